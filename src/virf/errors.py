@@ -1,0 +1,32 @@
+"""Errors that reach users.  Each carries one line that names the problem."""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Iterable
+
+
+class VirfError(Exception):
+    """Base class for errors VIRF reports to a user without a traceback."""
+
+
+class InputError(VirfError):
+    """The user's scene, plan or option is malformed or names an unknown term."""
+
+
+class EnvironmentProblem(VirfError):
+    """Something outside VIRF is missing (Java, the reasoner jars)."""
+
+
+def closest(term: str, choices: Iterable[str], n: int = 3) -> list[str]:
+    """The nearest known names to ``term``, case-insensitively, best first."""
+    pool = sorted(set(choices))
+    lowered = {c.lower(): c for c in pool}
+    hits = difflib.get_close_matches(term.lower(), list(lowered), n=n, cutoff=0.5)
+    return [lowered[h] for h in hits]
+
+
+def unknown_term(kind: str, term: str, choices: Iterable[str]) -> InputError:
+    near = closest(term, choices)
+    hint = f"; closest known: {', '.join(near)}" if near else ""
+    return InputError(f"unknown {kind} '{term}'{hint}")

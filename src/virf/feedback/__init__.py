@@ -1,0 +1,113 @@
+"""Render reports to text: a readable report for people, and the paper's
+diagnostic feedback prompt (Appendix E) for the LLM apprentice."""
+
+from __future__ import annotations
+
+import textwrap
+
+from virf.schema import Report, Violation
+
+FEEDBACK_TEMPLATE = """\
+ATTENTION: Your previous plan has failed a safety verification.
+DIAGNOSTIC REPORT
+
+[FAILURE ANALYSIS]
+The plan was rejected at STEP {step_number} during the simulation of the action '{action_info}'.
+
+[VIOLATED SAFETY RULE]
+Rule ID: {rule_id}
+Danger Level: {danger_level}
+Safety Warning: {rule_warning}
+
+[CAUSAL EXPLANATION]
+The logical reason for this failure is: {trigger_reason}
+System Analysis: {causal_message}
+
+[INVOLVED OBJECTS]
+The following objects are involved in this safety violation: {objects_str}
+
+[SUGGESTED CORRECTION]
+A potential way to resolve this is: {suggestion}
+
+NEW INSTRUCTION:
+Based on this report, generate a new, corrected plan that avoids this safety violation. If no safe plan is possible, you MUST respond with "TASK_ABORT".
+"""
+
+_NON_OBJECTS = {"rdf:type"}
+
+
+def involved_objects(v: Violation) -> list[str]:
+    names: list[str] = []
+    for t in v.triggering_facts:
+        for n in (t.subject, t.object):
+            n = n.strip("{}")
+            for part in (p.strip() for p in n.split(",")):
+                if part and part not in names and part[0].isupper() and "_" in part:
+                    names.append(part)
+    if v.subject and v.subject not in names and not v.subject.startswith("Step"):
+        names.insert(0, v.subject)
+    return names
+
+
+def feedback_prompt(report: Report) -> str:
+    """The paper's natural-language feedback prompt, filled from the report."""
+    if report.status == "SAFE" or not report.violations:
+        return "The plan passed safety verification.\n"
+    v = report.violations[0]
+    return FEEDBACK_TEMPLATE.format(
+        step_number=report.dangerous_step,
+        action_info=report.action or "(initial state, before any action)",
+        rule_id=v.id,
+        danger_level=v.danger_level,
+        rule_warning=v.safety_warning,
+        trigger_reason=v.trigger_reason,
+        causal_message=v.message,
+        objects_str=", ".join(involved_objects(v)) or "(none)",
+        suggestion=v.suggestion,
+    )
+
+
+def _wrap(text: str, indent: str) -> str:
+    return textwrap.fill(text, width=100, initial_indent=indent, subsequent_indent=indent + "  ")
+
+
+def render_report(report: Report, title: str | None = None) -> str:
+    """A human-readable report that shows the causal chain."""
+    lines: list[str] = []
+    if title:
+        lines.append(f"== {title}")
+    head = f"Verdict: {report.status}"
+    if report.dangerous_step is not None:
+        where = f"step {report.dangerous_step}"
+        where += f" ({report.action})" if report.action else " (initial state)"
+        head += f" at {where}"
+    lines.append(head)
+    lines.append(_wrap(report.reason, "  "))
+    for i, v in enumerate(report.violations, start=1):
+        tag = "" if v.definite else " [needs confirmation]"
+        lines.append(f"  Violation {i}: {v.id} ({v.category}, danger {v.danger_level}){tag}")
+        lines.append(_wrap(v.description, "    "))
+        if v.triggering_facts:
+            lines.append("    Triggering facts (minimal):")
+            for t in v.triggering_facts:
+                mark = "  (assumed)" if t in v.assumed_facts else ""
+                lines.append(f"      - {t.subject} {t.predicate} {t.object}{mark}")
+        if v.background:
+            lines.append("    Background knowledge used:")
+            for b in v.background:
+                lines.append(_wrap(f"- {b.text}   [{b.id}; {b.source}]", "      "))
+        lines.append(_wrap(f"Warning: {v.safety_warning}", "    "))
+        lines.append(_wrap(f"Suggestion: {v.suggestion}", "    "))
+    if report.questions:
+        lines.append("  Questions for the user:")
+        for q in report.questions:
+            lines.append(_wrap(f"? {q}", "    "))
+    if report.trace:
+        lines.append("  Trace:")
+        for t in report.trace:
+            mark = {"ok": " ", "unsafe": "!", "unknown": "?", "not-simulated": "-", "error": "x"}[t.outcome]
+            note = f"  <- {', '.join(t.findings)}" if t.findings else ""
+            if t.outcome == "not-simulated":
+                note = "  (not simulated)"
+            lines.append(f"    {mark} {t.step:>2}. {t.action}{note}")
+    return "\n".join(lines) + "\n"

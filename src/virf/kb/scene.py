@@ -1,0 +1,255 @@
+"""Read a scene (the paper's ABox JSON) into facts with provenance.
+
+Format (Appendix C of the paper)::
+
+    {"instances":  [{"class_name": "Pot", "instance_name": "Pot_1"}, ...],
+     "assertions": [{"subject": "Pot_1", "property": "isOn",
+                     "object": "CounterTop_1", "type": "object_property"}, ...],
+     "closed_world": ["contains", "supports"],          # optional
+     "unlocated_by_default": false}                     # optional
+
+* An instance may be listed several times with different classes.
+* States and materials are individuals: write the class name as the object
+  (``"hasState" -> "OnState"``, ``"hasMaterial" -> "Metal"``) or declare an
+  instance of the class.  Plain words such as ``"closed"`` or ``"on"`` are
+  accepted as data values of ``hasState``/``hasMaterial``.
+* ``isInside``/``isOn``/``isHeldBy`` are stored as their inverses
+  ``contains``/``supports``/``isHolding`` so that the simulator has one
+  spelling of each relation.
+* Objects in a scene were perceived, so they start *located* (``isLocated
+  true``) unless an assertion says ``isLocated false`` or the scene sets
+  ``unlocated_by_default`` (as a benchmark scene does for a robot that must
+  ``find`` everything before acting on it).
+* ``closed_world`` names relations the scene lists completely.  Closure facts
+  for other relations are open-world assumptions: a hazard that needs one is
+  UNKNOWN, with a question, rather than UNSAFE.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+from virf.errors import InputError, closest
+from virf.kb.tbox import Vocabulary
+from virf.schema import Fact, FactKind, Provenance
+
+NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
+INVERSES = {"isInside": "contains", "isOn": "supports", "isHeldBy": "isHolding", "isControlledBy": "controls"}
+CLOSABLE = ("contains", "supports")
+# Words a scene may use as data values of hasState/hasMaterial.
+VALUE_WORDS = {
+    "on": "OnState",
+    "off": "OffState",
+    "open": "OpenState",
+    "opened": "OpenState",
+    "closed": "ClosedState",
+    "close": "ClosedState",
+    "hot": "HotState",
+    "cold": "ColdState",
+    "wet": "WetState",
+    "dry": "DryState",
+    "dirty": "DirtyState",
+    "clean": "CleanState",
+    "broken": "BrokenState",
+    "sliced": "SlicedState",
+    "cooked": "CookedState",
+    "filled": "FilledWithLiquidState",
+    "full": "FilledWithLiquidState",
+    "empty": "EmptyState",
+    "usedup": "UsedUpState",
+    "sealed": "SealedState",
+    "unknown": "UnknownMaterial",
+    "metallic": "Metal",
+}
+DEFAULT_AGENT = "Robot_1"
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene: its individuals, typed facts and closed relations."""
+
+    objects: Mapping[str, frozenset[str]]  # individual -> asserted classes (objects and agents)
+    order: tuple[str, ...]  # scene order of objects, for deterministic resolution
+    facts: Mapping[Fact, Provenance]
+    agent: str
+    closed_world: frozenset[str]
+    name: str = "scene"
+    unlocated_by_default: bool = False
+
+
+def load_scene_file(path: str | Path, vocab: Vocabulary) -> Scene:
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError(f"scene file not found: {p}") from None
+    except OSError as exc:
+        raise InputError(f"cannot read scene file {p}: {exc.strerror}") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise InputError(f"scene {p} is not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
+    return build_scene(data, vocab, name=p.stem if p.stem != "scene" else p.parent.name)
+
+
+def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
+    if not isinstance(data, dict):
+        raise InputError("scene must be a JSON object with 'instances' and 'assertions'")
+    unknown_keys = sorted(set(data) - {"instances", "assertions", "closed_world", "description", "name", "unlocated_by_default"})
+    if unknown_keys:
+        raise InputError(
+            f"unknown scene key '{unknown_keys[0]}'; expected instances, assertions, closed_world, unlocated_by_default, description"
+        )
+    instances = data.get("instances")
+    if not isinstance(instances, list):
+        raise InputError("scene needs an 'instances' list")
+    assertions = data.get("assertions", [])
+    if not isinstance(assertions, list):
+        raise InputError("scene 'assertions' must be a list")
+
+    classes: dict[str, set[str]] = {}
+    order: list[str] = []
+    for i, inst in enumerate(instances):
+        if not isinstance(inst, dict) or not {"class_name", "instance_name"} <= set(inst):
+            raise InputError(f"instances[{i}] needs 'class_name' and 'instance_name'")
+        iname, cname = str(inst["instance_name"]), str(inst["class_name"])
+        if not NAME_RE.match(iname):
+            raise InputError(
+                f"instances[{i}]: instance name '{iname}' must start with a letter or '_' "
+                "and use only letters, digits, '_', '.', '-'"
+            )
+        if iname in vocab.individuals or iname in vocab.classes:
+            raise InputError(f"instances[{i}]: '{iname}' is already an ontology term; choose another name")
+        cls = vocab.require_class(cname)
+        if iname not in classes:
+            classes[iname] = set()
+            order.append(iname)
+        classes[iname].add(cls)
+
+    def kind_of(ind: str) -> str:
+        cs = classes[ind]
+        for root in ("Material", "State", "Attribute", "Action"):
+            if vocab.any_is_a(cs, root):
+                return root
+        return "Object"
+
+    facts: dict[Fact, Provenance] = {}
+    for ind in order:
+        for cls in sorted(classes[ind]):
+            facts[Fact(ind, "type", cls, FactKind.TYPE)] = Provenance.SCENE
+
+    closed = data.get("closed_world", [])
+    if not isinstance(closed, list) or not all(isinstance(c, str) for c in closed):
+        raise InputError("scene 'closed_world' must be a list of relation names")
+    for rel in closed:
+        if rel not in CLOSABLE:
+            raise InputError(f"closed_world: '{rel}' cannot be closed; choose from {', '.join(CLOSABLE)}")
+
+    def resolve_value(value: str, prop: str, where: str) -> str:
+        if value in classes:
+            return value
+        if value in vocab.individuals:
+            return value
+        alias = vocab.class_synonyms.get(value)
+        if alias and alias in vocab.individuals:
+            return alias
+        lowered = value.lower().replace("_", "").replace(" ", "")
+        if lowered.startswith("is") and lowered[2:] in VALUE_WORDS:
+            lowered = lowered[2:]
+        if lowered in VALUE_WORDS:
+            return VALUE_WORDS[lowered]
+        for ind in vocab.individuals:
+            if ind.lower() == lowered or ind.lower() == lowered + "state":
+                return ind
+        pool = list(classes) + sorted(vocab.individuals)
+        near = closest(value, pool)
+        hint = f"; closest known: {', '.join(near)}" if near else ""
+        raise InputError(f"{where}: unknown individual or value '{value}' for {prop}{hint}")
+
+    for i, a in enumerate(assertions):
+        where = f"assertions[{i}]"
+        if not isinstance(a, dict) or not {"subject", "property", "object"} <= set(a):
+            raise InputError(f"{where} needs 'subject', 'property' and 'object'")
+        subj, prop_name, obj = str(a["subject"]), str(a["property"]), a["object"]
+        kind = str(a.get("type", "object_property"))
+        if kind not in ("object_property", "data_property"):
+            raise InputError(f"{where}: type '{kind}' must be object_property or data_property")
+        if subj not in classes:
+            near = closest(subj, classes)
+            hint = f"; closest known: {', '.join(near)}" if near else ""
+            raise InputError(f"{where}: unknown individual '{subj}' (declare it in instances){hint}")
+        prop = vocab.canonical_property(prop_name)
+        if prop is None:
+            near = closest(prop_name, list(vocab.object_properties | vocab.data_properties))
+            hint = f"; closest known: {', '.join(near)}" if near else ""
+            raise InputError(f"{where}: unknown property '{prop_name}'{hint}")
+        if prop in vocab.data_properties:
+            if not isinstance(obj, bool) and str(obj).lower() not in ("true", "false"):
+                raise InputError(f"{where}: {prop} takes true or false, not '{obj}'")
+            value = str(obj).lower()
+            facts[Fact(subj, prop, value, FactKind.DATA)] = Provenance.SCENE
+            continue
+        target = resolve_value(str(obj), prop, where)
+        if target in classes and kind_of(target) == "Material" and prop != "hasMaterial":
+            pass
+        if prop in INVERSES:
+            subj, prop, target = target, INVERSES[prop], subj
+            if subj not in classes:
+                raise InputError(f"{where}: '{subj}' must be a declared instance for {prop_name}")
+        facts[Fact(subj, prop, target)] = Provenance.SCENE
+
+    objects = {ind: frozenset(cs) for ind, cs in classes.items() if kind_of(ind) == "Object"}
+    object_order = tuple(ind for ind in order if ind in objects)
+
+    agents = [ind for ind in object_order if vocab.any_is_a(objects[ind], "Robot")]
+    if agents:
+        agent = agents[0]
+    else:
+        agent = DEFAULT_AGENT
+        objects[agent] = frozenset({"Robot"})
+        facts[Fact(agent, "type", "Robot", FactKind.TYPE)] = Provenance.PLAN
+
+    _apply_material_knowledge(objects, facts, vocab)
+    return Scene(
+        objects=MappingProxyType(objects),
+        order=object_order,
+        facts=MappingProxyType(dict(sorted(facts.items()))),
+        agent=agent,
+        closed_world=frozenset(closed),
+        name=str(data.get("name", name)),
+        unlocated_by_default=bool(data.get("unlocated_by_default", False)),
+    )
+
+
+def _apply_material_knowledge(
+    objects: dict[str, frozenset[str]], facts: dict[Fact, Provenance], vocab: Vocabulary
+) -> None:
+    """Typical-material defaults, then unknown-material markers.
+
+    A Mug is ceramic *unless the scene says otherwise*: OWL has no defaults, so
+    the default is applied here, only when the scene states no material and the
+    classes imply none.  An object whose material is still unknown gets an
+    explicit UnknownMaterial marker (an ASSUMED fact): the open world made
+    visible, so that uncertainty rules can ask about it.
+    """
+    stated: dict[str, set[str]] = {}
+    for f in facts:
+        if f.predicate == "hasMaterial":
+            stated.setdefault(f.subject, set()).add(f.object)
+    for ind, cs in objects.items():
+        if not vocab.any_is_a(cs, "PhysicalObject") or vocab.any_is_a(cs, "Liquid"):
+            continue
+        if stated.get(ind) or vocab.materials_of(cs) or vocab.any_is_a(cs, "FoodItem"):
+            continue
+        typical = vocab.typical_materials(cs)
+        if typical:
+            for m in typical:
+                facts[Fact(ind, "hasMaterial", m)] = Provenance.DEFAULT
+        else:
+            facts[Fact(ind, "hasMaterial", "UnknownMaterial")] = Provenance.ASSUMED

@@ -1,0 +1,449 @@
+"""Sandbox simulator: deterministic preconditions and effects of the 17 actions.
+
+States are immutable; ``apply`` returns a new state and never touches the
+input scene.  The simulator decides only whether an action *can* run and what
+it changes.  Whether the result is safe is the reasoner's business.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field, replace
+from types import MappingProxyType
+
+from virf.errors import closest
+from virf.kb.scene import Scene
+from virf.kb.tbox import Vocabulary
+from virf.schema import Fact, FactKind, Provenance
+from virf.sim.plan import PlanStep
+
+STATE_PAIRS = {
+    "OnState": "OffState",
+    "OffState": "OnState",
+    "OpenState": "ClosedState",
+    "ClosedState": "OpenState",
+    "DirtyState": "CleanState",
+    "CleanState": "DirtyState",
+    "FilledWithLiquidState": "EmptyState",
+    "EmptyState": "FilledWithLiquidState",
+    "HotState": "ColdState",
+    "WetState": "DryState",
+}
+LIQUID_CLASS = {"water": "Water", "coffee": "Coffee", "wine": "Wine"}
+# Affordance an action needs of its target (checked only for catalogue types).
+AFFORDANCE = {
+    "pick": "Pickupable",
+    "open": "Openable",
+    "close": "Openable",
+    "turn_on": "Toggleable",
+    "turn_off": "Toggleable",
+    "slice": "Sliceable",
+    "break": "Breakable",
+    "dirty": "Dirtyable",
+    "clean": "Dirtyable",
+    "fillLiquid": "LiquidContainer",
+    "emptyLiquid": "LiquidContainer",
+}
+
+
+@dataclass(frozen=True)
+class WorldState:
+    objects: Mapping[str, frozenset[str]]
+    order: tuple[str, ...]
+    facts: Mapping[Fact, Provenance]
+    agent: str
+    closed_world: frozenset[str]
+    found: tuple[str, ...] = ()  # objects found so far, most recent last
+
+    @property
+    def last_found(self) -> str | None:
+        return self.found[-1] if self.found else None
+
+    def has(self, subject: str, predicate: str, obj: str) -> bool:
+        return Fact(subject, predicate, obj) in self.facts
+
+    def objects_of(self, subject: str, predicate: str) -> list[str]:
+        return sorted(
+            f.object for f in self.facts if f.subject == subject and f.predicate == predicate
+            and f.kind is FactKind.OBJECT
+        )
+
+    def subjects_of(self, predicate: str, obj: str) -> list[str]:
+        return sorted(
+            f.subject for f in self.facts if f.object == obj and f.predicate == predicate
+            and f.kind is FactKind.OBJECT
+        )
+
+    def held(self) -> str | None:
+        held = self.objects_of(self.agent, "isHolding")
+        return held[0] if held else None
+
+
+@dataclass(frozen=True)
+class ResolvedStep:
+    step: PlanStep
+    target: str | None = None  # the object acted on / receptacle / pour destination
+    patient: str | None = None  # the object moved or transformed besides the target
+    liquid: str | None = None  # liquid individual created by fillLiquid
+    instrument: str | None = None  # held tool used
+
+
+@dataclass(frozen=True)
+class MissingObject:
+    step: PlanStep
+    term: str
+    near: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class PreconditionFailure:
+    step: PlanStep
+    precondition: str  # a PreconditionViolation class in the ontology
+    subject: str
+    message: str
+    facts: tuple[Fact, ...] = field(default_factory=tuple)
+
+
+class Simulator:
+    def __init__(self, vocab: Vocabulary) -> None:
+        self.vocab = vocab
+
+    # ------------------------------------------------------------------ setup
+    def initial(self, scene: Scene) -> WorldState:
+        facts = dict(scene.facts)
+        held = {f.object for f in facts if f.subject == scene.agent and f.predicate == "isHolding"}
+        for ind in scene.order:
+            if self._is_physical(scene.objects[ind]) and not any(
+                f.subject == ind and f.predicate == "isLocated" for f in facts
+            ):
+                located = ind in held or not scene.unlocated_by_default
+                facts[Fact(ind, "isLocated", "true" if located else "false", FactKind.DATA)] = (
+                    Provenance.SCENE
+                )
+        return WorldState(
+            objects=scene.objects,
+            order=scene.order,
+            facts=MappingProxyType(dict(sorted(facts.items()))),
+            agent=scene.agent,
+            closed_world=scene.closed_world,
+        )
+
+    def _is_physical(self, classes: frozenset[str]) -> bool:
+        return self.vocab.any_is_a(classes, "PhysicalObject")
+
+    def _is_catalogue_type(self, classes: frozenset[str]) -> bool:
+        return any(self.vocab.annotation(c, "compatibleReceptacle") or self.vocab.is_a(c, "Receptacle")
+                   or self._has_kitchen_axioms(c) for c in classes)
+
+    def _has_kitchen_axioms(self, cls: str) -> bool:
+        comment = self.vocab.annotation(cls, "comment")
+        return bool(comment) and comment[0].startswith("AI2-THOR object type")
+
+    def lacks(self, obj: str, state: WorldState, affordance: str) -> bool:
+        classes = state.objects.get(obj, frozenset())
+        return self._is_catalogue_type(classes) and not self.vocab.any_is_a(classes, affordance)
+
+    # ------------------------------------------------------------------ resolution
+    def resolve_term(self, state: WorldState, term: str) -> str | None:
+        if term in state.objects:
+            return term
+        lowered = term.lower()
+        for ind in state.order + tuple(sorted(set(state.objects) - set(state.order))):
+            if ind.lower() == lowered:
+                return ind
+        cls = self.vocab.canonical_class(term)
+        if cls is None:
+            return None
+        candidates = [
+            ind for ind in state.order + tuple(sorted(set(state.objects) - set(state.order)))
+            if ind != state.agent and self.vocab.any_is_a(state.objects[ind], cls)
+        ]
+        if not candidates:
+            return None
+        # The object the agent dealt with most recently wins: a later 'put Fridge'
+        # means the fridge just found, as in AI2-THOR where actions act on the
+        # object in view.
+        for ind in reversed(state.found):
+            if ind in candidates:
+                return ind
+        held = state.held()
+        if held in candidates:
+            return held
+        return candidates[0]
+
+    def resolve(self, state: WorldState, step: PlanStep) -> ResolvedStep | MissingObject:
+        def need(term: str) -> str | MissingObject:
+            found = self.resolve_term(state, term)
+            if found is None:
+                pool = list(state.objects) + sorted({c for cs in state.objects.values() for c in cs})
+                return MissingObject(step, term, tuple(closest(term, pool)))
+            return found
+
+        verb, args = step.verb, step.args
+        held = state.held()
+        if verb == "put":
+            dest = need(args[-1])
+            if isinstance(dest, MissingObject):
+                return dest
+            patient: str | MissingObject | None = held
+            if len(args) == 2:
+                patient = need(args[0])
+                if isinstance(patient, MissingObject):
+                    return patient
+            return ResolvedStep(step, target=dest, patient=patient)
+        if verb == "pour":
+            dest_r: str | MissingObject | None = state.last_found
+            if args:
+                dest_r = need(args[0])
+                if isinstance(dest_r, MissingObject):
+                    return dest_r
+            if dest_r == held:
+                dest_r = None
+            return ResolvedStep(step, target=dest_r, patient=held)
+        if verb in ("drop", "throw"):
+            return ResolvedStep(step, patient=held)
+        target = need(args[0])
+        if isinstance(target, MissingObject):
+            return target
+        if verb == "fillLiquid":
+            liquid = f"{LIQUID_CLASS[args[1]]}_in_{target}"
+            return ResolvedStep(step, target=target, liquid=liquid)
+        if verb in ("slice", "clean", "break"):
+            return ResolvedStep(step, target=target, instrument=held)
+        return ResolvedStep(step, target=target)
+
+    # ------------------------------------------------------------------ action individuals
+    def action_facts(self, state: WorldState, r: ResolvedStep) -> dict[Fact, Provenance]:
+        """The action as an individual of the state it starts in (lookahead)."""
+        act = f"Step{r.step.index}_{r.step.verb}"
+        out = {
+            Fact(act, "type", r.step.action_class, FactKind.TYPE): Provenance.PLAN,
+            Fact(act, "hasAgent", state.agent): Provenance.PLAN,
+        }
+        if r.target:
+            out[Fact(act, "hasTarget", r.target)] = Provenance.PLAN
+        if r.patient:
+            out[Fact(act, "hasPatient", r.patient)] = Provenance.PLAN
+        if r.instrument:
+            out[Fact(act, "hasInstrument", r.instrument)] = Provenance.PLAN
+        if r.liquid:
+            out[Fact(act, "hasPatient", r.liquid)] = Provenance.PLAN
+            out[Fact(r.liquid, "type", LIQUID_CLASS[r.step.args[1]], FactKind.TYPE)] = Provenance.PLAN
+        return out
+
+    @staticmethod
+    def action_individual(step: PlanStep) -> str:
+        return f"Step{step.index}_{step.verb}"
+
+    # ------------------------------------------------------------------ closure
+    def closure_facts(self, state: WorldState) -> dict[Fact, Provenance]:
+        """What the simulator believes are the complete contents of things.
+
+        Known for the robot's own hand; for receptacles only as far as the
+        scene says its listing is complete (``closed_world``), otherwise an
+        open-world assumption that a finding must ask about.
+        """
+        out: dict[Fact, Provenance] = {}
+        held = state.objects_of(state.agent, "isHolding")
+        out[Fact(state.agent, "isHolding", ",".join(held), FactKind.CLOSURE)] = Provenance.PLAN
+        for ind in state.order + tuple(sorted(set(state.objects) - set(state.order))):
+            classes = state.objects[ind]
+            for rel, cls in (("contains", "ContainerReceptacle"), ("supports", "SurfaceReceptacle")):
+                if self.vocab.any_is_a(classes, cls):
+                    members = state.objects_of(ind, rel)
+                    prov = Provenance.SCENE if rel in state.closed_world else Provenance.ASSUMED
+                    out[Fact(ind, rel, ",".join(members), FactKind.CLOSURE)] = prov
+        return out
+
+    # ------------------------------------------------------------------ effects
+    def apply(self, state: WorldState, r: ResolvedStep) -> WorldState | PreconditionFailure:
+        verb = r.step.verb
+        held = state.held()
+        facts = dict(state.facts)
+        objects = dict(state.objects)
+        found = list(state.found)
+        agent = state.agent
+
+        def fail(pre: str, subject: str, message: str, *why: Fact) -> PreconditionFailure:
+            return PreconditionFailure(r.step, pre, subject, message, tuple(why))
+
+        def add(f: Fact) -> None:
+            facts[f] = Provenance.PLAN
+
+        def drop(pred: Iterable[Fact]) -> None:
+            for f in list(pred):
+                facts.pop(f, None)
+
+        def set_state(obj: str, new: str) -> None:
+            opposite = STATE_PAIRS.get(new)
+            if opposite:
+                facts.pop(Fact(obj, "hasState", opposite), None)
+            add(Fact(obj, "hasState", new))
+
+        def located(obj: str) -> None:
+            facts.pop(Fact(obj, "isLocated", "false", FactKind.DATA), None)
+            add(Fact(obj, "isLocated", "true", FactKind.DATA))
+
+        def unplace(obj: str) -> None:
+            drop(f for f in facts if f.object == obj and f.predicate in ("contains", "supports")
+                 and f.kind is FactKind.OBJECT)
+
+        target = r.target
+        if verb in AFFORDANCE and target and self.lacks(target, state, AFFORDANCE[verb]):
+            return fail("Precondition_LacksAffordance", target,
+                        f"{target} cannot be used for '{verb}': its type is not {AFFORDANCE[verb]}")
+
+        if verb == "find":
+            assert target is not None
+            located(target)
+            drop(f for f in facts if f.subject == agent and f.predicate == "isNear")
+            add(Fact(agent, "isNear", target))
+            found = [o for o in found if o != target] + [target]
+        elif verb == "pick":
+            assert target is not None
+            if held is not None:
+                return fail("Precondition_HandNotEmpty", agent,
+                            f"{agent} is already holding {held}", Fact(agent, "isHolding", held))
+            unplace(target)
+            add(Fact(agent, "isHolding", target))
+            located(target)
+        elif verb == "put":
+            assert target is not None
+            obj = r.patient
+            if held is None or obj is None:
+                return fail("Precondition_NothingHeld", agent, f"{agent} is holding nothing to put")
+            if obj != held:
+                return fail("Precondition_NothingHeld", agent,
+                            f"{agent} is holding {held}, not {obj}", Fact(agent, "isHolding", held))
+            classes = state.objects[target]
+            if self._is_catalogue_type(classes) and not self.vocab.any_is_a(classes, "Receptacle"):
+                return fail("Precondition_NotAReceptacle", target, f"{target} cannot hold objects")
+            if state.has(target, "hasState", "ClosedState"):
+                return fail("Precondition_ReceptacleClosed", target, f"{target} is closed",
+                            Fact(target, "hasState", "ClosedState"))
+            drop([Fact(agent, "isHolding", held)])
+            rel = "supports" if self.vocab.any_is_a(classes, "SurfaceReceptacle") else "contains"
+            add(Fact(target, rel, held))
+        elif verb == "open":
+            assert target is not None
+            set_state(target, "OpenState")
+        elif verb == "close":
+            assert target is not None
+            set_state(target, "ClosedState")
+        elif verb in ("turn_on", "turn_off"):
+            assert target is not None
+            new = "OnState" if verb == "turn_on" else "OffState"
+            set_state(target, new)
+            # A stove knob switches the burners it controls.
+            for device in state.objects_of(target, "controls"):
+                set_state(device, new)
+        elif verb == "slice":
+            assert target is not None
+            set_state(target, "SlicedState")
+            if r.instrument and self.vocab.any_is_a(state.objects[r.instrument], "CuttingTool"):
+                add(Fact(r.instrument, "touched", target))
+            self._derive(state, target, "slicedType", objects, facts)
+        elif verb == "break":
+            assert target is not None
+            set_state(target, "BrokenState")
+            self._derive(state, target, "crackedType", objects, facts)
+        elif verb == "cook":
+            assert target is not None
+            set_state(target, "CookedState")
+        elif verb == "dirty":
+            assert target is not None
+            set_state(target, "DirtyState")
+        elif verb == "clean":
+            assert target is not None
+            set_state(target, "CleanState")
+            drop(f for f in facts if f.subject == target and f.predicate == "touched")
+        elif verb == "fillLiquid":
+            assert target is not None and r.liquid is not None
+            liquid_cls = LIQUID_CLASS[r.step.args[1]]
+            set_state(target, "FilledWithLiquidState")
+            objects[r.liquid] = frozenset({liquid_cls})
+            add(Fact(r.liquid, "type", liquid_cls, FactKind.TYPE))
+            add(Fact(target, "contains", r.liquid))
+        elif verb == "emptyLiquid":
+            assert target is not None
+            set_state(target, "EmptyState")
+            self._remove_liquids(state, target, objects, facts)
+        elif verb == "pour":
+            if held is None:
+                return fail("Precondition_NothingHeld", agent, f"{agent} is holding nothing to pour")
+            if target is None:
+                return fail("Precondition_NoPourTarget", agent,
+                            "nothing has been found to pour into since the object was picked up")
+            liquids = [o for o in state.objects_of(held, "contains")
+                       if self.vocab.any_is_a(state.objects.get(o, frozenset()), "Liquid")]
+            filled = state.has(held, "hasState", "FilledWithLiquidState")
+            for liquid in liquids:
+                facts.pop(Fact(held, "contains", liquid), None)
+                if self.vocab.any_is_a(state.objects[target], "ContainerReceptacle") or \
+                        self.vocab.any_is_a(state.objects[target], "LiquidContainer"):
+                    add(Fact(target, "contains", liquid))
+                else:
+                    objects.pop(liquid, None)
+                    drop(f for f in facts if liquid in (f.subject, f.object))
+            if liquids or filled:
+                set_state(held, "EmptyState")
+                if not self.vocab.any_is_a(state.objects[target], "LiquidContainer") and not \
+                        self.vocab.any_is_a(state.objects[target], "ContainerReceptacle"):
+                    set_state(target, "WetState")
+                elif self.vocab.any_is_a(state.objects[target], "LiquidContainer"):
+                    set_state(target, "FilledWithLiquidState")
+        elif verb in ("drop", "throw"):
+            if held is None:
+                return fail("Precondition_NothingHeld", agent, f"{agent} is holding nothing to {verb}")
+            drop([Fact(agent, "isHolding", held)])
+            floors = [o for o in state.order if self.vocab.any_is_a(state.objects[o], "Floor")]
+            if floors:
+                add(Fact(floors[0], "supports", held))
+        return replace(
+            state,
+            objects=MappingProxyType(objects),
+            facts=MappingProxyType(dict(sorted(facts.items()))),
+            found=tuple(found),
+        )
+
+    def _derive(
+        self,
+        state: WorldState,
+        source: str,
+        annotation: str,
+        objects: dict[str, frozenset[str]],
+        facts: dict[Fact, Provenance],
+    ) -> None:
+        """AI2-THOR replaces a sliced apple by AppleSliced pieces: add one piece
+        of the derived type where the source was, visible to the agent."""
+        for cls in sorted(state.objects[source]):
+            derived = self.vocab.annotation(cls, annotation)
+            if not derived or derived[0] not in self.vocab.classes:
+                continue
+            name = f"{derived[0]}_from_{source}"
+            if name in objects:
+                return
+            objects[name] = frozenset({derived[0]})
+            facts[Fact(name, "type", derived[0], FactKind.TYPE)] = Provenance.PLAN
+            facts[Fact(name, "isLocated", "true", FactKind.DATA)] = Provenance.PLAN
+            for f in list(facts):
+                if f.object == source and f.predicate in ("contains", "supports") and f.kind is FactKind.OBJECT:
+                    facts[Fact(f.subject, f.predicate, name)] = Provenance.PLAN
+            return
+
+    def _remove_liquids(
+        self, state: WorldState, container: str, objects: dict[str, frozenset[str]],
+        facts: dict[Fact, Provenance],
+    ) -> None:
+        for liquid in state.objects_of(container, "contains"):
+            if self.vocab.any_is_a(state.objects.get(liquid, frozenset()), "Liquid"):
+                objects.pop(liquid, None)
+                for f in list(facts):
+                    if liquid in (f.subject, f.object):
+                        facts.pop(f, None)
+
+
+def diff(before: WorldState, after: WorldState) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    added = tuple(f.render() for f in sorted(set(after.facts) - set(before.facts)))
+    removed = tuple(f.render() for f in sorted(set(before.facts) - set(after.facts)))
+    return added, removed

@@ -1,0 +1,383 @@
+"""The Logic Tutor: simulate a plan in a sandbox and ask the reasoner what is unsafe.
+
+Protocol (the paper's Algorithm 2, extended):
+
+* The simulator builds states S0..Sn from the scene.  Snapshot k is Sk plus
+  the next action a(k+1) as an individual (the walkthrough's one-step
+  lookahead): state-based concepts found in snapshot k belong to step k
+  (step 0 is the initial scene), action-based ones to step k+1.
+* Concepts marked ``checkAt final`` are asked only of Sn.
+* A failed precondition or an object the scene lacks stops the simulation;
+  the first is UNSAFE (logical inconsistency), the second UNKNOWN.
+* A finding is *definite* unless it is an uncertainty concept or its minimal
+  support contains an open-world assumption; definite findings make the plan
+  UNSAFE at the first step that has one, otherwise uncertain ones make it
+  UNKNOWN with questions.  An inconsistent snapshot is UNKNOWN.
+* Fail closed: any error or timeout gives status ERROR, never SAFE.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+from virf.kb.scene import Scene
+from virf.kb.tbox import TBox, UnsafeStateConcept
+from virf.reasoning import Engine, ReasonerFailure
+from virf.schema import (
+    BackgroundKnowledge,
+    CausalChain,
+    Fact,
+    FactKind,
+    Provenance,
+    Report,
+    StepTrace,
+    Triple,
+    ViolatedConcept,
+    Violation,
+)
+from virf.sim.plan import PlanStep
+from virf.sim.simulator import MissingObject, PreconditionFailure, ResolvedStep, Simulator, WorldState, diff
+from virf.verify.explain import minimize, needed_background
+
+DANGER_RANK = {"critical": 0, "high": 1, "medium": 2, "low": 3}
+PHASE_RANK = {"precondition": 0, "action": 1, "initial": 2, "state": 3, "final": 4, "missing-object": 5,
+              "inconsistency": 6, "error": 7}
+
+
+class VerificationTimeout(Exception):
+    pass
+
+
+@dataclass
+class _Finding:
+    concept: UnsafeStateConcept
+    step: int
+    phase: str
+    subject: str
+    definite: bool
+    facts: list[Fact]
+    provenance: Mapping[Fact, Provenance]
+    background: list[BackgroundKnowledge] = field(default_factory=list)
+    message: str = ""
+    questions: list[str] = field(default_factory=list)
+
+
+class Verifier:
+    def __init__(self, tbox: TBox, engine: Engine, timeout_s: float = 120.0) -> None:
+        self.tbox = tbox
+        self.vocab = tbox.vocabulary
+        self.engine = engine
+        self.sim = Simulator(self.vocab)
+        self.timeout_s = timeout_s
+        ordered = sorted(self.vocab.uscs.values(), key=lambda u: u.name)
+        self.always = [u.name for u in ordered if not u.final_only]
+        self.final = [u.name for u in ordered if u.final_only]
+
+    # ------------------------------------------------------------------ public
+    def verify(self, scene: Scene, plan: Sequence[PlanStep]) -> Report:
+        """Verify ``plan`` in ``scene``.  Never raises for a verification
+        problem: errors become an ERROR report (fail closed)."""
+        try:
+            return self._verify(scene, plan)
+        except VerificationTimeout as exc:
+            return self._error(plan, f"verification timed out: {exc}")
+        except ReasonerFailure as exc:
+            return self._error(plan, f"reasoner failure: {exc}")
+        except Exception as exc:  # noqa: BLE001  fail closed on anything unexpected
+            return self._error(plan, f"internal error: {type(exc).__name__}: {exc}")
+
+    # ------------------------------------------------------------------ protocol
+    def _verify(self, scene: Scene, plan: Sequence[PlanStep]) -> Report:
+        deadline = time.monotonic() + self.timeout_s
+        states: list[WorldState] = [self.sim.initial(scene)]
+        resolved: list[ResolvedStep] = []
+        stop: MissingObject | PreconditionFailure | None = None
+        for step in plan:
+            r = self.sim.resolve(states[-1], step)
+            if isinstance(r, MissingObject):
+                stop = r
+                break
+            resolved.append(r)
+            nxt = self.sim.apply(states[-1], r)
+            if isinstance(nxt, PreconditionFailure):
+                stop = nxt
+                break
+            states.append(nxt)
+        complete = stop is None
+        n = len(states) - 1
+
+        findings: dict[int, list[_Finding]] = {}
+        seen: set[tuple[str, str]] = set()
+        first_definite: int | None = None
+        for k, state in enumerate(states):
+            if time.monotonic() > deadline:
+                raise VerificationTimeout(f"more than {self.timeout_s:.0f}s at step {k}")
+            snapshot: dict[Fact, Provenance] = dict(state.facts)
+            snapshot.update(self.sim.closure_facts(state))
+            action_ind = None
+            if k < len(resolved):
+                snapshot.update(self.sim.action_facts(state, resolved[k]))
+                action_ind = Simulator.action_individual(resolved[k].step)
+            final = complete and k == n
+            concepts = self.always + (self.final if final else [])
+            result = self.engine.classify(snapshot.keys(), concepts)
+            if not result.consistent:
+                findings.setdefault(k, []).append(self._inconsistency(snapshot, k))
+                break
+            for concept, individuals in sorted(result.instances.items()):
+                usc = self.vocab.uscs[concept]
+                for ind in individuals:
+                    if ind == action_ind:
+                        step, phase = k + 1, "action"
+                    elif usc.final_only:
+                        step, phase = k, "final"
+                    else:
+                        step, phase = k, "initial" if k == 0 else "state"
+                    key = (concept, ind if phase != "action" else f"{ind}")
+                    if key in seen and phase not in ("final",):
+                        continue
+                    seen.add(key)
+                    f = self._explain(usc, ind, step, phase, snapshot)
+                    if phase == "final":
+                        f.step = self._onset(f.facts, states, n)
+                    findings.setdefault(f.step, []).append(f)
+            if stop is not None and k == len(states) - 1:
+                findings.setdefault(stop.step.index, []).append(self._stopped(stop, states[-1]))
+            # Step k is complete once snapshot k is in (its action findings came from k-1).
+            done = [s for s in findings if s <= k or (stop is not None and k == n)]
+            definite = [s for s in done if any(f.definite for f in findings[s])]
+            if definite:
+                first_definite = min(definite)
+                break
+        return self._report(plan, states, resolved, stop, findings, first_definite)
+
+    # ------------------------------------------------------------------ findings
+    def _explain(
+        self, usc: UnsafeStateConcept, ind: str, step: int, phase: str, snapshot: Mapping[Fact, Provenance]
+    ) -> _Finding:
+        facts = minimize(
+            snapshot,
+            lambda fs: self.engine.entails(fs, usc.name, ind),
+            {ind},
+            self.vocab,
+        )
+        background_ids = needed_background(self.engine, facts, usc.name, ind, self.vocab)
+        assumed = [f for f in facts if snapshot[f] is Provenance.ASSUMED]
+        defaults = [f for f in facts if snapshot[f] is Provenance.DEFAULT]
+        background = [
+            BackgroundKnowledge(id=b, text=self.vocab.background[b].text, source=self.vocab.background[b].source)
+            for b in background_ids
+        ] + [
+            BackgroundKnowledge(
+                id=f"DEFAULT-{f.subject}-{f.object}",
+                text=f"{f.render()} (typical material of its class; the scene states none)",
+                source="VIRF kitchen catalogue (typicalMaterial)",
+            )
+            for f in defaults
+        ]
+        definite = usc.kind != "uncertainty" and not assumed
+        questions = self._questions(usc, ind, assumed)
+        chain = "; ".join(f.render() for f in facts if snapshot[f] is not Provenance.DEFAULT)
+        extra = "; ".join(b.text for b in background)
+        message = f"{usc.trigger_reason[:1].upper()}{usc.trigger_reason[1:]}: {chain}"
+        if extra:
+            message += f"; background knowledge: {extra}"
+        message += f". Hence {ind} is an instance of {usc.name}."
+        return _Finding(usc, step, phase, ind, definite, facts, dict(snapshot), background, message, questions)
+
+    def _questions(self, usc: UnsafeStateConcept, ind: str, assumed: list[Fact]) -> list[str]:
+        out = []
+        markers = [f for f in assumed if f.predicate == "hasMaterial" and f.object == "UnknownMaterial"]
+        if usc.question:
+            x = markers[0].subject if markers else ind
+            out.append(usc.question.replace("{x}", x))
+        for f in assumed:
+            if f in markers and usc.question:
+                continue
+            if f.kind is FactKind.CLOSURE:
+                listed = ", ".join(f.members()) or "nothing"
+                out.append(
+                    f"Is it true that {f.subject} {f.predicate} {listed} and nothing else? "
+                    f"The scene does not say its '{f.predicate}' list is complete."
+                )
+            elif f.predicate == "hasMaterial" and f.object == "UnknownMaterial":
+                out.append(f"What material is {f.subject} made of?")
+            else:
+                out.append(f"Please confirm: {f.render()}?")
+        return out
+
+    def _onset(self, facts: list[Fact], states: list[WorldState], n: int) -> int:
+        """Earliest step from which a final-state finding's facts hold to the end."""
+        onset = n
+        for k in range(n, -1, -1):
+            present = set(states[k].facts) | set(self.sim.closure_facts(states[k]))
+            if all(f in present for f in facts):
+                onset = k
+            else:
+                break
+        return onset
+
+    def _inconsistency(self, snapshot: Mapping[Fact, Provenance], k: int) -> _Finding:
+        facts = minimize(snapshot, lambda fs: not self.engine.consistent(fs), set(), self.vocab)
+        listed = "; ".join(f.render() for f in facts)
+        concept = UnsafeStateConcept(
+            id="InconsistentWorldModel",
+            name="InconsistentWorldModel",
+            kind="logical-inconsistency",
+            category="Uncertainty",
+            danger_level="high",
+            description="The world model contradicts the knowledge base: these facts cannot all be true.",
+            safety_warning="A contradictory world model makes every conclusion unreliable.",
+            trigger_reason="the facts contradict the ontology",
+            suggestion="Confirm which of the contradictory facts is wrong and correct the scene.",
+            source="OWL 2 DL consistency check",
+            check_at="always",
+            definition="",
+            module="",
+        )
+        subject = facts[0].subject if facts else ""
+        question = f"The scene is contradictory: {listed}. Which of these is wrong?"
+        return _Finding(
+            concept, k, "inconsistency", subject, False, facts, dict(snapshot), [],
+            f"These facts cannot all be true: {listed}.", [question],
+        )
+
+    def _stopped(self, stop: MissingObject | PreconditionFailure, state: WorldState) -> _Finding:
+        if isinstance(stop, MissingObject):
+            near = f" (closest in the scene: {', '.join(stop.near)})" if stop.near else ""
+            concept = UnsafeStateConcept(
+                id="MissingObject",
+                name="MissingObject",
+                kind="uncertainty",
+                category="Uncertainty",
+                danger_level="high",
+                description="The plan names an object the scene does not contain.",
+                safety_warning="Acting on an object nobody has perceived is acting blind.",
+                trigger_reason=f"step {stop.step.index} refers to '{stop.term}', which is not in the scene",
+                suggestion=f"Confirm where the {stop.term} is (add it to the scene), or plan without it.",
+                source="paper: noise test (object omission)",
+                check_at="always",
+                definition="",
+                module="",
+            )
+            question = f"Step {stop.step.index} ('{stop.step.text}') needs '{stop.term}', but the scene has none{near}. Where is it?"
+            return _Finding(concept, stop.step.index, "missing-object", stop.term, False, [], {},
+                            [], f"'{stop.term}' is not in the scene{near}.", [question])
+        usc = self.vocab.preconditions[stop.precondition]
+        facts = list(stop.facts)
+        prov = {f: state.facts.get(f, Provenance.PLAN) for f in facts}
+        return _Finding(usc, stop.step.index, "precondition", stop.subject, True, facts, prov, [],
+                        f"Precondition failed: {stop.message}.")
+
+    # ------------------------------------------------------------------ report
+    def _report(
+        self,
+        plan: Sequence[PlanStep],
+        states: list[WorldState],
+        resolved: list[ResolvedStep],
+        stop: MissingObject | PreconditionFailure | None,
+        findings: dict[int, list[_Finding]],
+        first_definite: int | None,
+    ) -> Report:
+        uncertain_steps = sorted(s for s, fs in findings.items() if fs and not any(f.definite for f in fs))
+        if first_definite is not None:
+            status, step = "UNSAFE", first_definite
+        elif uncertain_steps or findings:
+            status, step = "UNKNOWN", min(findings)
+        else:
+            status, step = "SAFE", None
+        at_step = sorted(findings.get(step, []) if step is not None else [], key=_rank)
+        questions: list[str] = []
+        for s in sorted(findings):
+            if step is not None and s > step and status == "UNSAFE":
+                break
+            for f in sorted(findings[s], key=_rank):
+                for q in f.questions:
+                    if q not in questions:
+                        questions.append(q)
+        violations = tuple(self._violation(f) for f in at_step)
+        primary = violations[0] if violations else None
+        action = None
+        if step is not None and 1 <= step <= len(plan):
+            action = plan[step - 1].text
+        trace = self._trace(plan, states, resolved, stop, findings)
+        if primary is None:
+            reason = "every simulated state and action satisfies every safety rule"
+        elif status == "UNSAFE":
+            reason = f"step {step}: {primary.description}"
+        else:
+            reason = f"step {step}: safety depends on facts that are not known ({primary.description})"
+        return Report(
+            status=status,  # type: ignore[arg-type]
+            dangerous_step=step,
+            action=action,
+            violated_concept=ViolatedConcept(id=primary.id, description=primary.description) if primary else None,
+            causal_chain=CausalChain(
+                message=primary.message, triggering_facts=primary.triggering_facts, background=primary.background
+            ) if primary else None,
+            violations=violations,
+            questions=tuple(questions),
+            suggestion=primary.suggestion if primary else None,
+            danger_level=primary.danger_level if primary else None,
+            category=primary.category if primary else None,
+            reason=reason,
+            plan=tuple(s.text for s in plan),
+            trace=trace,
+            engine=self.engine.name,
+            scenario=self.tbox.scenario,
+        )
+
+    def _violation(self, f: _Finding) -> Violation:
+        u = f.concept
+        trig = tuple(x.triple() for x in f.facts if f.provenance.get(x) is not Provenance.DEFAULT)
+        assumed = tuple(x.triple() for x in f.facts if f.provenance.get(x) is Provenance.ASSUMED)
+        return Violation(
+            id=u.id, name=u.name, kind=u.kind, category=u.category, danger_level=u.danger_level,
+            description=u.description, safety_warning=u.safety_warning, trigger_reason=u.trigger_reason,
+            suggestion=u.suggestion, source=u.source, step=f.step, phase=f.phase,  # type: ignore[arg-type]
+            subject=f.subject, definite=f.definite, message=f.message, triggering_facts=trig,
+            assumed_facts=assumed, background=tuple(f.background),
+        )
+
+    def _trace(
+        self,
+        plan: Sequence[PlanStep],
+        states: list[WorldState],
+        resolved: list[ResolvedStep],
+        stop: MissingObject | PreconditionFailure | None,
+        findings: dict[int, list[_Finding]],
+    ) -> tuple[StepTrace, ...]:
+        out = []
+        for i, step in enumerate(plan, start=1):
+            ids = tuple(sorted({f.concept.id for f in findings.get(i, [])}))
+            fs = findings.get(i, [])
+            outcome = "unsafe" if any(f.definite for f in fs) else "unknown" if fs else "ok"
+            if i < len(states):
+                added, removed = diff(states[i - 1], states[i])
+                out.append(StepTrace(step=i, action=step.text, outcome=outcome, findings=ids,  # type: ignore[arg-type]
+                                     added=added, removed=removed))
+            else:
+                stopped_here = stop is not None and stop.step.index == i
+                out.append(StepTrace(step=i, action=step.text,
+                                     outcome=outcome if stopped_here else "not-simulated",  # type: ignore[arg-type]
+                                     findings=ids))
+        return tuple(out)
+
+    def _error(self, plan: Sequence[PlanStep], reason: str) -> Report:
+        return Report(
+            status="ERROR", dangerous_step=None, action=None, violated_concept=None, causal_chain=None,
+            violations=(), questions=(), suggestion=None, danger_level=None, category=None,
+            reason=reason + " (fail closed: the plan is not approved)",
+            plan=tuple(s.text for s in plan), trace=(), engine=self.engine.name, scenario=self.tbox.scenario,
+        )
+
+
+def _rank(f: _Finding) -> tuple[int, int, int, str, str]:
+    return (0 if f.definite else 1, DANGER_RANK.get(f.concept.danger_level, 9), PHASE_RANK[f.phase],
+            f.concept.id, f.subject)
+
+
+def _triples(facts: list[Fact]) -> tuple[Triple, ...]:
+    return tuple(f.triple() for f in facts)
