@@ -105,9 +105,10 @@ def render_report(report: Report, title: str | None = None) -> str:
     if report.trace:
         lines.append("  Trace:")
         for t in report.trace:
-            mark = {"ok": " ", "unsafe": "!", "unknown": "?", "not-simulated": "-", "error": "x"}[t.outcome]
+            mark = {"ok": " ", "unsafe": "!", "unknown": "?", "not-checked": "-", "not-simulated": "-",
+                    "error": "x"}[t.outcome]
             note = f"  <- {', '.join(t.findings)}" if t.findings else ""
-            if t.outcome == "not-simulated":
-                note = "  (not simulated)"
+            if t.outcome in ("not-simulated", "not-checked"):
+                note = f"  ({t.outcome.replace('-', ' ')}: verification stopped earlier)"
             lines.append(f"    {mark} {t.step:>2}. {t.action}{note}")
     return "\n".join(lines) + "\n"

@@ -357,6 +357,8 @@ class TBox:
         for term, props in frozen_ann.items():
             for alias in props.get("synonym", ()):
                 if term in oprops or term in dprops:
+                    if alias in oprops:
+                        continue  # a declared equivalent property, not just a word
                     prop_syn[alias] = term
                 elif term in classes:
                     cls_syn[alias] = term

@@ -124,7 +124,7 @@ class CausalChain(_Frozen):
 class StepTrace(_Frozen):
     step: int
     action: str
-    outcome: Literal["ok", "unsafe", "unknown", "not-simulated", "error"]
+    outcome: Literal["ok", "unsafe", "unknown", "not-checked", "not-simulated", "error"]
     findings: tuple[str, ...] = ()
     added: tuple[str, ...] = ()
     removed: tuple[str, ...] = ()

@@ -323,6 +323,9 @@ class Simulator:
                             Fact(target, "hasState", "ClosedState"))
             drop([Fact(agent, "isHolding", held)])
             rel = "supports" if self.vocab.any_is_a(classes, "SurfaceReceptacle") else "contains"
+            # Things on the same counter or in the same cabinet are near each other.
+            for other in state.objects_of(target, rel):
+                add(Fact(held, "isNear", other))
             add(Fact(target, rel, held))
         elif verb == "open":
             assert target is not None

@@ -109,6 +109,7 @@ class Verifier:
         n = len(states) - 1
 
         findings: dict[int, list[_Finding]] = {}
+        self._checked = -1  # last snapshot the reasoner answered for
         seen: set[tuple[str, str]] = set()
         first_definite: int | None = None
         for k, state in enumerate(states):
@@ -123,6 +124,7 @@ class Verifier:
             final = complete and k == n
             concepts = self.always + (self.final if final else [])
             result = self.engine.classify(snapshot.keys(), concepts)
+            self._checked = k
             if not result.consistent:
                 findings.setdefault(k, []).append(self._inconsistency(snapshot, k))
                 break
@@ -197,10 +199,11 @@ class Verifier:
             if f in markers and usc.question:
                 continue
             if f.kind is FactKind.CLOSURE:
-                listed = ", ".join(f.members()) or "nothing"
+                where = "in" if f.predicate == "contains" else "on"
+                listed = ", ".join(f.members())
+                claim = f"only {listed} is {where} {f.subject}" if listed else f"nothing is {where} {f.subject}"
                 out.append(
-                    f"Is it true that {f.subject} {f.predicate} {listed} and nothing else? "
-                    f"The scene does not say its '{f.predicate}' list is complete."
+                    f"Is it true that {claim}? The scene does not say its '{f.predicate}' list is complete."
                 )
             elif f.predicate == "hasMaterial" and f.object == "UnknownMaterial":
                 out.append(f"What material is {f.subject} made of?")
@@ -354,6 +357,8 @@ class Verifier:
             ids = tuple(sorted({f.concept.id for f in findings.get(i, [])}))
             fs = findings.get(i, [])
             outcome = "unsafe" if any(f.definite for f in fs) else "unknown" if fs else "ok"
+            if i > self._checked and not fs:
+                outcome = "not-checked"
             if i < len(states):
                 added, removed = diff(states[i - 1], states[i])
                 out.append(StepTrace(step=i, action=step.text, outcome=outcome, findings=ids,  # type: ignore[arg-type]

@@ -1,0 +1,220 @@
+"""The ``virf`` command: thin wrappers over :mod:`virf.api`.
+
+Exit codes of ``virf verify`` (and ``virf demo``):
+  0 SAFE, 1 UNSAFE, 2 bad input or usage, 3 UNKNOWN, 4 ERROR (verification
+  could not be completed: fail closed).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from virf.errors import EnvironmentProblem, VirfError
+
+EXIT = {"SAFE": 0, "UNSAFE": 1, "UNKNOWN": 3, "ERROR": 4}
+EXIT_BAD_INPUT = 2
+
+app = typer.Typer(
+    name="virf",
+    help="VIRF Logic Tutor: verify robot task plans against an OWL 2 DL safety ontology.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+kb_app = typer.Typer(help="Inspect the safety knowledge base (TBox).", no_args_is_help=True)
+app.add_typer(kb_app, name="kb")
+
+ScenarioOpt = Annotated[
+    str, typer.Option("--scenario", "-s", help="Scenario module to load (kitchen, appliances, cleaning).")
+]
+EngineOpt = Annotated[
+    str, typer.Option("--engine", "-e", help="Reasoning engine: hermit (reference, default) or pellet (Openllet).")
+]
+
+
+def _fail(message: str, code: int = EXIT_BAD_INPUT) -> typer.Exit:
+    typer.echo(f"error: {message}", err=True)
+    return typer.Exit(code)
+
+
+@app.command()
+def verify(
+    scene: Annotated[Path, typer.Argument(help="Scene ABox JSON file.")],
+    plan: Annotated[Path, typer.Argument(help="Plan: one action per line, or a JSON list of actions.")],
+    as_json: Annotated[bool, typer.Option("--json", help="Print exactly one JSON report on stdout.")] = False,
+    feedback: Annotated[
+        bool, typer.Option("--feedback", help="Also print the paper's feedback prompt for the planner.")
+    ] = False,
+    scenario: ScenarioOpt = "kitchen",
+    engine: EngineOpt = "hermit",
+    timeout: Annotated[float, typer.Option(help="Give up (status ERROR) after this many seconds.")] = 120.0,
+) -> None:
+    """Verify PLAN in SCENE.  Exit 0 SAFE, 1 UNSAFE, 3 UNKNOWN, 4 ERROR, 2 bad input."""
+    from virf.api import LogicTutor
+    from virf.feedback import feedback_prompt, render_report
+    from virf.kb.scene import load_scene_file
+    from virf.sim.plan import load_plan_file
+
+    try:
+        steps = load_plan_file(plan)
+        tutor = LogicTutor(scenario=scenario, engine=engine, timeout_s=timeout)
+        sc = load_scene_file(scene, tutor.tbox.vocabulary)
+    except EnvironmentProblem as exc:
+        raise _fail(str(exc), EXIT["ERROR"]) from None
+    except VirfError as exc:
+        raise _fail(str(exc)) from None
+    report = tutor.verifier.verify(sc, steps)
+    if as_json:
+        typer.echo(report.to_json())
+    else:
+        typer.echo(render_report(report, title=f"{scene} + {plan}"), nl=False)
+        if feedback and report.status != "SAFE":
+            typer.echo("\n" + feedback_prompt(report), nl=False)
+    raise typer.Exit(EXIT[report.status])
+
+
+@app.command()
+def demo(
+    folder: Annotated[Path, typer.Argument(help="Folder of examples: one sub-folder per scene.json + plan.txt.")] = Path(
+        "examples"
+    ),
+    engine: EngineOpt = "hermit",
+) -> None:
+    """Verify every example and print the reports; checks each against its expected.json."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from virf.api import LogicTutor
+    from virf.feedback import render_report
+
+    cases = sorted(p.parent for p in folder.glob("*/plan.txt"))
+    if not cases:
+        raise _fail(f"no examples in {folder} (expected <name>/scene.json and <name>/plan.txt)")
+    try:
+        tutor = LogicTutor(engine=engine)
+    except VirfError as exc:
+        raise _fail(str(exc), EXIT["ERROR"]) from None
+    console = Console(highlight=False, width=150)
+    table = Table(title="VIRF demo", show_lines=False)
+    for col in ("example", "expected", "verdict", "step", "violated concept", "match"):
+        table.add_column(col)
+    mismatches = 0
+    for case in cases:
+        expected = {}
+        if (case / "expected.json").exists():
+            expected = json.loads((case / "expected.json").read_text())
+        try:
+            report = tutor.verify_files(case / "scene.json", case / "plan.txt")
+        except VirfError as exc:
+            console.print(f"[red]{case.name}: {exc}[/red]")
+            mismatches += 1
+            continue
+        console.print(render_report(report, title=case.name))
+        ok = (not expected) or (
+            expected.get("status") == report.status
+            and expected.get("dangerous_step", report.dangerous_step) == report.dangerous_step
+            and expected.get("violated_concept", report.violated_concept and report.violated_concept.id)
+            == (report.violated_concept and report.violated_concept.id)
+        )
+        mismatches += 0 if ok else 1
+        table.add_row(
+            case.name,
+            str(expected.get("status", "-")),
+            report.status,
+            "-" if report.dangerous_step is None else str(report.dangerous_step),
+            report.violated_concept.id if report.violated_concept else "-",
+            "yes" if ok else "[red]NO[/red]",
+        )
+    console.print(table)
+    if mismatches:
+        raise _fail(f"{mismatches} example(s) did not give their expected verdict", 1)
+
+
+@kb_app.command("check")
+def kb_check(
+    scenario: ScenarioOpt = "kitchen",
+    as_json: Annotated[bool, typer.Option("--json", help="Print the figures as one JSON object.")] = False,
+) -> None:
+    """Check the TBox: consistency, satisfiability of every USC, and counts per module and category."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from virf.kb.check import check_tbox
+
+    try:
+        result = check_tbox(scenario)
+    except VirfError as exc:
+        raise _fail(str(exc)) from None
+    if as_json:
+        typer.echo(json.dumps(result, indent=2, sort_keys=True))
+    else:
+        console = Console(highlight=False, width=150)
+        console.print(f"Scenario: {scenario}  (reasoner: {result['reasoner']})")
+        console.print(f"TBox consistent: {'yes' if result['consistent'] else 'NO'}")
+        unsat = result["unsatisfiable_uscs"]
+        console.print(
+            f"Unsafe State Concepts satisfiable: {result['uscs'] - len(unsat)}/{result['uscs']}"
+            + (f"  UNSATISFIABLE: {', '.join(unsat)}" if unsat else "")
+        )
+        table = Table(title="Modules")
+        for col in ("module", "imports", "classes", "obj props", "data props", "individuals", "logical axioms", "USCs"):
+            table.add_column(col, justify="right" if col not in ("module", "imports") else "left")
+        for m in result["modules"]:
+            table.add_row(m["name"], ", ".join(m["imports"]), str(m["classes"]), str(m["object_properties"]),
+                          str(m["data_properties"]), str(m["individuals"]), str(m["logical_axioms"]), str(m["uscs"]))
+        console.print(table)
+        cats = Table(title="Unsafe State Concepts per category and kind")
+        kinds = sorted({k for row in result["usc_by_category"].values() for k in row})
+        cats.add_column("category")
+        for k in kinds:
+            cats.add_column(k, justify="right")
+        cats.add_column("total", justify="right")
+        for cat, row in sorted(result["usc_by_category"].items()):
+            cats.add_row(cat, *[str(row.get(k, 0)) for k in kinds], str(sum(row.values())))
+        console.print(cats)
+        console.print(f"Precondition definitions (simulator): {result['preconditions']}")
+        console.print(f"Annotated background axioms: {result['background_axioms']}")
+    if not result["consistent"] or result["unsatisfiable_uscs"]:
+        raise typer.Exit(1)
+
+
+@kb_app.command("rules")
+def kb_rules(
+    scenario: ScenarioOpt = "kitchen",
+    as_json: Annotated[bool, typer.Option("--json", help="Print the rules as JSON.")] = False,
+) -> None:
+    """List the Unsafe State Concepts with their definitions and annotations."""
+    from dataclasses import asdict
+
+    from virf.kb.tbox import load_tbox
+
+    try:
+        vocab = load_tbox(scenario).vocabulary
+    except VirfError as exc:
+        raise _fail(str(exc)) from None
+    rules = sorted(vocab.uscs.values(), key=lambda u: (u.module, u.id))
+    if as_json:
+        typer.echo(json.dumps([asdict(u) for u in rules], indent=2))
+        return
+    for u in rules:
+        typer.echo(f"{u.id}  [{u.kind}; {u.category}; {u.danger_level}; checked: {u.check_at}]")
+        typer.echo(f"    {u.definition}")
+        typer.echo(f"    {u.description}")
+        typer.echo(f"    source: {u.source}")
+
+
+def main() -> None:
+    try:
+        app()
+    except KeyboardInterrupt:
+        typer.echo("interrupted", err=True)
+        sys.exit(130)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,68 @@
+"""``virf kb check``: the TBox is consistent and every USC is satisfiable,
+checked with the reference reasoner (HermiT)."""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from typing import Any
+
+from virf.kb.tbox import load_tbox
+
+
+def check_tbox(scenario: str = "kitchen") -> dict[str, Any]:
+    tbox = load_tbox(scenario)  # starts the JVM
+    from org.semanticweb.HermiT import Configuration, Reasoner
+
+    vocab = tbox.vocabulary
+    config = Configuration()
+    config.throwInconsistentOntologyException = False
+    reasoner = Reasoner(config, tbox.root)
+    try:
+        consistent = bool(reasoner.isConsistent())
+        unsat = []
+        if consistent:
+            for name in sorted(vocab.uscs):
+                cls = tbox.factory.getOWLClass(_iri(name))
+                if not reasoner.isSatisfiable(cls):
+                    unsat.append(vocab.uscs[name].id)
+        else:
+            unsat = sorted(u.id for u in vocab.uscs.values())
+    finally:
+        reasoner.dispose()
+    by_category: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
+    for u in vocab.uscs.values():
+        by_category[u.category][u.kind] += 1
+    return {
+        "scenario": scenario,
+        "reasoner": "HermiT 1.4.3 (OWLAPI 5)",
+        "consistent": consistent,
+        "uscs": len(vocab.uscs),
+        "unsatisfiable_uscs": unsat,
+        "preconditions": len(vocab.preconditions),
+        "background_axioms": len(vocab.background),
+        "modules": [
+            {
+                "name": m.name,
+                "label": m.label,
+                "imports": list(m.imports),
+                "classes": m.classes,
+                "object_properties": m.object_properties,
+                "data_properties": m.data_properties,
+                "individuals": m.individuals,
+                "logical_axioms": m.logical_axioms,
+                "uscs": m.uscs,
+                "usc_by_category": dict(m.usc_by_category),
+                "usc_by_kind": dict(m.usc_by_kind),
+            }
+            for m in tbox.module_stats
+        ],
+        "usc_by_category": {k: dict(v) for k, v in sorted(by_category.items())},
+    }
+
+
+def _iri(name: str) -> Any:
+    from org.semanticweb.owlapi.model import IRI
+
+    from virf.kb.tbox import NS
+
+    return IRI.create(NS + name)
