@@ -54,6 +54,18 @@ class Fact:
             )
         return f"{self.subject} {self.predicate} {self.object}"
 
+    @classmethod
+    def from_triple(cls, t: Triple) -> Fact:
+        """Inverse of :meth:`triple`."""
+        if t.predicate == "rdf:type":
+            return cls(t.subject, "type", t.object, FactKind.TYPE)
+        if t.predicate.endswith(" only"):
+            members = ",".join(m.strip() for m in t.object.strip("{}").split(",") if m.strip())
+            return cls(t.subject, t.predicate.removesuffix(" only"), members, FactKind.CLOSURE)
+        if t.object in ("true", "false"):
+            return cls(t.subject, t.predicate, t.object, FactKind.DATA)
+        return cls(t.subject, t.predicate, t.object, FactKind.OBJECT)
+
     def triple(self) -> Triple:
         if self.kind is FactKind.TYPE:
             return Triple(subject=self.subject, predicate="rdf:type", object=self.object)
