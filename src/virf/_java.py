@@ -33,7 +33,7 @@ def jar_dir() -> Path:
 def ensure_jvm() -> None:
     """Start the JVM if it is not running.  Safe to call from any thread."""
     import jpype
-    import jpype.imports  # noqa: F401  (enables "from java... import")
+    import jpype.imports
 
     if jpype.isJVMStarted():
         return

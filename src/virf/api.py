@@ -27,7 +27,10 @@ class LogicTutor:
     """The verifier with its knowledge base and engine loaded."""
 
     def __init__(
-        self, scenario: str = DEFAULT_SCENARIO, engine: str = DEFAULT_ENGINE, timeout_s: float = 120.0
+        self,
+        scenario: str = DEFAULT_SCENARIO,
+        engine: str = DEFAULT_ENGINE,
+        timeout_s: float = 120.0,
     ) -> None:
         self.tbox: TBox = load_tbox(scenario)
         self.engine: Engine = make_engine(engine, self.tbox, timeout_s=timeout_s)
@@ -38,9 +41,15 @@ class LogicTutor:
             return build_scene(data, self.tbox.vocabulary)
         return load_scene_file(data, self.tbox.vocabulary)
 
-    def verify(self, scene: Scene | dict[str, Any], plan: Sequence[str] | Sequence[PlanStep]) -> Report:
+    def verify(
+        self, scene: Scene | dict[str, Any], plan: Sequence[str] | Sequence[PlanStep]
+    ) -> Report:
         sc = scene if isinstance(scene, Scene) else self.scene(scene)
-        steps = tuple(plan) if all(isinstance(p, PlanStep) for p in plan) else parse_plan([str(p) for p in plan])
+        steps = (
+            tuple(plan)
+            if all(isinstance(p, PlanStep) for p in plan)
+            else parse_plan([str(p) for p in plan])
+        )
         return self.verifier.verify(sc, steps)  # type: ignore[arg-type]
 
     def verify_files(self, scene_path: str | Path, plan_path: str | Path) -> Report:

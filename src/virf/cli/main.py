@@ -30,10 +30,16 @@ kb_app = typer.Typer(help="Inspect the safety knowledge base (TBox).", no_args_i
 app.add_typer(kb_app, name="kb")
 
 ScenarioOpt = Annotated[
-    str, typer.Option("--scenario", "-s", help="Scenario module to load (kitchen, appliances, cleaning).")
+    str,
+    typer.Option(
+        "--scenario", "-s", help="Scenario module to load (kitchen, appliances, cleaning)."
+    ),
 ]
 EngineOpt = Annotated[
-    str, typer.Option("--engine", "-e", help="Reasoning engine: hermit (reference, default) or pellet (Openllet).")
+    str,
+    typer.Option(
+        "--engine", "-e", help="Reasoning engine: hermit (reference, default) or pellet (Openllet)."
+    ),
 ]
 
 
@@ -45,14 +51,21 @@ def _fail(message: str, code: int = EXIT_BAD_INPUT) -> typer.Exit:
 @app.command()
 def verify(
     scene: Annotated[Path, typer.Argument(help="Scene ABox JSON file.")],
-    plan: Annotated[Path, typer.Argument(help="Plan: one action per line, or a JSON list of actions.")],
-    as_json: Annotated[bool, typer.Option("--json", help="Print exactly one JSON report on stdout.")] = False,
+    plan: Annotated[
+        Path, typer.Argument(help="Plan: one action per line, or a JSON list of actions.")
+    ],
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print exactly one JSON report on stdout.")
+    ] = False,
     feedback: Annotated[
-        bool, typer.Option("--feedback", help="Also print the paper's feedback prompt for the planner.")
+        bool,
+        typer.Option("--feedback", help="Also print the paper's feedback prompt for the planner."),
     ] = False,
     scenario: ScenarioOpt = "kitchen",
     engine: EngineOpt = "hermit",
-    timeout: Annotated[float, typer.Option(help="Give up (status ERROR) after this many seconds.")] = 120.0,
+    timeout: Annotated[
+        float, typer.Option(help="Give up (status ERROR) after this many seconds.")
+    ] = 120.0,
 ) -> None:
     """Verify PLAN in SCENE.  Exit 0 SAFE, 1 UNSAFE, 3 UNKNOWN, 4 ERROR, 2 bad input."""
     from virf.api import LogicTutor
@@ -80,9 +93,9 @@ def verify(
 
 @app.command()
 def demo(
-    folder: Annotated[Path, typer.Argument(help="Folder of examples: one sub-folder per scene.json + plan.txt.")] = Path(
-        "examples"
-    ),
+    folder: Annotated[
+        Path, typer.Argument(help="Folder of examples: one sub-folder per scene.json + plan.txt.")
+    ] = Path("examples"),
     engine: EngineOpt = "hermit",
 ) -> None:
     """Verify every example and print the reports; checks each against its expected.json."""
@@ -118,7 +131,9 @@ def demo(
         ok = (not expected) or (
             expected.get("status") == report.status
             and expected.get("dangerous_step", report.dangerous_step) == report.dangerous_step
-            and expected.get("violated_concept", report.violated_concept and report.violated_concept.id)
+            and expected.get(
+                "violated_concept", report.violated_concept and report.violated_concept.id
+            )
             == (report.violated_concept and report.violated_concept.id)
         )
         mismatches += 0 if ok else 1
@@ -138,7 +153,9 @@ def demo(
 @kb_app.command("check")
 def kb_check(
     scenario: ScenarioOpt = "kitchen",
-    as_json: Annotated[bool, typer.Option("--json", help="Print the figures as one JSON object.")] = False,
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print the figures as one JSON object.")
+    ] = False,
 ) -> None:
     """Check the TBox: consistency, satisfiability of every USC, and counts per module and category."""
     from rich.console import Console
@@ -162,11 +179,28 @@ def kb_check(
             + (f"  UNSATISFIABLE: {', '.join(unsat)}" if unsat else "")
         )
         table = Table(title="Modules")
-        for col in ("module", "imports", "classes", "obj props", "data props", "individuals", "logical axioms", "USCs"):
+        for col in (
+            "module",
+            "imports",
+            "classes",
+            "obj props",
+            "data props",
+            "individuals",
+            "logical axioms",
+            "USCs",
+        ):
             table.add_column(col, justify="right" if col not in ("module", "imports") else "left")
         for m in result["modules"]:
-            table.add_row(m["name"], ", ".join(m["imports"]), str(m["classes"]), str(m["object_properties"]),
-                          str(m["data_properties"]), str(m["individuals"]), str(m["logical_axioms"]), str(m["uscs"]))
+            table.add_row(
+                m["name"],
+                ", ".join(m["imports"]),
+                str(m["classes"]),
+                str(m["object_properties"]),
+                str(m["data_properties"]),
+                str(m["individuals"]),
+                str(m["logical_axioms"]),
+                str(m["uscs"]),
+            )
         console.print(table)
         cats = Table(title="Unsafe State Concepts per category and kind")
         kinds = sorted({k for row in result["usc_by_category"].values() for k in row})

@@ -104,11 +104,17 @@ def render_report(report: Report, title: str | None = None) -> str:
             lines.append(_wrap(f"? {q}", "    "))
     if report.trace:
         lines.append("  Trace:")
-        for t in report.trace:
-            mark = {"ok": " ", "unsafe": "!", "unknown": "?", "not-checked": "-", "not-simulated": "-",
-                    "error": "x"}[t.outcome]
-            note = f"  <- {', '.join(t.findings)}" if t.findings else ""
-            if t.outcome in ("not-simulated", "not-checked"):
-                note = f"  ({t.outcome.replace('-', ' ')}: verification stopped earlier)"
-            lines.append(f"    {mark} {t.step:>2}. {t.action}{note}")
+        for st in report.trace:
+            mark = {
+                "ok": " ",
+                "unsafe": "!",
+                "unknown": "?",
+                "not-checked": "-",
+                "not-simulated": "-",
+                "error": "x",
+            }[st.outcome]
+            note = f"  <- {', '.join(st.findings)}" if st.findings else ""
+            if st.outcome in ("not-simulated", "not-checked"):
+                note = f"  ({st.outcome.replace('-', ' ')}: verification stopped earlier)"
+            lines.append(f"    {mark} {st.step:>2}. {st.action}{note}")
     return "\n".join(lines) + "\n"

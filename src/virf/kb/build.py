@@ -181,12 +181,12 @@ def _quote(text: str) -> str:
 def _axiom(ident: str, comment: str, source: str, expr: str) -> str:
     return (
         f"        Annotations: :id {_quote(ident)}, rdfs:comment {_quote(comment)}, "
-        f":source {_quote(source)}, :kind \"background\"\n        {expr}"
+        f':source {_quote(source)}, :kind "background"\n        {expr}'
     )
 
 
 def _type_frame(name: str, info: dict[str, Any]) -> str:
-    annotations = [f'rdfs:comment {_quote("AI2-THOR object type " + name + ".")}']
+    annotations = [f"rdfs:comment {_quote('AI2-THOR object type ' + name + '.')}"]
     for material in info.get("typical_materials", []):
         annotations.append(f":typicalMaterial {_quote(material)}")
     for state in info.get("default_states", []):
@@ -203,25 +203,41 @@ def _type_frame(name: str, info: dict[str, Any]) -> str:
     axioms = []
     category = info["category"]
     axioms.append(
-        _axiom(f"KIT-{name}-isa-{category}", f"{name} is a kind of {category}.",
-               COMMON_SENSE, f":{category}")
+        _axiom(
+            f"KIT-{name}-isa-{category}",
+            f"{name} is a kind of {category}.",
+            COMMON_SENSE,
+            f":{category}",
+        )
     )
     for material in info.get("materials", []):
         axioms.append(
-            _axiom(f"KIT-{name}-material-{material}", f"Every {name} is made of {material}.",
-                   COMMON_SENSE, f":hasMaterial value :{material}")
+            _axiom(
+                f"KIT-{name}-material-{material}",
+                f"Every {name} is made of {material}.",
+                COMMON_SENSE,
+                f":hasMaterial value :{material}",
+            )
         )
     for prop in info.get("properties", []):
         axioms.append(
-            _axiom(f"KIT-{name}-property-{prop}", f"Every {name} is {prop}.",
-                   COMMON_SENSE, f":hasProperty value :{prop}")
+            _axiom(
+                f"KIT-{name}-property-{prop}",
+                f"Every {name} is {prop}.",
+                COMMON_SENSE,
+                f":hasProperty value :{prop}",
+            )
         )
     receptacle = info.get("receptacle")
     if receptacle:
         cls = RECEPTACLES[receptacle]
         axioms.append(
-            _axiom(f"KIT-{name}-{cls}", f"A {name} is a receptacle: objects go {'inside it' if receptacle == 'container' else 'on it'}.",
-                   CATALOGUE_SOURCE, f":{cls}")
+            _axiom(
+                f"KIT-{name}-{cls}",
+                f"A {name} is a receptacle: objects go {'inside it' if receptacle == 'container' else 'on it'}.",
+                CATALOGUE_SOURCE,
+                f":{cls}",
+            )
         )
     for field, (cls, text) in AFFORDANCES.items():
         if info.get(field):
@@ -259,16 +275,23 @@ def render_kitchen(catalogue: dict[str, Any]) -> str:
         .replace("{nonfood}", ", ".join(f":{c}" for c in ("FoodItem", *NON_FOOD_TOP)))
         .replace("{affordances}", "\n".join(affordance_frames))
     )
-    parts = [header, "# ---------------------------------------------------------------- category tree"]
+    parts = [
+        header,
+        "# ---------------------------------------------------------------- category tree",
+    ]
     for category in categories:
         if category in ("Meat",):
             continue  # declared in the header with RawMeat under it
         parents = ", ".join(f":{p}" for p in CATEGORY_PARENTS[category])
         parts.append(f"Class: :{category}\n    SubClassOf: {parents}")
-    parts.append("\n# ---------------------------------------------------------------- object types")
+    parts.append(
+        "\n# ---------------------------------------------------------------- object types"
+    )
     for name in sorted(types):
         parts.append(_type_frame(name, types[name]))
-    parts.append("\n# ---------------------------------------------------------------- memberships between types")
+    parts.append(
+        "\n# ---------------------------------------------------------------- memberships between types"
+    )
     for sub, sup, text in EXTRA_MEMBERSHIPS:
         if sub in types:
             parts.append(

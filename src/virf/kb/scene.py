@@ -40,7 +40,12 @@ from virf.kb.tbox import Vocabulary
 from virf.schema import Fact, FactKind, Provenance
 
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
-INVERSES = {"isInside": "contains", "isOn": "supports", "isHeldBy": "isHolding", "isControlledBy": "controls"}
+INVERSES = {
+    "isInside": "contains",
+    "isOn": "supports",
+    "isHeldBy": "isHolding",
+    "isControlledBy": "controls",
+}
 CLOSABLE = ("contains", "supports")
 # Words a scene may use as data values of hasState/hasMaterial.
 VALUE_WORDS = {
@@ -94,14 +99,19 @@ def load_scene_file(path: str | Path, vocab: Vocabulary) -> Scene:
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise InputError(f"scene {p} is not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
+        raise InputError(
+            f"scene {p} is not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}"
+        ) from None
     return build_scene(data, vocab, name=p.stem if p.stem != "scene" else p.parent.name)
 
 
 def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
     if not isinstance(data, dict):
         raise InputError("scene must be a JSON object with 'instances' and 'assertions'")
-    unknown_keys = sorted(set(data) - {"instances", "assertions", "closed_world", "description", "name", "unlocated_by_default"})
+    unknown_keys = sorted(
+        set(data)
+        - {"instances", "assertions", "closed_world", "description", "name", "unlocated_by_default"}
+    )
     if unknown_keys:
         raise InputError(
             f"unknown scene key '{unknown_keys[0]}'; expected instances, assertions, closed_world, unlocated_by_default, description"
@@ -125,7 +135,9 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
                 "and use only letters, digits, '_', '.', '-'"
             )
         if iname in vocab.individuals or iname in vocab.classes:
-            raise InputError(f"instances[{i}]: '{iname}' is already an ontology term; choose another name")
+            raise InputError(
+                f"instances[{i}]: '{iname}' is already an ontology term; choose another name"
+            )
         cls = vocab.require_class(cname)
         if iname not in classes:
             classes[iname] = set()
@@ -149,7 +161,9 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
         raise InputError("scene 'closed_world' must be a list of relation names")
     for rel in closed:
         if rel not in CLOSABLE:
-            raise InputError(f"closed_world: '{rel}' cannot be closed; choose from {', '.join(CLOSABLE)}")
+            raise InputError(
+                f"closed_world: '{rel}' cannot be closed; choose from {', '.join(CLOSABLE)}"
+            )
 
     def resolve_value(value: str, prop: str, where: str) -> str:
         if value in classes:
@@ -183,7 +197,9 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
         if subj not in classes:
             near = closest(subj, classes)
             hint = f"; closest known: {', '.join(near)}" if near else ""
-            raise InputError(f"{where}: unknown individual '{subj}' (declare it in instances){hint}")
+            raise InputError(
+                f"{where}: unknown individual '{subj}' (declare it in instances){hint}"
+            )
         prop = vocab.canonical_property(prop_name)
         if prop is None:
             near = closest(prop_name, list(vocab.object_properties | vocab.data_properties))

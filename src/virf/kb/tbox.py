@@ -141,10 +141,7 @@ class Vocabulary:
     def require_class(self, name: str) -> str:
         found = self.canonical_class(name)
         if found is None:
-            raise InputError(
-                f"unknown class '{name}'"
-                + _hint(closest(name, self.classes))
-            )
+            raise InputError(f"unknown class '{name}'" + _hint(closest(name, self.classes)))
         return found
 
     def materials_of(self, classes: frozenset[str] | set[str]) -> frozenset[str]:
@@ -195,7 +192,9 @@ class TBox:
     def __init__(self, scenario: str = DEFAULT_SCENARIO) -> None:
         names = scenario_names()
         if scenario not in names:
-            raise InputError(f"unknown scenario '{scenario}'" + _hint(closest(scenario, names) or names))
+            raise InputError(
+                f"unknown scenario '{scenario}'" + _hint(closest(scenario, names) or names)
+            )
         ensure_jvm()
         from java.io import File
         from org.semanticweb.owlapi.apibinding import OWLManager
@@ -266,7 +265,10 @@ class TBox:
                         annotations[key][prop].append(_literal(ax.getValue()))
             for ax in ont.axioms(_axiom_type("SUBCLASS_OF")).toArray():
                 sub, sup = ax.getSubClass(), ax.getSuperClass()
-                if sub.isAnonymous() or str(sup.getClassExpressionType().toString()) != "ObjectHasValue":
+                if (
+                    sub.isAnonymous()
+                    or str(sup.getClassExpressionType().toString()) != "ObjectHasValue"
+                ):
                     continue
                 if _short(sup.getProperty().asOWLObjectProperty().getIRI()) == "hasMaterial":
                     value = sup.getFiller()
@@ -426,7 +428,9 @@ class TBox:
                 )
             )
         order = {"core": 0, "kitchen": 1}
-        out.sort(key=lambda m: (order.get(m.name, 3 if m.name.startswith("scenario") else 2), m.name))
+        out.sort(
+            key=lambda m: (order.get(m.name, 3 if m.name.startswith("scenario") else 2), m.name)
+        )
         return tuple(out)
 
 
@@ -464,10 +468,10 @@ def _axiom_type(name: str) -> Any:
 
 
 def _make_renderer() -> Any:
-    from org.semanticweb.owlapi.util import SimpleShortFormProvider
     from org.semanticweb.owlapi.manchestersyntax.renderer import (
         ManchesterOWLSyntaxOWLObjectRendererImpl,
     )
+    from org.semanticweb.owlapi.util import SimpleShortFormProvider
 
     renderer = ManchesterOWLSyntaxOWLObjectRendererImpl()
     renderer.setShortFormProvider(SimpleShortFormProvider())

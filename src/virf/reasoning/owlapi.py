@@ -68,7 +68,9 @@ class OwlapiEngine(Engine):
             return df.getOWLClassAssertionAxiom(self._entity("class", fact.object), subject)
         if fact.kind is FactKind.DATA:
             return df.getOWLDataPropertyAssertionAxiom(
-                self._entity("dprop", fact.predicate), subject, df.getOWLLiteral(fact.object == "true")
+                self._entity("dprop", fact.predicate),
+                subject,
+                df.getOWLLiteral(fact.object == "true"),
             )
         prop = self._entity("oprop", fact.predicate)
         if fact.kind is FactKind.CLOSURE:
@@ -83,9 +85,13 @@ class OwlapiEngine(Engine):
             else:
                 filler = df.getOWLNothing()
             return df.getOWLClassAssertionAxiom(df.getOWLObjectAllValuesFrom(prop, filler), subject)
-        return df.getOWLObjectPropertyAssertionAxiom(prop, subject, self._entity("ind", fact.object))
+        return df.getOWLObjectPropertyAssertionAxiom(
+            prop, subject, self._entity("ind", fact.object)
+        )
 
-    def _with(self, facts: list[Fact], without: frozenset[str], question: Callable[[Any], Any]) -> Any:
+    def _with(
+        self, facts: list[Fact], without: frozenset[str], question: Callable[[Any], Any]
+    ) -> Any:
         """Run ``question(reasoner)`` over TBox (minus ``without``) plus ``facts``."""
         from java.util import ArrayList
 
@@ -118,9 +124,7 @@ class OwlapiEngine(Engine):
 
     # ------------------------------------------------------------------ engine API
     def _classify(self, facts: list[Fact], concepts: list[str]) -> Classification:
-        abox = {f.subject for f in facts} | {
-            f.object for f in facts if f.kind is FactKind.OBJECT
-        }
+        abox = {f.subject for f in facts} | {f.object for f in facts if f.kind is FactKind.OBJECT}
 
         def ask(reasoner: Any) -> Classification:
             if not reasoner.isConsistent():
@@ -138,7 +142,9 @@ class OwlapiEngine(Engine):
         result: Classification = self._with(facts, frozenset(), ask)
         return result
 
-    def _entails(self, facts: list[Fact], concept: str, individual: str, without: frozenset[str]) -> bool:
+    def _entails(
+        self, facts: list[Fact], concept: str, individual: str, without: frozenset[str]
+    ) -> bool:
         axiom = self.df.getOWLClassAssertionAxiom(
             self._entity("class", concept), self._entity("ind", individual)
         )

@@ -49,8 +49,10 @@ class Fact:
             return f"{self.subject} is a {self.object}"
         if self.kind is FactKind.CLOSURE:
             inside = ", ".join(self.members())
-            return f"{self.subject} {self.predicate} only {{{inside}}}" if inside else (
-                f"{self.subject} {self.predicate} nothing"
+            return (
+                f"{self.subject} {self.predicate} only {{{inside}}}"
+                if inside
+                else (f"{self.subject} {self.predicate} nothing")
             )
         return f"{self.subject} {self.predicate} {self.object}"
 
@@ -71,7 +73,9 @@ class Fact:
             return Triple(subject=self.subject, predicate="rdf:type", object=self.object)
         if self.kind is FactKind.CLOSURE:
             inside = ", ".join(self.members())
-            return Triple(subject=self.subject, predicate=f"{self.predicate} only", object=f"{{{inside}}}")
+            return Triple(
+                subject=self.subject, predicate=f"{self.predicate} only", object=f"{{{inside}}}"
+            )
         return Triple(subject=self.subject, predicate=self.predicate, object=self.object)
 
 
@@ -95,7 +99,14 @@ class BackgroundKnowledge(_Frozen):
 
 Status = Literal["SAFE", "UNSAFE", "UNKNOWN", "ERROR"]
 Phase = Literal[
-    "initial", "action", "state", "final", "precondition", "missing-object", "inconsistency", "error"
+    "initial",
+    "action",
+    "state",
+    "final",
+    "precondition",
+    "missing-object",
+    "inconsistency",
+    "error",
 ]
 
 

@@ -136,7 +136,7 @@ class PlanStep:
 
 
 def _unknown_verb(word: str, line_no: int) -> InputError:
-    near = closest(word, list(_ALIASES) + ["turn on", "toggle on", "pick up"])
+    near = closest(word, [*_ALIASES, "turn on", "toggle on", "pick up"])
     hint = f"; closest: {', '.join(near)}" if near else f"; valid verbs: {', '.join(VERBS)}"
     return InputError(f"plan line {line_no}: unknown action '{word}'{hint}")
 
@@ -204,7 +204,9 @@ def parse_plan_text(text: str) -> tuple[PlanStep, ...]:
         try:
             data = json.loads(stripped)
         except json.JSONDecodeError as exc:
-            raise InputError(f"plan looks like JSON but is not valid: {exc.msg} at line {exc.lineno}") from None
+            raise InputError(
+                f"plan looks like JSON but is not valid: {exc.msg} at line {exc.lineno}"
+            ) from None
         if not isinstance(data, list):
             raise InputError("a JSON plan must be a list of action strings")
         return parse_plan(data)

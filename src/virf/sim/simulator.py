@@ -64,14 +64,16 @@ class WorldState:
 
     def objects_of(self, subject: str, predicate: str) -> list[str]:
         return sorted(
-            f.object for f in self.facts if f.subject == subject and f.predicate == predicate
-            and f.kind is FactKind.OBJECT
+            f.object
+            for f in self.facts
+            if f.subject == subject and f.predicate == predicate and f.kind is FactKind.OBJECT
         )
 
     def subjects_of(self, predicate: str, obj: str) -> list[str]:
         return sorted(
-            f.subject for f in self.facts if f.object == obj and f.predicate == predicate
-            and f.kind is FactKind.OBJECT
+            f.subject
+            for f in self.facts
+            if f.object == obj and f.predicate == predicate and f.kind is FactKind.OBJECT
         )
 
     def held(self) -> str | None:
@@ -132,8 +134,12 @@ class Simulator:
         return self.vocab.any_is_a(classes, "PhysicalObject")
 
     def _is_catalogue_type(self, classes: frozenset[str]) -> bool:
-        return any(self.vocab.annotation(c, "compatibleReceptacle") or self.vocab.is_a(c, "Receptacle")
-                   or self._has_kitchen_axioms(c) for c in classes)
+        return any(
+            self.vocab.annotation(c, "compatibleReceptacle")
+            or self.vocab.is_a(c, "Receptacle")
+            or self._has_kitchen_axioms(c)
+            for c in classes
+        )
 
     def _has_kitchen_axioms(self, cls: str) -> bool:
         comment = self.vocab.annotation(cls, "comment")
@@ -155,7 +161,8 @@ class Simulator:
         if cls is None:
             return None
         candidates = [
-            ind for ind in state.order + tuple(sorted(set(state.objects) - set(state.order)))
+            ind
+            for ind in state.order + tuple(sorted(set(state.objects) - set(state.order)))
             if ind != state.agent and self.vocab.any_is_a(state.objects[ind], cls)
         ]
         if not candidates:
@@ -175,7 +182,9 @@ class Simulator:
         def need(term: str) -> str | MissingObject:
             found = self.resolve_term(state, term)
             if found is None:
-                pool = list(state.objects) + sorted({c for cs in state.objects.values() for c in cs})
+                pool = list(state.objects) + sorted(
+                    {c for cs in state.objects.values() for c in cs}
+                )
                 return MissingObject(step, term, tuple(closest(term, pool)))
             return found
 
@@ -185,18 +194,20 @@ class Simulator:
             dest = need(args[-1])
             if isinstance(dest, MissingObject):
                 return dest
-            patient: str | MissingObject | None = held
+            patient = held
             if len(args) == 2:
-                patient = need(args[0])
-                if isinstance(patient, MissingObject):
-                    return patient
+                named = need(args[0])
+                if isinstance(named, MissingObject):
+                    return named
+                patient = named
             return ResolvedStep(step, target=dest, patient=patient)
         if verb == "pour":
-            dest_r: str | MissingObject | None = state.last_found
+            dest_r = state.last_found
             if args:
-                dest_r = need(args[0])
-                if isinstance(dest_r, MissingObject):
-                    return dest_r
+                named = need(args[0])
+                if isinstance(named, MissingObject):
+                    return named
+                dest_r = named
             if dest_r == held:
                 dest_r = None
             return ResolvedStep(step, target=dest_r, patient=held)
@@ -228,7 +239,9 @@ class Simulator:
             out[Fact(act, "hasInstrument", r.instrument)] = Provenance.PLAN
         if r.liquid:
             out[Fact(act, "hasPatient", r.liquid)] = Provenance.PLAN
-            out[Fact(r.liquid, "type", LIQUID_CLASS[r.step.args[1]], FactKind.TYPE)] = Provenance.PLAN
+            out[Fact(r.liquid, "type", LIQUID_CLASS[r.step.args[1]], FactKind.TYPE)] = (
+                Provenance.PLAN
+            )
         return out
 
     @staticmethod
@@ -248,7 +261,10 @@ class Simulator:
         out[Fact(state.agent, "isHolding", ",".join(held), FactKind.CLOSURE)] = Provenance.PLAN
         for ind in state.order + tuple(sorted(set(state.objects) - set(state.order))):
             classes = state.objects[ind]
-            for rel, cls in (("contains", "ContainerReceptacle"), ("supports", "SurfaceReceptacle")):
+            for rel, cls in (
+                ("contains", "ContainerReceptacle"),
+                ("supports", "SurfaceReceptacle"),
+            ):
                 if self.vocab.any_is_a(classes, cls):
                     members = state.objects_of(ind, rel)
                     prov = Provenance.SCENE if rel in state.closed_world else Provenance.ASSUMED
@@ -285,13 +301,21 @@ class Simulator:
             add(Fact(obj, "isLocated", "true", FactKind.DATA))
 
         def unplace(obj: str) -> None:
-            drop(f for f in facts if f.object == obj and f.predicate in ("contains", "supports")
-                 and f.kind is FactKind.OBJECT)
+            drop(
+                f
+                for f in facts
+                if f.object == obj
+                and f.predicate in ("contains", "supports")
+                and f.kind is FactKind.OBJECT
+            )
 
         target = r.target
         if verb in AFFORDANCE and target and self.lacks(target, state, AFFORDANCE[verb]):
-            return fail("Precondition_LacksAffordance", target,
-                        f"{target} cannot be used for '{verb}': its type is not {AFFORDANCE[verb]}")
+            return fail(
+                "Precondition_LacksAffordance",
+                target,
+                f"{target} cannot be used for '{verb}': its type is not {AFFORDANCE[verb]}",
+            )
 
         if verb == "find":
             assert target is not None
@@ -302,8 +326,12 @@ class Simulator:
         elif verb == "pick":
             assert target is not None
             if held is not None:
-                return fail("Precondition_HandNotEmpty", agent,
-                            f"{agent} is already holding {held}", Fact(agent, "isHolding", held))
+                return fail(
+                    "Precondition_HandNotEmpty",
+                    agent,
+                    f"{agent} is already holding {held}",
+                    Fact(agent, "isHolding", held),
+                )
             unplace(target)
             add(Fact(agent, "isHolding", target))
             located(target)
@@ -313,14 +341,22 @@ class Simulator:
             if held is None or obj is None:
                 return fail("Precondition_NothingHeld", agent, f"{agent} is holding nothing to put")
             if obj != held:
-                return fail("Precondition_NothingHeld", agent,
-                            f"{agent} is holding {held}, not {obj}", Fact(agent, "isHolding", held))
+                return fail(
+                    "Precondition_NothingHeld",
+                    agent,
+                    f"{agent} is holding {held}, not {obj}",
+                    Fact(agent, "isHolding", held),
+                )
             classes = state.objects[target]
             if self._is_catalogue_type(classes) and not self.vocab.any_is_a(classes, "Receptacle"):
                 return fail("Precondition_NotAReceptacle", target, f"{target} cannot hold objects")
             if state.has(target, "hasState", "ClosedState"):
-                return fail("Precondition_ReceptacleClosed", target, f"{target} is closed",
-                            Fact(target, "hasState", "ClosedState"))
+                return fail(
+                    "Precondition_ReceptacleClosed",
+                    target,
+                    f"{target} is closed",
+                    Fact(target, "hasState", "ClosedState"),
+                )
             drop([Fact(agent, "isHolding", held)])
             rel = "supports" if self.vocab.any_is_a(classes, "SurfaceReceptacle") else "contains"
             # Things on the same counter or in the same cabinet are near each other.
@@ -373,31 +409,43 @@ class Simulator:
             self._remove_liquids(state, target, objects, facts)
         elif verb == "pour":
             if held is None:
-                return fail("Precondition_NothingHeld", agent, f"{agent} is holding nothing to pour")
+                return fail(
+                    "Precondition_NothingHeld", agent, f"{agent} is holding nothing to pour"
+                )
             if target is None:
-                return fail("Precondition_NoPourTarget", agent,
-                            "nothing has been found to pour into since the object was picked up")
-            liquids = [o for o in state.objects_of(held, "contains")
-                       if self.vocab.any_is_a(state.objects.get(o, frozenset()), "Liquid")]
+                return fail(
+                    "Precondition_NoPourTarget",
+                    agent,
+                    "nothing has been found to pour into since the object was picked up",
+                )
+            liquids = [
+                o
+                for o in state.objects_of(held, "contains")
+                if self.vocab.any_is_a(state.objects.get(o, frozenset()), "Liquid")
+            ]
             filled = state.has(held, "hasState", "FilledWithLiquidState")
             for liquid in liquids:
                 facts.pop(Fact(held, "contains", liquid), None)
-                if self.vocab.any_is_a(state.objects[target], "ContainerReceptacle") or \
-                        self.vocab.any_is_a(state.objects[target], "LiquidContainer"):
+                if self.vocab.any_is_a(
+                    state.objects[target], "ContainerReceptacle"
+                ) or self.vocab.any_is_a(state.objects[target], "LiquidContainer"):
                     add(Fact(target, "contains", liquid))
                 else:
                     objects.pop(liquid, None)
                     drop(f for f in facts if liquid in (f.subject, f.object))
             if liquids or filled:
                 set_state(held, "EmptyState")
-                if not self.vocab.any_is_a(state.objects[target], "LiquidContainer") and not \
-                        self.vocab.any_is_a(state.objects[target], "ContainerReceptacle"):
+                if not self.vocab.any_is_a(
+                    state.objects[target], "LiquidContainer"
+                ) and not self.vocab.any_is_a(state.objects[target], "ContainerReceptacle"):
                     set_state(target, "WetState")
                 elif self.vocab.any_is_a(state.objects[target], "LiquidContainer"):
                     set_state(target, "FilledWithLiquidState")
         elif verb in ("drop", "throw"):
             if held is None:
-                return fail("Precondition_NothingHeld", agent, f"{agent} is holding nothing to {verb}")
+                return fail(
+                    "Precondition_NothingHeld", agent, f"{agent} is holding nothing to {verb}"
+                )
             drop([Fact(agent, "isHolding", held)])
             floors = [o for o in state.order if self.vocab.any_is_a(state.objects[o], "Floor")]
             if floors:
@@ -430,12 +478,19 @@ class Simulator:
             facts[Fact(name, "type", derived[0], FactKind.TYPE)] = Provenance.PLAN
             facts[Fact(name, "isLocated", "true", FactKind.DATA)] = Provenance.PLAN
             for f in list(facts):
-                if f.object == source and f.predicate in ("contains", "supports") and f.kind is FactKind.OBJECT:
+                if (
+                    f.object == source
+                    and f.predicate in ("contains", "supports")
+                    and f.kind is FactKind.OBJECT
+                ):
                     facts[Fact(f.subject, f.predicate, name)] = Provenance.PLAN
             return
 
     def _remove_liquids(
-        self, state: WorldState, container: str, objects: dict[str, frozenset[str]],
+        self,
+        state: WorldState,
+        container: str,
+        objects: dict[str, frozenset[str]],
         facts: dict[Fact, Provenance],
     ) -> None:
         for liquid in state.objects_of(container, "contains"):

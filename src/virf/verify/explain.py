@@ -15,10 +15,17 @@ from virf.kb.tbox import Vocabulary
 from virf.reasoning import Engine
 from virf.schema import Fact, FactKind, Provenance
 
-_DROP_FIRST = {Provenance.ASSUMED: 0, Provenance.DEFAULT: 1, Provenance.PLAN: 2, Provenance.SCENE: 3}
+_DROP_FIRST = {
+    Provenance.ASSUMED: 0,
+    Provenance.DEFAULT: 1,
+    Provenance.PLAN: 2,
+    Provenance.SCENE: 3,
+}
 
 
-def _component(facts: Mapping[Fact, Provenance], start: set[str], tbox_individuals: frozenset[str]) -> list[Fact]:
+def _component(
+    facts: Mapping[Fact, Provenance], start: set[str], tbox_individuals: frozenset[str]
+) -> list[Fact]:
     """Facts about individuals linked to ``start`` through ABox relations.
 
     Entailment of a class assertion depends only on this component; TBox
@@ -43,8 +50,10 @@ def _component(facts: Mapping[Fact, Provenance], start: set[str], tbox_individua
                         reach.add(m)
                         changed = True
     return [
-        f for f in facts
-        if f.subject in reach or (f.kind is FactKind.OBJECT and f.object in reach)
+        f
+        for f in facts
+        if f.subject in reach
+        or (f.kind is FactKind.OBJECT and f.object in reach)
         or f.subject in tbox_individuals
     ]
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Literal
 
 from virf.kb.scene import Scene
 from virf.kb.tbox import TBox, UnsafeStateConcept
@@ -38,12 +39,28 @@ from virf.schema import (
     Violation,
 )
 from virf.sim.plan import PlanStep
-from virf.sim.simulator import MissingObject, PreconditionFailure, ResolvedStep, Simulator, WorldState, diff
+from virf.sim.simulator import (
+    MissingObject,
+    PreconditionFailure,
+    ResolvedStep,
+    Simulator,
+    WorldState,
+    diff,
+)
 from virf.verify.explain import minimize, needed_background
 
+Outcome = Literal["ok", "unsafe", "unknown", "not-checked", "not-simulated", "error"]
 DANGER_RANK = {"critical": 0, "high": 1, "medium": 2, "low": 3}
-PHASE_RANK = {"precondition": 0, "action": 1, "initial": 2, "state": 3, "final": 4, "missing-object": 5,
-              "inconsistency": 6, "error": 7}
+PHASE_RANK = {
+    "precondition": 0,
+    "action": 1,
+    "initial": 2,
+    "state": 3,
+    "final": 4,
+    "missing-object": 5,
+    "inconsistency": 6,
+    "error": 7,
+}
 
 
 class VerificationTimeout(Exception):
@@ -85,7 +102,7 @@ class Verifier:
             return self._error(plan, f"verification timed out: {exc}")
         except ReasonerFailure as exc:
             return self._error(plan, f"reasoner failure: {exc}")
-        except Exception as exc:  # noqa: BLE001  fail closed on anything unexpected
+        except Exception as exc:
             return self._error(plan, f"internal error: {type(exc).__name__}: {exc}")
 
     # ------------------------------------------------------------------ protocol
@@ -132,16 +149,16 @@ class Verifier:
                 usc = self.vocab.uscs[concept]
                 for ind in individuals:
                     if ind == action_ind:
-                        step, phase = k + 1, "action"
+                        at, phase = k + 1, "action"
                     elif usc.final_only:
-                        step, phase = k, "final"
+                        at, phase = k, "final"
                     else:
-                        step, phase = k, "initial" if k == 0 else "state"
+                        at, phase = k, "initial" if k == 0 else "state"
                     key = (concept, ind if phase != "action" else f"{ind}")
                     if key in seen and phase not in ("final",):
                         continue
                     seen.add(key)
-                    f = self._explain(usc, ind, step, phase, snapshot)
+                    f = self._explain(usc, ind, at, phase, snapshot)
                     if phase == "final":
                         f.step = self._onset(f.facts, states, n)
                     findings.setdefault(f.step, []).append(f)
@@ -157,7 +174,12 @@ class Verifier:
 
     # ------------------------------------------------------------------ findings
     def _explain(
-        self, usc: UnsafeStateConcept, ind: str, step: int, phase: str, snapshot: Mapping[Fact, Provenance]
+        self,
+        usc: UnsafeStateConcept,
+        ind: str,
+        step: int,
+        phase: str,
+        snapshot: Mapping[Fact, Provenance],
     ) -> _Finding:
         facts = minimize(
             snapshot,
@@ -169,7 +191,9 @@ class Verifier:
         assumed = [f for f in facts if snapshot[f] is Provenance.ASSUMED]
         defaults = [f for f in facts if snapshot[f] is Provenance.DEFAULT]
         background = [
-            BackgroundKnowledge(id=b, text=self.vocab.background[b].text, source=self.vocab.background[b].source)
+            BackgroundKnowledge(
+                id=b, text=self.vocab.background[b].text, source=self.vocab.background[b].source
+            )
             for b in background_ids
         ] + [
             BackgroundKnowledge(
@@ -187,11 +211,15 @@ class Verifier:
         if extra:
             message += f"; background knowledge: {extra}"
         message += f". Hence {ind} is an instance of {usc.name}."
-        return _Finding(usc, step, phase, ind, definite, facts, dict(snapshot), background, message, questions)
+        return _Finding(
+            usc, step, phase, ind, definite, facts, dict(snapshot), background, message, questions
+        )
 
     def _questions(self, usc: UnsafeStateConcept, ind: str, assumed: list[Fact]) -> list[str]:
         out = []
-        markers = [f for f in assumed if f.predicate == "hasMaterial" and f.object == "UnknownMaterial"]
+        markers = [
+            f for f in assumed if f.predicate == "hasMaterial" and f.object == "UnknownMaterial"
+        ]
         if usc.question:
             x = markers[0].subject if markers else ind
             out.append(usc.question.replace("{x}", x))
@@ -201,7 +229,11 @@ class Verifier:
             if f.kind is FactKind.CLOSURE:
                 where = "in" if f.predicate == "contains" else "on"
                 listed = ", ".join(f.members())
-                claim = f"only {listed} is {where} {f.subject}" if listed else f"nothing is {where} {f.subject}"
+                claim = (
+                    f"only {listed} is {where} {f.subject}"
+                    if listed
+                    else f"nothing is {where} {f.subject}"
+                )
                 out.append(
                     f"Is it true that {claim}? The scene does not say its '{f.predicate}' list is complete."
                 )
@@ -243,8 +275,16 @@ class Verifier:
         subject = facts[0].subject if facts else ""
         question = f"The scene is contradictory: {listed}. Which of these is wrong?"
         return _Finding(
-            concept, k, "inconsistency", subject, False, facts, dict(snapshot), [],
-            f"These facts cannot all be true: {listed}.", [question],
+            concept,
+            k,
+            "inconsistency",
+            subject,
+            False,
+            facts,
+            dict(snapshot),
+            [],
+            f"These facts cannot all be true: {listed}.",
+            [question],
         )
 
     def _stopped(self, stop: MissingObject | PreconditionFailure, state: WorldState) -> _Finding:
@@ -266,13 +306,32 @@ class Verifier:
                 module="",
             )
             question = f"Step {stop.step.index} ('{stop.step.text}') needs '{stop.term}', but the scene has none{near}. Where is it?"
-            return _Finding(concept, stop.step.index, "missing-object", stop.term, False, [], {},
-                            [], f"'{stop.term}' is not in the scene{near}.", [question])
+            return _Finding(
+                concept,
+                stop.step.index,
+                "missing-object",
+                stop.term,
+                False,
+                [],
+                {},
+                [],
+                f"'{stop.term}' is not in the scene{near}.",
+                [question],
+            )
         usc = self.vocab.preconditions[stop.precondition]
         facts = list(stop.facts)
         prov = {f: state.facts.get(f, Provenance.PLAN) for f in facts}
-        return _Finding(usc, stop.step.index, "precondition", stop.subject, True, facts, prov, [],
-                        f"Precondition failed: {stop.message}.")
+        return _Finding(
+            usc,
+            stop.step.index,
+            "precondition",
+            stop.subject,
+            True,
+            facts,
+            prov,
+            [],
+            f"Precondition failed: {stop.message}.",
+        )
 
     # ------------------------------------------------------------------ report
     def _report(
@@ -284,7 +343,9 @@ class Verifier:
         findings: dict[int, list[_Finding]],
         first_definite: int | None,
     ) -> Report:
-        uncertain_steps = sorted(s for s, fs in findings.items() if fs and not any(f.definite for f in fs))
+        uncertain_steps = sorted(
+            s for s, fs in findings.items() if fs and not any(f.definite for f in fs)
+        )
         if first_definite is not None:
             status, step = "UNSAFE", first_definite
         elif uncertain_steps or findings:
@@ -311,15 +372,23 @@ class Verifier:
         elif status == "UNSAFE":
             reason = f"step {step}: {primary.description}"
         else:
-            reason = f"step {step}: safety depends on facts that are not known ({primary.description})"
+            reason = (
+                f"step {step}: safety depends on facts that are not known ({primary.description})"
+            )
         return Report(
             status=status,  # type: ignore[arg-type]
             dangerous_step=step,
             action=action,
-            violated_concept=ViolatedConcept(id=primary.id, description=primary.description) if primary else None,
+            violated_concept=ViolatedConcept(id=primary.id, description=primary.description)
+            if primary
+            else None,
             causal_chain=CausalChain(
-                message=primary.message, triggering_facts=primary.triggering_facts, background=primary.background
-            ) if primary else None,
+                message=primary.message,
+                triggering_facts=primary.triggering_facts,
+                background=primary.background,
+            )
+            if primary
+            else None,
             violations=violations,
             questions=tuple(questions),
             suggestion=primary.suggestion if primary else None,
@@ -337,11 +406,24 @@ class Verifier:
         trig = tuple(x.triple() for x in f.facts if f.provenance.get(x) is not Provenance.DEFAULT)
         assumed = tuple(x.triple() for x in f.facts if f.provenance.get(x) is Provenance.ASSUMED)
         return Violation(
-            id=u.id, name=u.name, kind=u.kind, category=u.category, danger_level=u.danger_level,
-            description=u.description, safety_warning=u.safety_warning, trigger_reason=u.trigger_reason,
-            suggestion=u.suggestion, source=u.source, step=f.step, phase=f.phase,  # type: ignore[arg-type]
-            subject=f.subject, definite=f.definite, message=f.message, triggering_facts=trig,
-            assumed_facts=assumed, background=tuple(f.background),
+            id=u.id,
+            name=u.name,
+            kind=u.kind,
+            category=u.category,
+            danger_level=u.danger_level,
+            description=u.description,
+            safety_warning=u.safety_warning,
+            trigger_reason=u.trigger_reason,
+            suggestion=u.suggestion,
+            source=u.source,
+            step=f.step,
+            phase=f.phase,  # type: ignore[arg-type]
+            subject=f.subject,
+            definite=f.definite,
+            message=f.message,
+            triggering_facts=trig,
+            assumed_facts=assumed,
+            background=tuple(f.background),
         )
 
     def _trace(
@@ -356,32 +438,63 @@ class Verifier:
         for i, step in enumerate(plan, start=1):
             ids = tuple(sorted({f.concept.id for f in findings.get(i, [])}))
             fs = findings.get(i, [])
-            outcome = "unsafe" if any(f.definite for f in fs) else "unknown" if fs else "ok"
+            outcome: Outcome = (
+                "unsafe" if any(f.definite for f in fs) else "unknown" if fs else "ok"
+            )
             if i > self._checked and not fs:
                 outcome = "not-checked"
             if i < len(states):
                 added, removed = diff(states[i - 1], states[i])
-                out.append(StepTrace(step=i, action=step.text, outcome=outcome, findings=ids,  # type: ignore[arg-type]
-                                     added=added, removed=removed))
+                out.append(
+                    StepTrace(
+                        step=i,
+                        action=step.text,
+                        outcome=outcome,
+                        findings=ids,
+                        added=added,
+                        removed=removed,
+                    )
+                )
             else:
                 stopped_here = stop is not None and stop.step.index == i
-                out.append(StepTrace(step=i, action=step.text,
-                                     outcome=outcome if stopped_here else "not-simulated",  # type: ignore[arg-type]
-                                     findings=ids))
+                out.append(
+                    StepTrace(
+                        step=i,
+                        action=step.text,
+                        outcome=outcome if stopped_here else "not-simulated",
+                        findings=ids,
+                    )
+                )
         return tuple(out)
 
     def _error(self, plan: Sequence[PlanStep], reason: str) -> Report:
         return Report(
-            status="ERROR", dangerous_step=None, action=None, violated_concept=None, causal_chain=None,
-            violations=(), questions=(), suggestion=None, danger_level=None, category=None,
+            status="ERROR",
+            dangerous_step=None,
+            action=None,
+            violated_concept=None,
+            causal_chain=None,
+            violations=(),
+            questions=(),
+            suggestion=None,
+            danger_level=None,
+            category=None,
             reason=reason + " (fail closed: the plan is not approved)",
-            plan=tuple(s.text for s in plan), trace=(), engine=self.engine.name, scenario=self.tbox.scenario,
+            plan=tuple(s.text for s in plan),
+            trace=(),
+            engine=self.engine.name,
+            scenario=self.tbox.scenario,
         )
 
 
 def _rank(f: _Finding) -> tuple[int, int, int, str, str]:
-    return (0 if f.definite else 1, DANGER_RANK.get(f.concept.danger_level, 9), PHASE_RANK[f.phase],
-            f.concept.id, f.subject)
+    return (
+        0 if f.definite else 1,
+        DANGER_RANK.get(f.concept.danger_level, 9),
+        PHASE_RANK[f.phase],
+        f.concept.id,
+        f.subject,
+    )
 
 
 def _triples(facts: list[Fact]) -> tuple[Triple, ...]:
