@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import difflib
 from collections.abc import Iterable
+from pathlib import Path
 
 
 class VirfError(Exception):
@@ -30,3 +31,16 @@ def unknown_term(kind: str, term: str, choices: Iterable[str]) -> InputError:
     near = closest(term, choices)
     hint = f"; closest known: {', '.join(near)}" if near else ""
     return InputError(f"unknown {kind} '{term}'{hint}")
+
+
+def read_input_file(path: str | Path, what: str) -> str:
+    """Read a user's file, turning I/O failures into one-line input errors."""
+    p = Path(path)
+    try:
+        return p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError(f"{what} file not found: {p}") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{what} file {p} is not UTF-8 text") from None
+    except OSError as exc:
+        raise InputError(f"cannot read {what} file {p}: {exc.strerror}") from None

@@ -35,7 +35,7 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
-from virf.errors import InputError, closest
+from virf.errors import InputError, closest, read_input_file
 from virf.kb.tbox import Vocabulary
 from virf.schema import Fact, FactKind, Provenance
 
@@ -90,12 +90,7 @@ class Scene:
 
 def load_scene_file(path: str | Path, vocab: Vocabulary) -> Scene:
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"scene file not found: {p}") from None
-    except OSError as exc:
-        raise InputError(f"cannot read scene file {p}: {exc.strerror}") from None
+    text = read_input_file(p, "scene")
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:

@@ -20,7 +20,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from virf.errors import InputError, closest
+from virf.errors import InputError, closest, read_input_file
 
 VERBS = (
     "find",
@@ -214,11 +214,4 @@ def parse_plan_text(text: str) -> tuple[PlanStep, ...]:
 
 
 def load_plan_file(path: str | Path) -> tuple[PlanStep, ...]:
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"plan file not found: {p}") from None
-    except OSError as exc:
-        raise InputError(f"cannot read plan file {p}: {exc.strerror}") from None
-    return parse_plan_text(text)
+    return parse_plan_text(read_input_file(path, "plan"))
