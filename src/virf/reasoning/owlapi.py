@@ -106,14 +106,27 @@ class OwlapiEngine(Engine):
             self.manager.addAxioms(self.ontology, added)
             self.manager.removeAxioms(self.ontology, removed)
             reasoner = None
+            fired = threading.Event()
+            watchdog: threading.Timer | None = None
             try:
                 reasoner = self._reasoner(self.ontology)
+                # A reasoner that runs past the timeout is interrupted from this
+                # watchdog thread; the interruption surfaces as ReasonerFailure.
+                watchdog = threading.Timer(self.timeout_s, _interrupt, (reasoner, fired))
+                watchdog.daemon = True
+                watchdog.start()
                 return question(reasoner)
             except ReasonerFailure:
                 raise
             except Exception as exc:  # any Java-side failure: fail closed upstream
+                if fired.is_set() or "TimeOut" in type(exc).__name__ or "TimeOut" in str(exc):
+                    raise ReasonerFailure(
+                        f"{self.name} timed out after {self.timeout_s:g}s"
+                    ) from exc
                 raise ReasonerFailure(f"{self.name} failed: {type(exc).__name__}: {exc}") from exc
             finally:
+                if watchdog is not None:
+                    watchdog.cancel()
                 if reasoner is not None:
                     reasoner.dispose()
                 self.manager.removeAxioms(self.ontology, added)
@@ -160,6 +173,11 @@ class OwlapiEngine(Engine):
     def _consistent(self, facts: list[Fact], without: frozenset[str]) -> bool:
         result: bool = self._with(facts, without, lambda r: bool(r.isConsistent()))
         return result
+
+
+def _interrupt(reasoner: Any, fired: threading.Event) -> None:
+    fired.set()
+    reasoner.interrupt()
 
 
 class HermitEngine(OwlapiEngine):
