@@ -1,0 +1,79 @@
+"""Shared fixtures: one JVM, one knowledge base, one Logic Tutor per test session.
+
+Loading the TBox and starting HermiT costs seconds, so ``tutor`` is session
+scoped and every test reuses it.  Tests that need a broken or slow engine build
+their own ``Verifier`` around ``tutor.tbox`` instead of touching the shared one.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from virf.api import LogicTutor
+from virf.kb.tbox import Vocabulary
+from virf.schema import Report
+
+ROOT = Path(__file__).resolve().parent.parent
+EXAMPLES_DIR = ROOT / "examples"
+
+
+def example_cases() -> list[Path]:
+    """Every example folder: one ``scene.json`` + ``plan.txt`` (+ ``expected.json``)."""
+    return sorted(
+        p
+        for p in EXAMPLES_DIR.iterdir()
+        if p.is_dir() and (p / "scene.json").is_file() and (p / "plan.txt").is_file()
+    )
+
+
+def load_expected(case: Path) -> dict[str, Any]:
+    data: dict[str, Any] = json.loads((case / "expected.json").read_text(encoding="utf-8"))
+    return data
+
+
+def case_params(keep: Callable[[Path], bool] | None = None) -> list[Any]:
+    """Example folders as pytest params with readable ids, optionally filtered."""
+    return [pytest.param(c, id=c.name) for c in example_cases() if keep is None or keep(c)]
+
+
+# Small builders for inline scenes.
+def inst(cls: str, name: str) -> dict[str, str]:
+    return {"class_name": cls, "instance_name": name}
+
+
+def rel(subject: str, prop: str, obj: str, kind: str = "object_property") -> dict[str, str]:
+    return {"subject": subject, "property": prop, "object": obj, "type": kind}
+
+
+@pytest.fixture(scope="session")
+def tutor() -> LogicTutor:
+    return LogicTutor()
+
+
+@pytest.fixture(scope="session")
+def vocab(tutor: LogicTutor) -> Vocabulary:
+    return tutor.tbox.vocabulary
+
+
+@pytest.fixture(scope="session")
+def examples_dir() -> Path:
+    return EXAMPLES_DIR
+
+
+@pytest.fixture(scope="session")
+def example_report(tutor: LogicTutor) -> Callable[[str], Report]:
+    """The report for an example folder by name, verified once per session."""
+    cache: dict[str, Report] = {}
+
+    def get(name: str) -> Report:
+        if name not in cache:
+            case = EXAMPLES_DIR / name
+            cache[name] = tutor.verify_files(case / "scene.json", case / "plan.txt")
+        return cache[name]
+
+    return get

@@ -1,0 +1,219 @@
+"""Scene input: the paper's Appendix C ABox format, errors with suggestions, material defaults."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+from conftest import inst, rel
+
+from virf.errors import InputError
+from virf.kb.build import load_catalogue
+from virf.kb.scene import build_scene, load_scene_file
+from virf.schema import Fact, FactKind, Provenance
+
+FOOD_CATEGORIES = {"Fruit", "Vegetable", "BakedGood", "EggFood", "Meat", "Beverage", "Condiment"}
+NO_MATERIAL_TYPES = sorted(
+    name
+    for name, info in load_catalogue()["types"].items()
+    if not info.get("materials")
+    and not info.get("typical_materials")
+    and info["category"] not in FOOD_CATEGORIES
+)
+
+APPENDIX_C: dict[str, Any] = {
+    "instances": [
+        inst("Microwave", "Microwave_1"),
+        inst("Pot", "Pot_1"),
+        inst("MetallicObject", "Pot_1"),
+        inst("CounterTop", "CounterTop_1"),
+        inst("Metal", "Metal_for_Pot_1"),
+    ],
+    "assertions": [
+        rel("Pot_1", "isMadeOf", "Metal_for_Pot_1"),
+        rel("Microwave_1", "hasState", "closed", "data_property"),
+        rel("Pot_1", "isOn", "CounterTop_1"),
+    ],
+}
+
+
+def test_appendix_c_abox_loads(tutor) -> None:
+    scene = tutor.scene(APPENDIX_C)
+    facts = scene.facts
+    assert facts[Fact("Microwave_1", "hasState", "ClosedState")] is Provenance.SCENE
+    assert facts[Fact("CounterTop_1", "supports", "Pot_1")] is Provenance.SCENE
+    assert Fact("Pot_1", "hasMaterial", "Metal_for_Pot_1") in facts  # isMadeOf == hasMaterial
+    assert Fact("Pot_1", "type", "Pot", FactKind.TYPE) in facts
+    assert Fact("Pot_1", "type", "MetallicObject", FactKind.TYPE) in facts
+    assert Fact("Metal_for_Pot_1", "type", "Metal", FactKind.TYPE) in facts
+    # isOn is stored once, as its inverse.
+    assert not any(f.predicate == "isOn" for f in facts)
+    # The material individual is not a physical object in the scene.
+    assert set(scene.objects) == {"Microwave_1", "Pot_1", "CounterTop_1", scene.agent}
+    assert scene.objects["Pot_1"] == frozenset({"Pot", "MetallicObject"})
+    assert tutor.engine.consistent(facts)
+
+
+def test_scene_order_and_default_agent(tutor) -> None:
+    scene = tutor.scene(APPENDIX_C)
+    assert scene.order == ("Microwave_1", "Pot_1", "CounterTop_1")
+    assert scene.agent == "Robot_1"
+    assert Fact("Robot_1", "type", "Robot", FactKind.TYPE) in scene.facts
+
+
+def _error(tutor, data: Any) -> str:
+    with pytest.raises(InputError) as err:
+        build_scene(data, tutor.tbox.vocabulary)
+    return str(err.value)
+
+
+def test_unknown_class_suggests_closest(tutor) -> None:
+    msg = _error(tutor, {"instances": [inst("Mircowave", "Microwave_1")]})
+    assert "'Mircowave'" in msg
+    assert "Microwave" in msg.split("closest", 1)[1]
+
+
+def test_unknown_property_suggests_closest(tutor) -> None:
+    data = {
+        "instances": [inst("Microwave", "Microwave_1")],
+        "assertions": [rel("Microwave_1", "hasStat", "OnState")],
+    }
+    msg = _error(tutor, data)
+    assert "'hasStat'" in msg
+    assert "hasState" in msg.split("closest", 1)[1]
+
+
+def test_unknown_subject_individual_suggests_closest(tutor) -> None:
+    data = {
+        "instances": [inst("Pot", "Pot_1"), inst("CounterTop", "CounterTop_1")],
+        "assertions": [rel("Pot1", "isOn", "CounterTop_1")],
+    }
+    msg = _error(tutor, data)
+    assert "'Pot1'" in msg
+    assert "Pot_1" in msg.split("closest", 1)[1]
+
+
+def test_unknown_object_individual_suggests_closest(tutor) -> None:
+    data = {
+        "instances": [inst("Pot", "Pot_1"), inst("CounterTop", "CounterTop_1")],
+        "assertions": [rel("Pot_1", "isOn", "CounterTop1")],
+    }
+    msg = _error(tutor, data)
+    assert "'CounterTop1'" in msg
+    assert "CounterTop_1" in msg.split("closest", 1)[1]
+
+
+@pytest.mark.parametrize("name", ["1Pot", "Pot 1", "Pot/1", ""])
+def test_bad_instance_name(tutor, name: str) -> None:
+    msg = _error(tutor, {"instances": [inst("Pot", name)]})
+    assert f"'{name}'" in msg
+
+
+def test_instance_named_like_ontology_term(tutor) -> None:
+    assert "ontology term" in _error(tutor, {"instances": [inst("Pot", "Metal")]})
+
+
+@pytest.mark.parametrize(
+    "data",
+    [
+        [],
+        {"assertions": []},
+        {"instances": [], "extra": 1},
+        {"instances": [{"class_name": "Pot"}]},
+        {"instances": [inst("Pot", "Pot_1")], "closed_world": ["isNear"]},
+        {"instances": [inst("Pot", "Pot_1")], "assertions": [rel("Pot_1", "isLocated", "maybe")]},
+        {
+            "instances": [inst("Pot", "Pot_1")],
+            "assertions": [rel("Pot_1", "hasState", "OnState", "weird_property")],
+        },
+    ],
+)
+def test_malformed_scene_structure(tutor, data: Any) -> None:
+    _error(tutor, data)
+
+
+def test_malformed_json_file(tmp_path, vocab) -> None:
+    p = tmp_path / "scene.json"
+    p.write_text('{"instances": [\n', encoding="utf-8")
+    with pytest.raises(InputError, match="not valid JSON"):
+        load_scene_file(p, vocab)
+
+
+def test_missing_scene_file(tmp_path, vocab) -> None:
+    with pytest.raises(InputError, match="not found"):
+        load_scene_file(tmp_path / "nope.json", vocab)
+
+
+def test_scene_file_name(tmp_path, vocab) -> None:
+    case = tmp_path / "my-case"
+    case.mkdir()
+    (case / "scene.json").write_text('{"instances": []}', encoding="utf-8")
+    assert load_scene_file(case / "scene.json", vocab).name == "my-case"
+
+
+# ---------------------------------------------------------------- materials
+
+
+def test_mug_gets_default_ceramic(tutor) -> None:
+    scene = tutor.scene({"instances": [inst("Mug", "Mug_1")]})
+    materials = {f: p for f, p in scene.facts.items() if f.predicate == "hasMaterial"}
+    assert materials == {Fact("Mug_1", "hasMaterial", "Ceramic"): Provenance.DEFAULT}
+
+
+def test_stated_material_overrides_default(tutor) -> None:
+    scene = tutor.scene(
+        {"instances": [inst("Mug", "Mug_1")], "assertions": [rel("Mug_1", "hasMaterial", "Glass")]}
+    )
+    materials = {f: p for f, p in scene.facts.items() if f.predicate == "hasMaterial"}
+    assert materials == {Fact("Mug_1", "hasMaterial", "Glass"): Provenance.SCENE}
+
+
+def test_strict_material_needs_no_default(tutor) -> None:
+    # Every pot is metal by the TBox: no default and no unknown-material marker.
+    scene = tutor.scene({"instances": [inst("Pot", "Pot_1")]})
+    assert not any(f.predicate == "hasMaterial" for f in scene.facts)
+
+
+def test_food_gets_no_material_marker(tutor) -> None:
+    scene = tutor.scene({"instances": [inst("Apple", "Apple_1")]})
+    assert not any(f.predicate == "hasMaterial" for f in scene.facts)
+
+
+@pytest.mark.parametrize("cls", ["PhysicalObject", *NO_MATERIAL_TYPES])
+def test_unknown_material_is_assumed(tutor, cls: str) -> None:
+    scene = tutor.scene({"instances": [inst(cls, "Thing_1")]})
+    materials = {f: p for f, p in scene.facts.items() if f.predicate == "hasMaterial"}
+    assert materials == {Fact("Thing_1", "hasMaterial", "UnknownMaterial"): Provenance.ASSUMED}
+
+
+def test_catalogue_has_a_type_without_material() -> None:
+    assert NO_MATERIAL_TYPES, "the parametrised test above would only cover PhysicalObject"
+
+
+# ---------------------------------------------------------------- value words and inverses
+
+
+def test_value_words_and_inverses(tutor) -> None:
+    data = {
+        "instances": [
+            inst("Fridge", "Fridge_1"),
+            inst("Apple", "Apple_1"),
+            inst("StoveKnob", "StoveKnob_1"),
+            inst("StoveBurner", "StoveBurner_1"),
+        ],
+        "assertions": [
+            rel("Fridge_1", "hasState", "open", "data_property"),
+            rel("Apple_1", "isInside", "Fridge_1"),
+            rel("StoveBurner_1", "isControlledBy", "StoveKnob_1"),
+            rel("StoveKnob_1", "hasState", "off", "data_property"),
+            rel("Apple_1", "isLocated", "false", "data_property"),
+        ],
+        "closed_world": ["contains"],
+    }
+    scene = tutor.scene(data)
+    assert Fact("Fridge_1", "hasState", "OpenState") in scene.facts
+    assert Fact("Fridge_1", "contains", "Apple_1") in scene.facts
+    assert Fact("StoveKnob_1", "controls", "StoveBurner_1") in scene.facts
+    assert Fact("StoveKnob_1", "hasState", "OffState") in scene.facts
+    assert Fact("Apple_1", "isLocated", "false", FactKind.DATA) in scene.facts
+    assert scene.closed_world == frozenset({"contains"})

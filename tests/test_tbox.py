@@ -1,0 +1,256 @@
+"""The safety knowledge base: consistency, rule metadata, provenance, generated module."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from virf.kb.build import kitchen_path, load_catalogue, render_kitchen
+from virf.kb.check import check_tbox
+from virf.kb.tbox import DANGER_LEVELS, USC_KINDS
+from virf.schema import Fact, FactKind
+
+CATALOGUE: dict[str, Any] = load_catalogue()["types"]
+
+PAPER_RULES = (
+    "UnsafeMicrowaveUsage",
+    "ThrowActionDanger",
+    "DropActionDanger",
+    "BreakActionDanger",
+    "DirtyActionDanger",
+    "FillWineDanger",
+    "PourToUnsafeTargetDanger",
+    "LogicalInconsistency_ActionOnUnlocatedObject",
+    "LogicalInconsistency_DirectCookAction",
+    "LogicalInconsistency_SliceWithHandheldKnife",
+    "MicrowaveContainsUnknownMaterialDanger",
+    "CupContainsEggDanger",
+    "BreadOnHotStoveDanger",
+    "ImproperlyFilledRefrigeratorHazard",
+    "AmmoniaBleachMixtureHazardDanger",
+    "ChildNearSharpObjectDanger",
+    "HotOilContainerHazardDanger",
+)
+GENERALISED_RULES = (
+    "MicrowaveEggDanger",
+    "MicrowaveContainsMugDanger",
+    "CoffeemachineWithTomatoDanger",
+    "ForkInToasterDanger",
+    "KettleOnStoveDanger",
+    "MugOnStoveBurnerDanger",
+    "ForkInStoveBurnerDanger",
+    "KnifeOnStoveBurnerDanger",
+    "EggOnStoveBurnerDanger",
+    "ForcefullyClosingDrawerWithEggDanger",
+)
+METAL_TOOLS = ("Pot", "Pan", "Fork", "Spoon", "Knife", "ButterKnife", "Kettle", "Ladle")
+
+
+@pytest.fixture(scope="module")
+def tbox_check(tutor) -> dict[str, Any]:
+    return check_tbox()
+
+
+def _short(entity: Any) -> str:
+    return str(entity.getIRI().getShortForm())
+
+
+def _notes(ax: Any) -> dict[str, str]:
+    out = {}
+    for ann in ax.getAnnotations():
+        value = ann.getValue()
+        text = str(value.asLiteral().get().getLiteral()) if value.isLiteral() else ""
+        out[str(ann.getProperty().getIRI().getShortForm())] = text
+    return out
+
+
+def _axioms(tutor, keep) -> list[tuple[str, str, Any, dict[str, str]]]:
+    """(module, axiom type, axiom, annotations) for modules accepted by ``keep``."""
+    out = []
+    for ont in tutor.tbox.closure:
+        module = tutor.tbox.module_name(ont)
+        if keep(module):
+            for ax in ont.getLogicalAxioms():
+                out.append((module, str(ax.getAxiomType()), ax, _notes(ax)))
+    return out
+
+
+def _is_rule_module(module: str) -> bool:
+    return module == "kitchen" or module.startswith("safety-")
+
+
+# ---------------------------------------------------------------- consistency
+
+
+def test_tbox_is_consistent(tbox_check) -> None:
+    assert tbox_check["consistent"] is True
+    assert tbox_check["uscs"] >= 30
+
+
+@pytest.mark.xfail(
+    reason="src bug: CORE-SingleBodyMaterial makes every multi-material catalogue type "
+    "(CoffeeMachine: Metal+Plastic) unsatisfiable, so CoffeeMachineFoodDanger can never fire",
+    strict=True,
+)
+def test_no_unsatisfiable_usc(tbox_check) -> None:
+    assert tbox_check["unsatisfiable_uscs"] == []
+
+
+@pytest.mark.xfail(
+    reason="src bug: CellPhone, CoffeeMachine, Laptop, Television have several strict "
+    "materials (catalogue) but core says an object body has one material",
+    strict=True,
+)
+def test_every_catalogue_type_is_satisfiable(tutor) -> None:
+    unsat = [
+        name
+        for name in sorted(CATALOGUE)
+        if not tutor.engine.consistent([Fact("X_1", "type", name, FactKind.TYPE)])
+    ]
+    assert unsat == []
+
+
+# ---------------------------------------------------------------- rule metadata
+
+
+def test_usc_annotations_complete(vocab) -> None:
+    assert vocab.uscs
+    for name, u in vocab.uscs.items():
+        assert u.name == name
+        assert u.id, name
+        assert u.kind in USC_KINDS, name
+        assert u.category, name
+        assert u.danger_level in DANGER_LEVELS, name
+        for field in ("description", "safety_warning", "trigger_reason", "suggestion", "source"):
+            assert getattr(u, field).strip(), f"{name}: empty {field}"
+        assert u.check_at in ("always", "final"), name
+        assert u.definition, f"{name} has no '-def' definition axiom"
+        assert u.module.startswith("safety-"), name
+
+
+def test_usc_ids_are_unique(vocab) -> None:
+    ids = [u.id for u in vocab.uscs.values()] + [p.id for p in vocab.preconditions.values()]
+    assert len(ids) == len(set(ids))
+
+
+def test_preconditions_used_by_simulator_exist(vocab) -> None:
+    for name in (
+        "Precondition_HandNotEmpty",
+        "Precondition_NothingHeld",
+        "Precondition_ReceptacleClosed",
+        "Precondition_NotAReceptacle",
+        "Precondition_NoPourTarget",
+        "Precondition_LacksAffordance",
+    ):
+        assert name in vocab.preconditions
+        assert vocab.preconditions[name].suggestion
+
+
+@pytest.mark.parametrize("rule", PAPER_RULES)
+def test_paper_rule_present(vocab, rule: str) -> None:
+    assert rule in {u.id for u in vocab.uscs.values()}
+
+
+@pytest.mark.parametrize("rule", PAPER_RULES + GENERALISED_RULES)
+def test_paper_rule_covered(vocab, rule: str) -> None:
+    covering = [
+        u.id
+        for u in vocab.uscs.values()
+        if u.id == rule or rule in [g.strip() for g in u.generalizes.split(",")]
+    ]
+    assert covering, f"no USC is or generalises {rule}"
+
+
+# ---------------------------------------------------------------- axiom provenance
+
+
+def test_every_identified_axiom_has_a_source(tutor) -> None:
+    axioms = _axioms(tutor, _is_rule_module)
+    assert len(axioms) > 400
+    ids = [notes["id"] for _, _, _, notes in axioms if "id" in notes]
+    assert len(ids) == len(set(ids)), "duplicate axiom ids"
+    for module, kind, ax, notes in axioms:
+        if "id" in notes:
+            assert notes.get("source", "").strip(), f"{module}: {notes['id']} ({kind}) has no source"
+
+
+def test_kitchen_axioms_identified(tutor) -> None:
+    kitchen = _axioms(tutor, lambda m: m == "kitchen")
+    for _, kind, ax, notes in kitchen:
+        if kind == "SubClassOf":
+            sub = ax.getSubClass()
+            if not sub.isAnonymous() and _short(sub.asOWLClass()) in CATALOGUE:
+                assert "id" in notes, f"catalogue axiom without id: {ax}"
+                assert notes.get("kind") == "background"
+            elif "id" not in notes:
+                # Unidentified axioms only build the category tree between named classes.
+                sup = ax.getSuperClass()
+                assert not sub.isAnonymous() and not sup.isAnonymous(), str(ax)
+                assert _short(sup.asOWLClass()) not in CATALOGUE, str(ax)
+        elif kind == "DisjointClasses":
+            assert "id" in notes, str(ax)
+        elif kind == "EquivalentClasses" and "id" not in notes:
+            named = {_short(c) for c in ax.getClassesInSignature()}
+            assert not named & set(CATALOGUE), str(ax)
+        else:
+            assert kind in ("SubClassOf", "DisjointClasses", "EquivalentClasses"), kind
+
+
+def test_kitchen_background_matches_catalogue(vocab) -> None:
+    for name, info in CATALOGUE.items():
+        assert f"KIT-{name}-isa-{info['category']}" in vocab.background, name
+        for material in info.get("materials", []):
+            assert f"KIT-{name}-material-{material}" in vocab.background, name
+            assert material in vocab.class_materials.get(name, frozenset()), name
+        for prop in info.get("properties", []):
+            assert f"KIT-{name}-property-{prop}" in vocab.background, name
+
+
+def test_safety_modules_structure(tutor, vocab) -> None:
+    safety = _axioms(tutor, lambda m: m.startswith("safety-"))
+    roots = {"UnsafeStateConcept", "PreconditionViolation"}
+    defined = set()
+    for module, kind, ax, notes in safety:
+        if kind == "EquivalentClasses":
+            ident = notes.get("id", "")
+            assert ident.endswith("-def"), f"{module}: definition without '-def' id: {ax}"
+            stem = ident.removesuffix("-def")
+            assert stem in {_short(c) for c in ax.getNamedClasses()}, ident
+            defined.add(stem)
+        elif "id" not in notes:
+            # The only unidentified axioms place a rule class under its root.
+            assert kind == "SubClassOf", f"{module}: {ax}"
+            assert _short(ax.getSuperClass().asOWLClass()) in roots, str(ax)
+            assert not ax.getSubClass().isAnonymous()
+    assert set(vocab.uscs) <= defined
+
+
+def test_kitchen_module_in_sync_with_catalogue() -> None:
+    assert render_kitchen(load_catalogue()) == kitchen_path().read_text(encoding="utf-8")
+
+
+# ---------------------------------------------------------------- composition
+
+
+@pytest.mark.parametrize("tool", METAL_TOOLS)
+def test_metal_tools_are_conductive(vocab, tool: str) -> None:
+    assert "MetallicObject" in vocab.ancestors[tool]
+    assert "ConductiveObject" in vocab.ancestors[tool]
+
+
+def test_knife_is_sharp_but_spoon_is_not(vocab) -> None:
+    assert vocab.is_a("Knife", "SharpObject")
+    assert not vocab.is_a("Spoon", "SharpObject")
+
+
+def test_non_metal_tableware_is_not_metallic(vocab) -> None:
+    for cls in ("Mug", "Plate", "Bowl", "Apple"):
+        assert "MetallicObject" not in vocab.ancestors[cls], cls
+
+
+@pytest.mark.parametrize("cls", ["Mug", "Plate", "Bowl"])
+def test_typical_material_is_ceramic(vocab, cls: str) -> None:
+    assert vocab.typical_materials({cls}) == ("Ceramic",)
+    # A default, not a TBox fact: the class itself does not force a material.
+    assert vocab.materials_of({cls}) == frozenset()
