@@ -90,9 +90,7 @@ def test_walkthrough_needs_pot_material_axiom(tutor, example_report) -> None:
     assert "KIT-Pot-material-Metal" in [b.id for b in v.background]
     facts = proof_facts(v)
     assert tutor.engine.entails(facts, v.name, v.subject)
-    assert not tutor.engine.entails(
-        facts, v.name, v.subject, without={"KIT-Pot-material-Metal"}
-    )
+    assert not tutor.engine.entails(facts, v.name, v.subject, without={"KIT-Pot-material-Metal"})
     # Removing an unrelated background axiom changes nothing.
     assert tutor.engine.entails(facts, v.name, v.subject, without={"KIT-Knife-property-Sharp"})
 

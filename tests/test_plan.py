@@ -57,11 +57,6 @@ def test_numbering_is_not_part_of_the_step() -> None:
     assert step.canonical() == "find X"
 
 
-@pytest.mark.xfail(
-    reason="src bug: put's filler-word stripping ('a', 'an', 'the', ...) also drops an "
-    "object literally named 'A', so 'put_in(A, B)' is verified as 'put B'",
-    strict=True,
-)
 @pytest.mark.parametrize("text", ["put_in(A, B)", "put A in B"])
 def test_single_letter_object_names_are_kept(text: str) -> None:
     assert one(text) == ("put", ("A", "B"))

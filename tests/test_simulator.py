@@ -112,7 +112,7 @@ def test_put_into_closed_fridge(tutor, scene) -> None:
 
 def test_put_into_opened_fridge_is_fine(tutor, scene) -> None:
     plan = ["find Apple_1", "pick Apple_1", "find Fridge_1", "open Fridge_1", "put Fridge_1"]
-    report = tutor.verify(scene, plan + ["close Fridge_1"])
+    report = tutor.verify(scene, [*plan, "close Fridge_1"])
     assert report.status == "SAFE"
     assert "Fridge_1 contains Apple_1" in report.trace[4].added
 

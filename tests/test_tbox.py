@@ -88,20 +88,10 @@ def test_tbox_is_consistent(tbox_check) -> None:
     assert tbox_check["uscs"] >= 30
 
 
-@pytest.mark.xfail(
-    reason="src bug: CORE-SingleBodyMaterial makes every multi-material catalogue type "
-    "(CoffeeMachine: Metal+Plastic) unsatisfiable, so CoffeeMachineFoodDanger can never fire",
-    strict=True,
-)
 def test_no_unsatisfiable_usc(tbox_check) -> None:
     assert tbox_check["unsatisfiable_uscs"] == []
 
 
-@pytest.mark.xfail(
-    reason="src bug: CellPhone, CoffeeMachine, Laptop, Television have several strict "
-    "materials (catalogue) but core says an object body has one material",
-    strict=True,
-)
 def test_every_catalogue_type_is_satisfiable(tutor) -> None:
     unsat = [
         name
@@ -170,9 +160,11 @@ def test_every_identified_axiom_has_a_source(tutor) -> None:
     assert len(axioms) > 400
     ids = [notes["id"] for _, _, _, notes in axioms if "id" in notes]
     assert len(ids) == len(set(ids)), "duplicate axiom ids"
-    for module, kind, ax, notes in axioms:
+    for module, kind, _, notes in axioms:
         if "id" in notes:
-            assert notes.get("source", "").strip(), f"{module}: {notes['id']} ({kind}) has no source"
+            assert notes.get("source", "").strip(), (
+                f"{module}: {notes['id']} ({kind}) has no source"
+            )
 
 
 def test_kitchen_axioms_identified(tutor) -> None:

@@ -56,9 +56,7 @@ def test_noise_examples_are_never_safe(example_report, case: str) -> None:
 
 
 @pytest.mark.parametrize("perturb", [_contradiction, _omission, _uncertainty])
-def test_noise_perturbations_of_a_safe_plan_are_never_safe(
-    tutor, example_report, perturb
-) -> None:
+def test_noise_perturbations_of_a_safe_plan_are_never_safe(tutor, example_report, perturb) -> None:
     plan = load_plan_file(REFINED / "plan.txt")
     assert example_report(REFINED.name).status == "SAFE"  # the unperturbed baseline
     report = tutor.verify(perturb(_refined_scene()), plan)
@@ -102,7 +100,7 @@ BURNER = EXAMPLES_DIR / "burner-left-on" / "scene.json"
 def test_final_state_hazard_only_checked_at_the_end(tutor) -> None:
     scene = tutor.scene(BURNER)
     on = ["find StoveKnob_1", "turn_on StoveKnob_1"]
-    later_pot = on + ["find Pot_1", "pick Pot_1", "find StoveBurner_1", "put StoveBurner_1"]
+    later_pot = [*on, "find Pot_1", "pick Pot_1", "find StoveBurner_1", "put StoveBurner_1"]
     report = tutor.verify(scene, later_pot)
     assert "StoveBurnerLeftOnEmptyDanger" not in [v.id for v in report.violations]
     assert report.status == "SAFE"
@@ -146,12 +144,6 @@ def test_question_names_object_when_material_assumed(tutor) -> None:
     assert any("Thing_1" in q for q in report.questions)
 
 
-@pytest.mark.xfail(
-    reason="src bug: Verifier._questions only looks for an UnknownMaterial marker among "
-    "ASSUMED facts; when the scene itself states 'hasMaterial UnknownMaterial' the question "
-    "asks for the material of the classified individual (the microwave / the pour action)",
-    strict=True,
-)
 @pytest.mark.parametrize("case", ["unknown-material-microwave", "noise-uncertainty"])
 def test_question_names_object_of_stated_unknown_material(example_report, case: str) -> None:
     report = example_report(case)
@@ -269,4 +261,3 @@ def test_engine_aliases(tutor) -> None:
 def test_unknown_concept_is_rejected(tutor) -> None:
     with pytest.raises(InputError, match="NoSuchConcept"):
         tutor.engine.classify([], ["NoSuchConcept"])
-

@@ -178,6 +178,11 @@ def kb_check(
             f"Unsafe State Concepts satisfiable: {result['uscs'] - len(unsat)}/{result['uscs']}"
             + (f"  UNSATISFIABLE: {', '.join(unsat)}" if unsat else "")
         )
+        bad = result["unsatisfiable_classes"]
+        console.print(
+            f"Named classes satisfiable: {result['classes'] - len(bad)}/{result['classes']}"
+            + (f"  UNSATISFIABLE: {', '.join(bad)}" if bad else "")
+        )
         table = Table(title="Modules")
         for col in (
             "module",
@@ -213,7 +218,7 @@ def kb_check(
         console.print(cats)
         console.print(f"Precondition definitions (simulator): {result['preconditions']}")
         console.print(f"Annotated background axioms: {result['background_axioms']}")
-    if not result["consistent"] or result["unsatisfiable_uscs"]:
+    if not result["consistent"] or result["unsatisfiable_uscs"] or result["unsatisfiable_classes"]:
         raise typer.Exit(1)
 
 

@@ -261,8 +261,19 @@ EXTRA_MEMBERSHIPS: tuple[tuple[str, str, str], ...] = (
 )
 
 
+# Disjoint in the core (CORE-SingleBodyMaterial): a type may list one of them.
+BODY_MATERIALS = {"Metal", "Plastic", "Glass", "Ceramic", "Wood"}
+
+
 def render_kitchen(catalogue: dict[str, Any]) -> str:
     types: dict[str, Any] = catalogue["types"]
+    for name, info in sorted(types.items()):
+        body = BODY_MATERIALS.intersection(info.get("materials", []))
+        if len(body) > 1:
+            raise ValueError(
+                f"catalogue type {name} lists body materials {', '.join(sorted(body))}; "
+                "an object has one body material (CORE-SingleBodyMaterial): keep the main one"
+            )
     categories = sorted({info["category"] for info in types.values()} | set(CATEGORY_PARENTS))
     unknown = [c for c in categories if c not in CATEGORY_PARENTS]
     if unknown:

@@ -25,8 +25,15 @@ def check_tbox(scenario: str = "kitchen") -> dict[str, Any]:
                 cls = tbox.factory.getOWLClass(_iri(name))
                 if not reasoner.isSatisfiable(cls):
                     unsat.append(vocab.uscs[name].id)
+            unsat_classes = sorted(
+                name
+                for name in vocab.classes
+                if name not in vocab.class_synonyms
+                and not reasoner.isSatisfiable(tbox.factory.getOWLClass(_iri(name)))
+            )
         else:
             unsat = sorted(u.id for u in vocab.uscs.values())
+            unsat_classes = sorted(vocab.classes)
     finally:
         reasoner.dispose()
     by_category: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
@@ -38,6 +45,8 @@ def check_tbox(scenario: str = "kitchen") -> dict[str, Any]:
         "consistent": consistent,
         "uscs": len(vocab.uscs),
         "unsatisfiable_uscs": unsat,
+        "classes": len(vocab.classes),
+        "unsatisfiable_classes": unsat_classes,
         "preconditions": len(vocab.preconditions),
         "background_axioms": len(vocab.background),
         "modules": [

@@ -117,7 +117,8 @@ _ALIASES = {
 }
 _NUMBERING = re.compile(r"^\s*(?:step\s*)?\d+\s*[.):]\s*", re.IGNORECASE)
 _CALL = re.compile(r"^([A-Za-z_]+)\s*\((.*)\)\s*$")
-_FILLER = {"in", "into", "on", "onto", "up", "the", "a", "an", "to"}
+_CONNECTORS = {"in", "into", "on", "onto", "to"}
+_ARTICLES = {"the", "a", "an"}
 
 
 @dataclass(frozen=True)
@@ -165,10 +166,15 @@ def parse_line(line: str, line_no: int = 1, index: int = 1) -> PlanStep:
     verb = _ALIASES.get(word)
     if verb is None:
         raise _unknown_verb(word, line_no)
-    if verb == "put" and len(args) > 2:
-        args = [a for a in args if a.lower() not in _FILLER]
-    elif verb == "put" and len(args) == 2 and args[0].lower() in _FILLER:
-        args = args[1:]
+    if verb == "put" and not call:
+        # "put X in R", "put the X into the R", "put in R": drop connecting words,
+        # but only where a connector can stand, so an object named "A" survives.
+        # Articles are dropped only in lower case: "A" may be an object's name.
+        args = [a for a in args if a not in _ARTICLES] or args
+        while len(args) > 2 and args[-2].lower() in _CONNECTORS:
+            args = [*args[:-2], args[-1]]
+        while len(args) > 1 and args[0].lower() in _CONNECTORS:
+            args = args[1:]
     lo, hi = ARITY[verb]
     if not lo <= len(args) <= hi:
         want = str(lo) if lo == hi else f"{lo} to {hi}"

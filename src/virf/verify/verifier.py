@@ -204,7 +204,7 @@ class Verifier:
             for f in defaults
         ]
         definite = usc.kind != "uncertainty" and not assumed
-        questions = self._questions(usc, ind, assumed)
+        questions = self._questions(usc, ind, facts, assumed)
         chain = "; ".join(f.render() for f in facts if snapshot[f] is not Provenance.DEFAULT)
         extra = "; ".join(b.text for b in background)
         message = f"{usc.trigger_reason[:1].upper()}{usc.trigger_reason[1:]}: {chain}"
@@ -215,10 +215,14 @@ class Verifier:
             usc, step, phase, ind, definite, facts, dict(snapshot), background, message, questions
         )
 
-    def _questions(self, usc: UnsafeStateConcept, ind: str, assumed: list[Fact]) -> list[str]:
+    def _questions(
+        self, usc: UnsafeStateConcept, ind: str, facts: list[Fact], assumed: list[Fact]
+    ) -> list[str]:
         out = []
+        # The object the question is about: whatever the proof says is of unknown
+        # material, whether the scene stated it or VIRF marked it.
         markers = [
-            f for f in assumed if f.predicate == "hasMaterial" and f.object == "UnknownMaterial"
+            f for f in facts if f.predicate == "hasMaterial" and f.object == "UnknownMaterial"
         ]
         if usc.question:
             x = markers[0].subject if markers else ind
@@ -235,7 +239,8 @@ class Verifier:
                     else f"nothing is {where} {f.subject}"
                 )
                 out.append(
-                    f"Is it true that {claim}? The scene does not say its '{f.predicate}' list is complete."
+                    f"Is it true that {claim}? "
+                    f"The scene does not say its '{f.predicate}' list is complete."
                 )
             elif f.predicate == "hasMaterial" and f.object == "UnknownMaterial":
                 out.append(f"What material is {f.subject} made of?")
