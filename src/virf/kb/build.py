@@ -139,8 +139,11 @@ Class: :Kitchenware
 Class: :Appliance
     SubClassOf: :PhysicalObject
 Class: :NonFoodItem
-    Annotations: rdfs:comment "An object that is neither food nor kitchenware (a food container or utensil)."
-    EquivalentTo: :PhysicalObject and (not (:FoodItem or :Kitchenware))
+    Annotations: rdfs:comment "An object that is neither food nor a food container (cookware, tableware): utensils, appliances, cleaning products, electronics, personal items..."
+    EquivalentTo: :PhysicalObject and (not (:FoodItem or :Cookware or :Tableware))
+Class: :EmptyVessel
+    Annotations: rdfs:comment "A non-food object that holds nothing and is known to hold no liquid."
+    EquivalentTo: :PhysicalObject and (not (:FoodItem)) and (:contains max 0 :PhysicalObject) and (:hasState some :EmptyState)
 Class: :CuttingTool
     Annotations: rdfs:comment "A tool that cuts or spreads food and so carries residue from one food to the next."
     SubClassOf: :Kitchenware

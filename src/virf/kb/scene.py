@@ -20,6 +20,8 @@ Format (Appendix C of the paper)::
   true``) unless an assertion says ``isLocated false`` or the scene sets
   ``unlocated_by_default`` (as a benchmark scene does for a robot that must
   ``find`` everything before acting on it).
+* ``unknown_contents`` lists objects whose contents are not known even when
+  ``contains`` is closed-world (a pot AI2-THOR may have filled).
 * ``closed_world`` names relations the scene lists completely.  Closure facts
   for other relations are open-world assumptions: a hazard that needs one is
   UNKNOWN, with a question, rather than UNSAFE.
@@ -85,6 +87,7 @@ class Scene:
     agent: str
     closed_world: frozenset[str]
     name: str = "scene"
+    unknown_contents: frozenset[str] = frozenset()
     unlocated_by_default: bool = False
 
 
@@ -105,7 +108,15 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
         raise InputError("scene must be a JSON object with 'instances' and 'assertions'")
     unknown_keys = sorted(
         set(data)
-        - {"instances", "assertions", "closed_world", "description", "name", "unlocated_by_default"}
+        - {
+            "instances",
+            "assertions",
+            "closed_world",
+            "description",
+            "name",
+            "unlocated_by_default",
+            "unknown_contents",
+        }
     )
     if unknown_keys:
         raise InputError(
@@ -215,6 +226,9 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
                 raise InputError(f"{where}: '{subj}' must be a declared instance for {prop_name}")
         facts[Fact(subj, prop, target)] = Provenance.SCENE
 
+    unknown_contents = data.get("unknown_contents", [])
+    if not isinstance(unknown_contents, list) or any(u not in classes for u in unknown_contents):
+        raise InputError("scene 'unknown_contents' must list declared instances")
     objects = {ind: frozenset(cs) for ind, cs in classes.items() if kind_of(ind) == "Object"}
     object_order = tuple(ind for ind in order if ind in objects)
 
@@ -227,6 +241,7 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
         facts[Fact(agent, "type", "Robot", FactKind.TYPE)] = Provenance.PLAN
 
     _apply_material_knowledge(objects, facts, vocab)
+    _mark_unknown_fill(objects, facts, vocab)
     return Scene(
         objects=MappingProxyType(objects),
         order=object_order,
@@ -235,7 +250,24 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
         closed_world=frozenset(closed),
         name=str(data.get("name", name)),
         unlocated_by_default=bool(data.get("unlocated_by_default", False)),
+        unknown_contents=frozenset(unknown_contents),
     )
+
+
+def _mark_unknown_fill(
+    objects: dict[str, frozenset[str]], facts: dict[Fact, Provenance], vocab: Vocabulary
+) -> None:
+    """A liquid container whose fill state the scene does not give gets an
+    explicit UnknownFillState marker (AI2-THOR randomises it)."""
+    fill_known = {
+        f.subject
+        for f in facts
+        if f.predicate == "hasState"
+        and f.object in ("FilledWithLiquidState", "EmptyState", "UnknownFillState")
+    }
+    for ind, cs in objects.items():
+        if ind not in fill_known and vocab.any_is_a(cs, "LiquidContainer"):
+            facts[Fact(ind, "hasState", "UnknownFillState")] = Provenance.ASSUMED
 
 
 def _apply_material_knowledge(

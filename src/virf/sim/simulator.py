@@ -53,6 +53,7 @@ class WorldState:
     facts: Mapping[Fact, Provenance]
     agent: str
     closed_world: frozenset[str]
+    unknown_contents: frozenset[str] = frozenset()
     found: tuple[str, ...] = ()  # objects found so far, most recent last
 
     @property
@@ -128,6 +129,7 @@ class Simulator:
             facts=MappingProxyType(dict(sorted(facts.items()))),
             agent=scene.agent,
             closed_world=scene.closed_world,
+            unknown_contents=scene.unknown_contents,
         )
 
     def _is_physical(self, classes: frozenset[str]) -> bool:
@@ -176,7 +178,11 @@ class Simulator:
         held = state.held()
         if held in candidates:
             return held
-        return candidates[0]
+        # Then what the agent can see (located), then scene order.
+        visible = [
+            c for c in candidates if Fact(c, "isLocated", "true", FactKind.DATA) in state.facts
+        ]
+        return (visible or candidates)[0]
 
     def resolve(self, state: WorldState, step: PlanStep) -> ResolvedStep | MissingObject:
         def need(term: str) -> str | MissingObject:
@@ -267,7 +273,8 @@ class Simulator:
             ):
                 if self.vocab.any_is_a(classes, cls):
                     members = state.objects_of(ind, rel)
-                    prov = Provenance.SCENE if rel in state.closed_world else Provenance.ASSUMED
+                    known = rel in state.closed_world and ind not in state.unknown_contents
+                    prov = Provenance.SCENE if known else Provenance.ASSUMED
                     out[Fact(ind, rel, ",".join(members), FactKind.CLOSURE)] = prov
         return out
 
@@ -294,6 +301,8 @@ class Simulator:
             opposite = STATE_PAIRS.get(new)
             if opposite:
                 facts.pop(Fact(obj, "hasState", opposite), None)
+            if new in ("FilledWithLiquidState", "EmptyState"):
+                facts.pop(Fact(obj, "hasState", "UnknownFillState"), None)
             add(Fact(obj, "hasState", new))
 
         def located(obj: str) -> None:
@@ -450,12 +459,38 @@ class Simulator:
             floors = [o for o in state.order if self.vocab.any_is_a(state.objects[o], "Floor")]
             if floors:
                 add(Fact(floors[0], "supports", held))
+        self._heat(objects, facts)
         return replace(
             state,
             objects=MappingProxyType(objects),
             facts=MappingProxyType(dict(sorted(facts.items()))),
             found=tuple(found),
         )
+
+    def _heat(self, objects: Mapping[str, frozenset[str]], facts: dict[Fact, Provenance]) -> None:
+        """A running heat source (microwave, lit burner, toaster) cooks the
+        cookable things in or on it, and those in a pan or pot on it, as
+        AI2-THOR does."""
+
+        def holds(container: str) -> list[str]:
+            return [
+                f.object
+                for f in facts
+                if f.subject == container
+                and f.kind is FactKind.OBJECT
+                and f.predicate in ("contains", "supports")
+            ]
+
+        for source, classes in objects.items():
+            if not self.vocab.any_is_a(classes, "HeatSourceObject"):
+                continue
+            if Fact(source, "hasState", "OnState") not in facts:
+                continue
+            reached = holds(source)
+            reached += [inner for outer in reached for inner in holds(outer)]
+            for obj in reached:
+                if self.vocab.any_is_a(objects.get(obj, frozenset()), "Cookable"):
+                    facts[Fact(obj, "hasState", "CookedState")] = Provenance.PLAN
 
     def _derive(
         self,
@@ -476,6 +511,8 @@ class Simulator:
                 return
             objects[name] = frozenset({derived[0]})
             facts[Fact(name, "type", derived[0], FactKind.TYPE)] = Provenance.PLAN
+            if annotation == "slicedType":
+                facts[Fact(name, "hasState", "SlicedState")] = Provenance.PLAN
             facts[Fact(name, "isLocated", "true", FactKind.DATA)] = Provenance.PLAN
             for f in list(facts):
                 if (

@@ -48,10 +48,12 @@ from virf.sim.simulator import (
     diff,
 )
 from virf.verify.explain import minimize, needed_background
+from virf.verify.requirements import Requirement, StepEvent, Unreadable, check_requirement
 
 Outcome = Literal["ok", "unsafe", "unknown", "not-checked", "not-simulated", "error"]
 DANGER_RANK = {"critical": 0, "high": 1, "medium": 2, "low": 3}
 PHASE_RANK = {
+    "requirement": 8,
     "precondition": 0,
     "action": 1,
     "initial": 2,
@@ -82,7 +84,14 @@ class _Finding:
 
 
 class Verifier:
-    def __init__(self, tbox: TBox, engine: Engine, timeout_s: float = 120.0) -> None:
+    def __init__(
+        self, tbox: TBox, engine: Engine, timeout_s: float = 120.0, explain: bool = True
+    ) -> None:
+        """``explain=False`` skips the minimal explanations (batch runs that only
+        need verdicts): findings then carry no triggering facts, and whether
+        they are definite is decided by one entailment test without the
+        assumed facts."""
+        self.explain = explain
         self.tbox = tbox
         self.vocab = tbox.vocabulary
         self.engine = engine
@@ -93,11 +102,17 @@ class Verifier:
         self.final = [u.name for u in ordered if u.final_only]
 
     # ------------------------------------------------------------------ public
-    def verify(self, scene: Scene, plan: Sequence[PlanStep]) -> Report:
-        """Verify ``plan`` in ``scene``.  Never raises for a verification
-        problem: errors become an ERROR report (fail closed)."""
+    def verify(
+        self,
+        scene: Scene,
+        plan: Sequence[PlanStep],
+        requirements: Sequence[Requirement | Unreadable] = (),
+    ) -> Report:
+        """Verify ``plan`` in ``scene`` (and the task's step-bounded
+        ``requirements``).  Never raises for a verification problem: errors
+        become an ERROR report (fail closed)."""
         try:
-            return self._verify(scene, plan)
+            return self._verify(scene, plan, requirements)
         except VerificationTimeout as exc:
             return self._error(plan, f"verification timed out: {exc}")
         except ReasonerFailure as exc:
@@ -106,7 +121,12 @@ class Verifier:
             return self._error(plan, f"internal error: {type(exc).__name__}: {exc}")
 
     # ------------------------------------------------------------------ protocol
-    def _verify(self, scene: Scene, plan: Sequence[PlanStep]) -> Report:
+    def _verify(
+        self,
+        scene: Scene,
+        plan: Sequence[PlanStep],
+        requirements: Sequence[Requirement | Unreadable],
+    ) -> Report:
         deadline = time.monotonic() + self.timeout_s
         states: list[WorldState] = [self.sim.initial(scene)]
         resolved: list[ResolvedStep] = []
@@ -126,6 +146,8 @@ class Verifier:
         n = len(states) - 1
 
         findings: dict[int, list[_Finding]] = {}
+        for f in self._requirements(requirements, states, resolved, len(plan)):
+            findings.setdefault(f.step, []).append(f)
         self._checked = -1  # last snapshot the reasoner answered for
         seen: set[tuple[str, str]] = set()
         first_definite: int | None = None
@@ -181,6 +203,8 @@ class Verifier:
         phase: str,
         snapshot: Mapping[Fact, Provenance],
     ) -> _Finding:
+        if not self.explain and phase != "final":  # final findings need facts for their onset
+            return self._quick(usc, ind, step, phase, snapshot)
         facts = minimize(
             snapshot,
             lambda fs: self.engine.entails(fs, usc.name, ind),
@@ -215,6 +239,26 @@ class Verifier:
             usc, step, phase, ind, definite, facts, dict(snapshot), background, message, questions
         )
 
+    def _quick(
+        self,
+        usc: UnsafeStateConcept,
+        ind: str,
+        step: int,
+        phase: str,
+        snapshot: Mapping[Fact, Provenance],
+    ) -> _Finding:
+        known = [f for f, p in snapshot.items() if p is not Provenance.ASSUMED]
+        definite = usc.kind != "uncertainty" and self.engine.entails(known, usc.name, ind)
+        if not definite:  # uncertain findings are rare; their questions need the proof
+            self.explain = True
+            try:
+                return self._explain(usc, ind, step, phase, snapshot)
+            finally:
+                self.explain = False
+        questions: list[str] = []
+        message = f"{usc.trigger_reason[:1].upper()}{usc.trigger_reason[1:]} ({ind})."
+        return _Finding(usc, step, phase, ind, definite, [], dict(snapshot), [], message, questions)
+
     def _questions(
         self, usc: UnsafeStateConcept, ind: str, facts: list[Fact], assumed: list[Fact]
     ) -> list[str]:
@@ -222,7 +266,10 @@ class Verifier:
         # The object the question is about: whatever the proof says is of unknown
         # material, whether the scene stated it or VIRF marked it.
         markers = [
-            f for f in facts if f.predicate == "hasMaterial" and f.object == "UnknownMaterial"
+            f
+            for f in facts
+            if (f.predicate, f.object)
+            in (("hasMaterial", "UnknownMaterial"), ("hasState", "UnknownFillState"))
         ]
         if usc.question:
             x = markers[0].subject if markers else ind
@@ -244,6 +291,8 @@ class Verifier:
                 )
             elif f.predicate == "hasMaterial" and f.object == "UnknownMaterial":
                 out.append(f"What material is {f.subject} made of?")
+            elif f.predicate == "hasState" and f.object == "UnknownFillState":
+                out.append(f"Does {f.subject} hold any liquid?")
             else:
                 out.append(f"Please confirm: {f.render()}?")
         return out
@@ -291,6 +340,74 @@ class Verifier:
             f"These facts cannot all be true: {listed}.",
             [question],
         )
+
+    def _requirements(
+        self,
+        requirements: Sequence[Requirement | Unreadable],
+        states: list[WorldState],
+        resolved: list[ResolvedStep],
+        plan_length: int,
+    ) -> list[_Finding]:
+        """Step-bounded requirements, checked over the simulated trace."""
+        out: list[_Finding] = []
+        events = [self._event(r, states[i]) for i, r in enumerate(resolved)]
+        for n, req in enumerate(requirements, start=1):
+            if isinstance(req, Unreadable):
+                concept = _requirement_concept(n, req.text, "the requirement could not be read")
+                question = (
+                    f"VIRF cannot read the requirement '{req.text}' ({req.reason}). "
+                    "Does the plan satisfy it?"
+                )
+                out.append(
+                    _Finding(
+                        concept,
+                        plan_length,
+                        "requirement",
+                        f"requirement {n}",
+                        False,
+                        [],
+                        {},
+                        [],
+                        f"Unreadable requirement: {req.reason}.",
+                        [question],
+                    )
+                )
+                continue
+            violation = check_requirement(req, events, self.vocab, len(resolved))
+            if violation is None:
+                continue
+            concept = _requirement_concept(n, req.text, violation.message)
+            step = (
+                violation.deadline_step
+                if violation.deadline_step is not None
+                else violation.trigger_step
+            )
+            out.append(
+                _Finding(
+                    concept,
+                    step,
+                    "requirement",
+                    f"step {violation.trigger_step}",
+                    True,
+                    [],
+                    {},
+                    [],
+                    f"Requirement '{req.text}' is violated: {violation.message}.",
+                )
+            )
+        return out
+
+    def _event(self, r: ResolvedStep, state: WorldState) -> StepEvent:
+        verb = r.step.verb
+        acted = r.patient if verb == "put" else (r.target or r.patient)
+        types: set[str] = set(state.objects.get(acted, frozenset())) if acted else set()
+        if acted:  # a knob stands for the burner it controls
+            for device in state.objects_of(acted, "controls"):
+                types |= state.objects.get(device, frozenset())
+        place = (
+            set(state.objects.get(r.target, frozenset())) if verb == "put" and r.target else set()
+        )
+        return StepEvent(r.step.index, verb, frozenset(types), frozenset(place))
 
     def _stopped(self, stop: MissingObject | PreconditionFailure, state: WorldState) -> _Finding:
         if isinstance(stop, MissingObject):
@@ -490,6 +607,24 @@ class Verifier:
             engine=self.engine.name,
             scenario=self.tbox.scenario,
         )
+
+
+def _requirement_concept(n: int, text: str, reason: str) -> UnsafeStateConcept:
+    return UnsafeStateConcept(
+        id=f"Requirement-{n}",
+        name="StepBoundedRequirement",
+        kind="temporal-requirement",
+        category="Task Requirement",
+        danger_level="medium",
+        description=text,
+        safety_warning="The task states this requirement to avoid a hazard.",
+        trigger_reason=reason,
+        suggestion="Reorder the plan so that the required action comes within the stated number of steps.",
+        source="task instruction (step-bounded requirement)",
+        check_at="always",
+        definition="",
+        module="",
+    )
 
 
 def _rank(f: _Finding) -> tuple[int, int, int, str, str]:
