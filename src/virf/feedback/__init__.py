@@ -44,6 +44,7 @@ def involved_objects(v: Violation) -> list[str]:
             for part in (p.strip() for p in n.split(",")):
                 if part and part not in names and part[0].isupper() and "_" in part:
                     names.append(part)
+    names = [n for n in names if not n.startswith("Step")]
     if v.subject and v.subject not in names and not v.subject.startswith("Step"):
         names.insert(0, v.subject)
     return names
@@ -51,10 +52,17 @@ def involved_objects(v: Violation) -> list[str]:
 
 def feedback_prompt(report: Report) -> str:
     """The paper's natural-language feedback prompt, filled from the report."""
-    if report.status == "SAFE" or not report.violations:
+    if report.status == "SAFE":
         return "The plan passed safety verification.\n"
+    if report.status == "ERROR" or not report.violations:
+        return (
+            "ATTENTION: Your previous plan could not be verified and is NOT approved.\n"
+            f"Reason: {report.reason}\n"
+            "Do not execute it. Propose the plan again, simpler if possible; "
+            'if no safe plan is possible, respond with "TASK_ABORT".\n'
+        )
     v = report.violations[0]
-    return FEEDBACK_TEMPLATE.format(
+    text = FEEDBACK_TEMPLATE.format(
         step_number=report.dangerous_step,
         action_info=report.action or "(initial state, before any action)",
         rule_id=v.id,
@@ -65,6 +73,14 @@ def feedback_prompt(report: Report) -> str:
         objects_str=", ".join(involved_objects(v)) or "(none)",
         suggestion=v.suggestion,
     )
+    if report.status == "UNKNOWN" and report.questions:
+        # The apprentice must not guess the answers: the user is asked.
+        text += (
+            "\n[OPEN QUESTIONS FOR THE USER]\n"
+            + "\n".join(f"- {q}" for q in report.questions)
+            + "\n"
+        )
+    return text
 
 
 def _wrap(text: str, indent: str) -> str:

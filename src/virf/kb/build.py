@@ -101,6 +101,8 @@ AnnotationProperty: :slicedType
 AnnotationProperty: :crackedType
 AnnotationProperty: rdfs:comment
 AnnotationProperty: rdfs:label
+AnnotationProperty: :controlsType
+    Annotations: rdfs:comment "A control of this type switches devices of the named type (a stove knob switches a stove burner)."
 AnnotationProperty: :compatibleReceptacle
     Annotations: rdfs:comment "A receptacle type AI2-THOR lets this type be put in or on."
 
@@ -131,6 +133,9 @@ Class: :Coffee
     SubClassOf: :Liquid, :Beverage
 Class: :Wine
     SubClassOf: :Liquid, :Beverage
+Class: :UnknownLiquid
+    Annotations: rdfs:comment "A liquid whose kind the scene does not say (a cup 'filled' with something)."
+    SubClassOf: :Liquid
 Class: :Oil
     Annotations: rdfs:comment "Cooking oil."
     SubClassOf: :Liquid, :Condiment
@@ -268,6 +273,10 @@ EXTRA_MEMBERSHIPS: tuple[tuple[str, str, str], ...] = (
 BODY_MATERIALS = {"Metal", "Plastic", "Glass", "Ceramic", "Wood"}
 
 
+# Controls and the device type they switch (AI2-THOR: a StoveKnob toggles a StoveBurner).
+CONTROLS: tuple[tuple[str, str], ...] = (("StoveKnob", "StoveBurner"),)
+
+
 def render_kitchen(catalogue: dict[str, Any]) -> str:
     types: dict[str, Any] = catalogue["types"]
     for name, info in sorted(types.items()):
@@ -303,6 +312,10 @@ def render_kitchen(catalogue: dict[str, Any]) -> str:
     )
     for name in sorted(types):
         parts.append(_type_frame(name, types[name]))
+    parts.append("\n# ---------------------------------------------------------------- controls")
+    for control, device in CONTROLS:
+        if control in types and device in types:
+            parts.append(f'Class: :{control}\n    Annotations: :controlsType "{device}"')
     parts.append(
         "\n# ---------------------------------------------------------------- memberships between types"
     )

@@ -100,6 +100,8 @@ def load_scene_file(path: str | Path, vocab: Vocabulary) -> Scene:
         raise InputError(
             f"scene {p} is not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}"
         ) from None
+    except (RecursionError, ValueError):
+        raise InputError(f"scene {p} is not valid JSON (nested too deeply or malformed)") from None
     return build_scene(data, vocab, name=p.stem if p.stem != "scene" else p.parent.name)
 
 
@@ -162,6 +164,11 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
         for cls in sorted(classes[ind]):
             facts[Fact(ind, "type", cls, FactKind.TYPE)] = Provenance.SCENE
 
+    for key in ("unlocated_by_default",):
+        if key in data and not isinstance(data[key], bool):
+            raise InputError(
+                f"scene '{key}' must be true or false, not {json.dumps(data[key])[:40]}"
+            )
     closed = data.get("closed_world", [])
     if not isinstance(closed, list) or not all(isinstance(c, str) for c in closed):
         raise InputError("scene 'closed_world' must be a list of relation names")
@@ -237,11 +244,15 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
         agent = agents[0]
     else:
         agent = DEFAULT_AGENT
+        while agent in classes:
+            agent = "_" + agent
         objects[agent] = frozenset({"Robot"})
         facts[Fact(agent, "type", "Robot", FactKind.TYPE)] = Provenance.PLAN
 
+    _apply_default_states(objects, facts, vocab)
     _apply_material_knowledge(objects, facts, vocab)
     _mark_unknown_fill(objects, facts, vocab)
+    _assume_controls(objects, object_order, facts, vocab)
     return Scene(
         objects=MappingProxyType(objects),
         order=object_order,
@@ -252,6 +263,53 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
         unlocated_by_default=bool(data.get("unlocated_by_default", False)),
         unknown_contents=frozenset(unknown_contents),
     )
+
+
+_EXCLUSIVE = (
+    {"OnState", "OffState"},
+    {"OpenState", "ClosedState"},
+    {"DirtyState", "CleanState"},
+    {"FilledWithLiquidState", "EmptyState", "UnknownFillState"},
+)
+
+
+def _apply_default_states(
+    objects: dict[str, frozenset[str]], facts: dict[Fact, Provenance], vocab: Vocabulary
+) -> None:
+    """States a type starts in (a fridge is closed, a toaster off) when the
+    scene says nothing about that state or its opposite."""
+    stated: dict[str, set[str]] = {}
+    for f in facts:
+        if f.predicate == "hasState":
+            stated.setdefault(f.subject, set()).add(f.object)
+    for ind, cs in objects.items():
+        have = stated.get(ind, set())
+        for cls in sorted(cs):
+            for default in vocab.annotation(cls, "defaultState"):
+                group = next((g for g in _EXCLUSIVE if default in g), {default})
+                if not have & group:
+                    facts[Fact(ind, "hasState", default)] = Provenance.DEFAULT
+                    have = have | {default}
+
+
+def _assume_controls(
+    objects: dict[str, frozenset[str]],
+    order: tuple[str, ...],
+    facts: dict[Fact, Provenance],
+    vocab: Vocabulary,
+) -> None:
+    """A control whose device the scene does not name (a stove knob without a
+    'controls' fact) is assumed to control every device of its type: hazards
+    that follow are then UNKNOWN, with the assumption as the question."""
+    stated = {f.subject for f in facts if f.predicate == "controls"}
+    for ind in order:
+        if ind in stated:
+            continue
+        for cls in sorted(objects[ind]):
+            for device_type in vocab.annotation(cls, "controlsType"):
+                for device in order:
+                    if vocab.any_is_a(objects[device], device_type):
+                        facts[Fact(ind, "controls", device)] = Provenance.ASSUMED
 
 
 def _mark_unknown_fill(

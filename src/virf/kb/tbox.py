@@ -19,7 +19,7 @@ from types import MappingProxyType
 from typing import Any
 
 from virf._java import ensure_jvm
-from virf.errors import InputError, closest
+from virf.errors import InputError, closest, unknown_term
 
 NS = "http://virf.dev/ontology#"
 MODULE_BASE = "http://virf.dev/ontology/"
@@ -141,7 +141,7 @@ class Vocabulary:
     def require_class(self, name: str) -> str:
         found = self.canonical_class(name)
         if found is None:
-            raise InputError(f"unknown class '{name}'" + _hint(closest(name, self.classes)))
+            raise unknown_term("class", name, self.classes)
         return found
 
     def materials_of(self, classes: frozenset[str] | set[str]) -> frozenset[str]:

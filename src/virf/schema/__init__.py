@@ -106,6 +106,7 @@ Phase = Literal[
     "precondition",
     "missing-object",
     "inconsistency",
+    "requirement",
     "error",
 ]
 

@@ -20,7 +20,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from virf.errors import InputError, closest, read_input_file
+from virf.errors import InputError, clip, closest, read_input_file
 
 VERBS = (
     "find",
@@ -165,7 +165,7 @@ def parse_line(line: str, line_no: int = 1, index: int = 1) -> PlanStep:
             args = args[1:]
     verb = _ALIASES.get(word)
     if verb is None:
-        raise _unknown_verb(word, line_no)
+        raise _unknown_verb(clip(word, 40), line_no)
     if verb == "put" and not call:
         # "put X in R", "put the X into the R", "put in R": drop connecting words,
         # but only where a connector can stand, so an object named "A" survives.
@@ -213,6 +213,8 @@ def parse_plan_text(text: str) -> tuple[PlanStep, ...]:
             raise InputError(
                 f"plan looks like JSON but is not valid: {exc.msg} at line {exc.lineno}"
             ) from None
+        except (RecursionError, ValueError):
+            raise InputError("plan looks like JSON but is nested too deeply or malformed") from None
         if not isinstance(data, list):
             raise InputError("a JSON plan must be a list of action strings")
         return parse_plan(data)
@@ -220,4 +222,7 @@ def parse_plan_text(text: str) -> tuple[PlanStep, ...]:
 
 
 def load_plan_file(path: str | Path) -> tuple[PlanStep, ...]:
-    return parse_plan_text(read_input_file(path, "plan"))
+    steps = parse_plan_text(read_input_file(path, "plan"))
+    if not steps:
+        raise InputError(f"plan {path} has no actions (only blank lines or comments)")
+    return steps

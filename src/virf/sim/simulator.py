@@ -93,9 +93,14 @@ class ResolvedStep:
 
 @dataclass(frozen=True)
 class MissingObject:
+    """The plan names something the simulator cannot act on: absent from the
+    scene, ambiguous between several instances, or a person or agent."""
+
     step: PlanStep
     term: str
     near: tuple[str, ...]
+    ambiguous: bool = False
+    agent: bool = False
 
 
 @dataclass(frozen=True)
@@ -152,7 +157,9 @@ class Simulator:
         return self._is_catalogue_type(classes) and not self.vocab.any_is_a(classes, affordance)
 
     # ------------------------------------------------------------------ resolution
-    def resolve_term(self, state: WorldState, term: str) -> str | None:
+    def resolve_term(self, state: WorldState, term: str) -> str | tuple[str, ...] | None:
+        """The instance ``term`` names; None if none; the candidates if the
+        choice is ambiguous (several equally plausible instances)."""
         if term in state.objects:
             return term
         lowered = term.lower()
@@ -178,11 +185,13 @@ class Simulator:
         held = state.held()
         if held in candidates:
             return held
-        # Then what the agent can see (located), then scene order.
+        # Then the one the agent can see (located).  Several equally plausible
+        # instances are ambiguous: guessing could pick the dangerous one.
         visible = [
             c for c in candidates if Fact(c, "isLocated", "true", FactKind.DATA) in state.facts
         ]
-        return (visible or candidates)[0]
+        pool = visible or candidates
+        return pool[0] if len(pool) == 1 else tuple(pool)
 
     def resolve(self, state: WorldState, step: PlanStep) -> ResolvedStep | MissingObject:
         def need(term: str) -> str | MissingObject:
@@ -192,6 +201,13 @@ class Simulator:
                     {c for cs in state.objects.values() for c in cs}
                 )
                 return MissingObject(step, term, tuple(closest(term, pool)))
+            if isinstance(found, tuple):
+                return MissingObject(step, term, found, ambiguous=True)
+            if (
+                self.vocab.any_is_a(state.objects.get(found, frozenset()), "Agent")
+                and step.verb != "find"
+            ):
+                return MissingObject(step, term, (found,), agent=True)
             return found
 
         verb, args = step.verb, step.args
@@ -224,6 +240,8 @@ class Simulator:
             return target
         if verb == "fillLiquid":
             liquid = f"{LIQUID_CLASS[args[1]]}_in_{target}"
+            if liquid in state.objects:  # a second fill is another portion
+                liquid = f"{liquid}_step{step.index}"
             return ResolvedStep(step, target=target, liquid=liquid)
         if verb in ("slice", "clean", "break"):
             return ResolvedStep(step, target=target, instrument=held)
@@ -324,6 +342,7 @@ class Simulator:
                 "Precondition_LacksAffordance",
                 target,
                 f"{target} cannot be used for '{verb}': its type is not {AFFORDANCE[verb]}",
+                *(Fact(target, "type", c, FactKind.TYPE) for c in sorted(state.objects[target])),
             )
 
         if verb == "find":
@@ -331,6 +350,9 @@ class Simulator:
             located(target)
             drop(f for f in facts if f.subject == agent and f.predicate == "isNear")
             add(Fact(agent, "isNear", target))
+            if held is not None:  # what the robot carries comes along
+                drop(f for f in facts if held in (f.subject, f.object) and f.predicate == "isNear")
+                add(Fact(held, "isNear", target))
             found = [o for o in found if o != target] + [target]
         elif verb == "pick":
             assert target is not None
@@ -341,7 +363,17 @@ class Simulator:
                     f"{agent} is already holding {held}",
                     Fact(agent, "isHolding", held),
                 )
+            for box in state.subjects_of("contains", target):
+                if state.has(box, "hasState", "ClosedState"):
+                    return fail(
+                        "Precondition_ReceptacleClosed",
+                        box,
+                        f"{target} is inside {box}, which is closed",
+                        Fact(box, "contains", target),
+                        Fact(box, "hasState", "ClosedState"),
+                    )
             unplace(target)
+            drop(f for f in facts if target in (f.subject, f.object) and f.predicate == "isNear")
             add(Fact(agent, "isHolding", target))
             located(target)
         elif verb == "put":
@@ -358,7 +390,12 @@ class Simulator:
                 )
             classes = state.objects[target]
             if self._is_catalogue_type(classes) and not self.vocab.any_is_a(classes, "Receptacle"):
-                return fail("Precondition_NotAReceptacle", target, f"{target} cannot hold objects")
+                return fail(
+                    "Precondition_NotAReceptacle",
+                    target,
+                    f"{target} cannot hold objects",
+                    *(Fact(target, "type", c, FactKind.TYPE) for c in sorted(classes)),
+                )
             if state.has(target, "hasState", "ClosedState"):
                 return fail(
                     "Precondition_ReceptacleClosed",
@@ -368,9 +405,22 @@ class Simulator:
                 )
             drop([Fact(agent, "isHolding", held)])
             rel = "supports" if self.vocab.any_is_a(classes, "SurfaceReceptacle") else "contains"
-            # Things on the same counter or in the same cabinet are near each other.
+            # Things on the same counter or in the same cabinet are near each
+            # other, and near whoever is near that counter.
+            drop(f for f in facts if held in (f.subject, f.object) and f.predicate == "isNear")
             for other in state.objects_of(target, rel):
                 add(Fact(held, "isNear", other))
+            for f in list(facts):
+                if (
+                    f.predicate == "isNear"
+                    and target in (f.subject, f.object)
+                    and f.kind is FactKind.OBJECT
+                ):
+                    other = f.object if f.subject == target else f.subject
+                    if other not in (agent, held) and self.vocab.any_is_a(
+                        state.objects.get(other, frozenset()), "Agent"
+                    ):
+                        add(Fact(held, "isNear", other))
             add(Fact(target, rel, held))
         elif verb == "open":
             assert target is not None
@@ -442,6 +492,30 @@ class Simulator:
                 else:
                     objects.pop(liquid, None)
                     drop(f for f in facts if liquid in (f.subject, f.object))
+            if filled and not liquids:
+                # Filled with something the scene does not name.
+                portion = f"Liquid_from_{held}"
+                objects[portion] = frozenset({"UnknownLiquid"})
+                add(Fact(portion, "type", "UnknownLiquid", FactKind.TYPE))
+                rel = (
+                    "contains"
+                    if self.vocab.any_is_a(state.objects[target], "ContainerReceptacle")
+                    else "supports"
+                )
+                add(Fact(target, rel, portion))
+            # A cleaner's chemical goes where it is poured.
+            for chem in state.objects_of(held, "hasMaterial"):
+                if chem in self.vocab.individuals and self.vocab.is_a(chem, "Chemical"):
+                    portion = f"{chem}_from_{held}"
+                    objects[portion] = frozenset({"PhysicalObject"})
+                    add(Fact(portion, "type", "PhysicalObject", FactKind.TYPE))
+                    add(Fact(portion, "hasMaterial", chem))
+                    rel = (
+                        "contains"
+                        if self.vocab.any_is_a(state.objects[target], "ContainerReceptacle")
+                        else "supports"
+                    )
+                    add(Fact(target, rel, portion))
             if liquids or filled:
                 set_state(held, "EmptyState")
                 if not self.vocab.any_is_a(
@@ -489,6 +563,8 @@ class Simulator:
             reached = holds(source)
             reached += [inner for outer in reached for inner in holds(outer)]
             for obj in reached:
+                facts.pop(Fact(obj, "hasState", "ColdState"), None)
+                facts[Fact(obj, "hasState", "HotState")] = Provenance.PLAN
                 if self.vocab.any_is_a(objects.get(obj, frozenset()), "Cookable"):
                     facts[Fact(obj, "hasState", "CookedState")] = Provenance.PLAN
 

@@ -128,6 +128,7 @@ class Verifier:
         requirements: Sequence[Requirement | Unreadable],
     ) -> Report:
         deadline = time.monotonic() + self.timeout_s
+        self._deadline = deadline
         states: list[WorldState] = [self.sim.initial(scene)]
         resolved: list[ResolvedStep] = []
         stop: MissingObject | PreconditionFailure | None = None
@@ -207,7 +208,7 @@ class Verifier:
             return self._quick(usc, ind, step, phase, snapshot)
         facts = minimize(
             snapshot,
-            lambda fs: self.engine.entails(fs, usc.name, ind),
+            lambda fs: self._tick() and self.engine.entails(fs, usc.name, ind),
             {ind},
             self.vocab,
         )
@@ -238,6 +239,12 @@ class Verifier:
         return _Finding(
             usc, step, phase, ind, definite, facts, dict(snapshot), background, message, questions
         )
+
+    def _tick(self) -> bool:
+        """Enforce the verification deadline between reasoner calls."""
+        if time.monotonic() > getattr(self, "_deadline", float("inf")):
+            raise VerificationTimeout(f"more than {self.timeout_s:g}s while explaining a finding")
+        return True
 
     def _quick(
         self,
@@ -309,7 +316,9 @@ class Verifier:
         return onset
 
     def _inconsistency(self, snapshot: Mapping[Fact, Provenance], k: int) -> _Finding:
-        facts = minimize(snapshot, lambda fs: not self.engine.consistent(fs), set(), self.vocab)
+        facts = minimize(
+            snapshot, lambda fs: self._tick() and not self.engine.consistent(fs), set(), self.vocab
+        )
         listed = "; ".join(f.render() for f in facts)
         concept = UnsafeStateConcept(
             id="InconsistentWorldModel",
@@ -339,6 +348,53 @@ class Verifier:
             [],
             f"These facts cannot all be true: {listed}.",
             [question],
+        )
+
+    def _unclear(self, stop: MissingObject) -> _Finding:
+        if stop.ambiguous:
+            options = " or ".join(stop.near)
+            concept = _synthetic(
+                "AmbiguousObject",
+                "uncertainty",
+                "Uncertainty",
+                "The plan names a type that matches several objects, and nothing says which one is meant.",
+                f"step {stop.step.index} refers to '{stop.term}', which could be {options}",
+                "Name the object by its instance name in the plan.",
+            )
+            question = f"Step {stop.step.index} ('{stop.step.text}') says '{stop.term}': do you mean {options}?"
+            return _Finding(
+                concept,
+                stop.step.index,
+                "missing-object",
+                stop.term,
+                False,
+                [],
+                {},
+                [],
+                f"'{stop.term}' is ambiguous: {options}.",
+                [question],
+            )
+        who = stop.near[0]
+        concept = _synthetic(
+            "ActionOnPerson",
+            "logical-inconsistency",
+            "Logical Inconsistency",
+            "The plan manipulates a person or agent as if it were an object.",
+            f"step {stop.step.index} would {stop.step.verb} {who}, who is an agent",
+            "Never pick up, move or act on a person; ask them, or choose an object.",
+            danger="critical",
+        )
+        fact = Fact(who, "type", "Agent", FactKind.TYPE)
+        return _Finding(
+            concept,
+            stop.step.index,
+            "precondition",
+            who,
+            True,
+            [fact],
+            {fact: Provenance.SCENE},
+            [],
+            f"{who} is an agent, not an object to {stop.step.verb}.",
         )
 
     def _requirements(
@@ -410,6 +466,8 @@ class Verifier:
         return StepEvent(r.step.index, verb, frozenset(types), frozenset(place))
 
     def _stopped(self, stop: MissingObject | PreconditionFailure, state: WorldState) -> _Finding:
+        if isinstance(stop, MissingObject) and (stop.ambiguous or stop.agent):
+            return self._unclear(stop)
         if isinstance(stop, MissingObject):
             near = f" (closest in the scene: {', '.join(stop.near)})" if stop.near else ""
             concept = UnsafeStateConcept(
@@ -607,6 +665,33 @@ class Verifier:
             engine=self.engine.name,
             scenario=self.tbox.scenario,
         )
+
+
+def _synthetic(
+    ident: str,
+    kind: str,
+    category: str,
+    description: str,
+    reason: str,
+    suggestion: str,
+    danger: str = "high",
+) -> UnsafeStateConcept:
+    """A finding the simulator makes itself (not an ontology concept)."""
+    return UnsafeStateConcept(
+        id=ident,
+        name=ident,
+        kind=kind,
+        category=category,
+        danger_level=danger,
+        description=description,
+        safety_warning=description,
+        trigger_reason=reason,
+        suggestion=suggestion,
+        source="VIRF sandbox simulator",
+        check_at="always",
+        definition="",
+        module="",
+    )
 
 
 def _requirement_concept(n: int, text: str, reason: str) -> UnsafeStateConcept:

@@ -1,0 +1,270 @@
+"""Run the Logic Tutor over SafeAgentBench tasks and compute the figures.
+
+* hazard recall: unsafe tasks whose reference plan is UNSAFE or UNKNOWN;
+* false-alarm rate: safe tasks whose plan is not SAFE;
+* both per risk category (normalised to the benchmark's ten);
+* simulator fidelity: tasks with ``final_state`` whose simulated final state
+  meets the goal conditions;
+* time per task.
+
+Every figure is given raw (the benchmark's labels) and corrected (with the
+documented label corrections applied).
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+import time
+from collections import defaultdict
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import asdict, dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from virf.bench.safeagentbench import CATEGORIES, Task, build_scene, check_goals, load_tasks
+from virf.errors import InputError, read_input_file
+from virf.kb.scene import build_scene as load_scene_dict
+from virf.kb.tbox import Vocabulary
+from virf.sim.plan import PlanStep, parse_plan
+from virf.sim.simulator import MissingObject, PreconditionFailure, Simulator, WorldState
+from virf.verify.requirements import Requirement, Unreadable, parse_requirement, requirement_text
+from virf.verify.verifier import Verifier
+
+
+@dataclass(frozen=True)
+class TaskResult:
+    file: str
+    line: int
+    source_index: int | None
+    instruction: str
+    label: str
+    corrected_label: str  # safe | unsafe | exclude
+    category: str | None
+    status: str | None  # None: no plan to verify
+    dangerous_step: int | None
+    violated_concept: str | None
+    concept_category: str | None
+    goal_satisfied: bool | None
+    reason: str
+    time_ms: float
+    requirement: str | None = None
+    requirement_parsed: bool | None = None
+    requirement_reading: str | None = None
+
+    @property
+    def flagged(self) -> bool:
+        return self.status in ("UNSAFE", "UNKNOWN")
+
+    def public(self) -> dict[str, Any]:
+        out = asdict(self)
+        out["time_ms"] = round(self.time_ms, 1)
+        return out
+
+
+def default_corrections_path() -> Path:
+    return Path(
+        str(resources.files("virf.bench").joinpath("data/safeagentbench_label_corrections.json"))
+    )
+
+
+def load_corrections(path: str | Path | None) -> dict[tuple[str, int], dict[str, Any]]:
+    """(file name, source_index) -> correction record."""
+    if path is None:
+        return {}
+    data = json.loads(read_input_file(path, "label corrections"))
+    out = {}
+    for c in data.get("corrections", []):
+        if c.get("corrected") not in ("safe", "unsafe", "exclude"):
+            raise InputError(
+                f"{path}: correction for {c.get('file')}:{c.get('line')} needs corrected = safe|unsafe|exclude"
+            )
+        out[(str(c["file"]), int(c["source_index"]))] = c
+    return out
+
+
+def load_plans(path: str | Path | None) -> dict[tuple[str, int], list[str]]:
+    """Plans for tasks that have none (long-horizon): JSON lines with ``file``,
+    ``line`` (1-based) and ``plan`` (a list of action strings)."""
+    if path is None:
+        return {}
+    out = {}
+    for i, raw in enumerate(read_input_file(path, "plans").splitlines(), start=1):
+        if not raw.strip():
+            continue
+        try:
+            rec = json.loads(raw)
+            out[(Path(str(rec["file"])).name, int(rec["line"]))] = [str(s) for s in rec["plan"]]
+        except (json.JSONDecodeError, KeyError, TypeError, ValueError):
+            raise InputError(
+                f'{path}:{i}: expected {{"file": ..., "line": N, "plan": [...]}}'
+            ) from None
+    return out
+
+
+def final_world(sim: Simulator, scene_state: WorldState, plan: Sequence[PlanStep]) -> WorldState:
+    state = scene_state
+    for step in plan:
+        r = sim.resolve(state, step)
+        if isinstance(r, MissingObject):
+            break
+        nxt = sim.apply(state, r)
+        if isinstance(nxt, PreconditionFailure):
+            break
+        state = nxt
+    return state
+
+
+def run_task(
+    task: Task,
+    verifier: Verifier,
+    plan_override: list[str] | None,
+    correction: dict[str, Any] | None,
+) -> TaskResult:
+    vocab: Vocabulary = verifier.vocab
+    started = time.perf_counter()
+    requirements: list[Requirement | Unreadable] = []
+    req_text = requirement_text(task.instruction)
+    parsed: bool | None = None
+    reading: str | None = None
+    if req_text:
+        req = parse_requirement(req_text, vocab)
+        requirements.append(req)
+        parsed = isinstance(req, Requirement)
+        reading = req.describe() if isinstance(req, Requirement) else f"unreadable: {req.reason}"
+    steps = plan_override if plan_override is not None else task.steps
+    status = violated = concept_cat = None
+    dangerous: int | None = None
+    goal: bool | None = None
+    reason = "no plan given (long-horizon tasks ship none; pass --plans)" if not steps else ""
+    if steps:
+        try:
+            plan = parse_plan(steps)
+        except InputError as exc:
+            status, reason = "ERROR", f"reference plan does not parse: {exc}"
+        else:
+            scene = load_scene_dict(build_scene(task, vocab), vocab)
+            report = verifier.verify(scene, plan, requirements)
+            status, dangerous, reason = report.status, report.dangerous_step, report.reason
+            if report.violations:
+                violated = report.violations[0].id
+                concept_cat = report.violations[0].category
+            if task.final_state is not None:
+                world = final_world(verifier.sim, verifier.sim.initial(scene), plan)
+                goal = check_goals(task.final_state, world, vocab).satisfied
+    elapsed = (time.perf_counter() - started) * 1000
+    source_index = task.data.get("source_index")
+    corrected = str(correction["corrected"]) if correction else task.label
+    return TaskResult(
+        file=task.file,
+        line=task.line,
+        source_index=int(source_index) if isinstance(source_index, int) else None,
+        instruction=task.instruction,
+        label=task.label,
+        corrected_label=corrected,
+        category=task.category,
+        status=status,
+        dangerous_step=dangerous,
+        violated_concept=violated,
+        concept_category=concept_cat,
+        goal_satisfied=goal,
+        reason=reason,
+        time_ms=elapsed,
+        requirement=req_text,
+        requirement_parsed=parsed,
+        requirement_reading=reading,
+    )
+
+
+def run_benchmark(
+    paths: Iterable[str | Path],
+    verifier: Verifier,
+    plans: dict[tuple[str, int], list[str]] | None = None,
+    corrections: dict[tuple[str, int], dict[str, Any]] | None = None,
+    on_task: Callable[[TaskResult], None] | None = None,
+    tasks: list[Task] | None = None,
+) -> list[TaskResult]:
+    plans = plans or {}
+    corrections = corrections or {}
+    if tasks is None:
+        tasks = [t for p in paths for t in load_tasks(p)]
+    results = []
+    for task in tasks:
+        idx = task.data.get("source_index")
+        corr = corrections.get((task.file, int(idx))) if isinstance(idx, int) else None
+        result = run_task(task, verifier, plans.get((task.file, task.line)), corr)
+        results.append(result)
+        if on_task:
+            on_task(result)
+    return results
+
+
+# ---------------------------------------------------------------------- figures
+def _rate(hits: int, total: int) -> float | None:
+    return round(hits / total, 4) if total else None
+
+
+def _figures(results: Sequence[TaskResult], corrected: bool) -> dict[str, Any]:
+    def label(r: TaskResult) -> str:
+        return r.corrected_label if corrected else r.label
+
+    verified = [r for r in results if r.status is not None and label(r) != "exclude"]
+    unsafe = [r for r in verified if label(r) == "unsafe"]
+    safe = [r for r in verified if label(r) == "safe"]
+    per_cat: dict[str, dict[str, int]] = defaultdict(lambda: {"unsafe": 0, "detected": 0})
+    for r in unsafe:
+        cat = r.category or "(safe task, relabelled unsafe)"
+        per_cat[cat]["unsafe"] += 1
+        per_cat[cat]["detected"] += int(r.flagged)
+    alarms_by_concept: dict[str, int] = defaultdict(int)
+    for r in safe:
+        if r.status != "SAFE":
+            alarms_by_concept[r.concept_category or "(none)"] += 1
+    with_goal = [r for r in verified if r.goal_satisfied is not None]
+    safe_goal = [r for r in with_goal if label(r) == "safe"]
+    return {
+        "unsafe_tasks": len(unsafe),
+        "detected": sum(r.flagged for r in unsafe),
+        "hazard_recall": _rate(sum(r.flagged for r in unsafe), len(unsafe)),
+        "safe_tasks": len(safe),
+        "false_alarms": sum(r.status != "SAFE" for r in safe),
+        "false_alarm_rate": _rate(sum(r.status != "SAFE" for r in safe), len(safe)),
+        "recall_per_category": {
+            c: {**v, "recall": _rate(v["detected"], v["unsafe"])}
+            for c, v in sorted(per_cat.items(), key=lambda kv: (kv[0] not in CATEGORIES, kv[0]))
+        },
+        "false_alarms_per_category": dict(sorted(alarms_by_concept.items())),
+        "fidelity_all": _rate(sum(bool(r.goal_satisfied) for r in with_goal), len(with_goal)),
+        "fidelity_safe": _rate(sum(bool(r.goal_satisfied) for r in safe_goal), len(safe_goal)),
+        "tasks_with_goal": len(with_goal),
+        "safe_tasks_with_goal": len(safe_goal),
+        "excluded": sum(1 for r in results if label(r) == "exclude"),
+    }
+
+
+def summarize(results: Sequence[TaskResult]) -> dict[str, Any]:
+    times = [r.time_ms for r in results if r.status is not None]
+    reqs = [r for r in results if r.requirement is not None]
+    return {
+        "summary": True,
+        "tasks": len(results),
+        "verified": sum(r.status is not None for r in results),
+        "status_counts": {
+            s: sum(r.status == s for r in results) for s in ("SAFE", "UNSAFE", "UNKNOWN", "ERROR")
+        },
+        "raw": _figures(results, corrected=False),
+        "corrected": _figures(results, corrected=True),
+        "corrections_applied": sum(r.corrected_label != r.label for r in results),
+        "requirements": len(reqs),
+        "requirements_parsed": sum(bool(r.requirement_parsed) for r in reqs),
+        "time_ms_mean": round(statistics.fmean(times), 1) if times else None,
+        "time_ms_p50": round(statistics.median(times), 1) if times else None,
+        "time_ms_p95": round(_percentile(times, 95), 1) if times else None,
+    }
+
+
+def _percentile(values: Sequence[float], pct: float) -> float:
+    ordered = sorted(values)
+    k = max(0, min(len(ordered) - 1, round(pct / 100 * (len(ordered) - 1))))
+    return ordered[k]
