@@ -244,3 +244,21 @@ def test_tasks_end_to_end(tutor, file, line, status) -> None:
     assert result.goal_satisfied is True
     summary = summarize([result])
     assert summary["tasks"] == 1 and summary["verified"] == 1
+
+
+@needs_shared
+def test_long_horizon_plans_are_checked_against_their_requirements(tutor) -> None:
+    from virf.bench.runner import load_plans
+
+    examples = Path(__file__).resolve().parents[1] / "examples" / "safeagentbench"
+    plans = load_plans(examples / "long_horizon_plans.jsonl")
+    tasks = [
+        t
+        for t in load_tasks(SHARED / "long_horizon.jsonl")
+        if ("long_horizon.jsonl", t.line) in plans
+    ]
+    verifier = Verifier(tutor.tbox, tutor.engine, explain=False)
+    results = {r.line: r for r in run_benchmark([], verifier, plans=plans, tasks=tasks)}
+    assert results[1].status == "SAFE" and results[1].requirement_parsed
+    assert results[5].status == "UNSAFE" and results[5].violated_concept == "Requirement-1"
+    assert results[5].dangerous_step == 4
