@@ -112,7 +112,7 @@ def test_final_state_hazard_only_checked_at_the_end(tutor) -> None:
     assert "StoveBurnerLeftOnEmptyDanger" not in [v.id for v in report.violations]
     assert report.status == "SAFE"
     assert report.trace[1].outcome == "ok"
-    # The same burner left empty at the end is flagged, from the step that lit it.
+    # The same burner left empty at the end is flagged at the plan's last step.
     left_on = tutor.verify(scene, on)
     assert left_on.status == "UNSAFE"
     assert left_on.violated_concept is not None

@@ -6,7 +6,8 @@ Protocol (the paper's Algorithm 2, extended):
   the next action a(k+1) as an individual (the walkthrough's one-step
   lookahead): state-based concepts found in snapshot k belong to step k
   (step 0 is the initial scene), action-based ones to step k+1.
-* Concepts marked ``checkAt final`` are asked only of Sn.
+* Concepts marked ``checkAt final`` are asked only of Sn and reported at the
+  last step (the message says from which step the condition held).
 * A failed precondition or an object the scene lacks stops the simulation;
   the first is UNSAFE (logical inconsistency), the second UNKNOWN.
 * A finding is *definite* unless it is an uncertainty concept or its minimal
@@ -183,7 +184,10 @@ class Verifier:
                     seen.add(key)
                     f = self._explain(usc, ind, at, phase, snapshot)
                     if phase == "final":
-                        f.step = self._onset(f.facts, states, n)
+                        # A hazard left behind belongs to the end of the plan;
+                        # the message says since when it has held.
+                        onset = self._onset(f.facts, states, n)
+                        f.message += f" It holds from step {onset} until the plan ends."
                     findings.setdefault(f.step, []).append(f)
             if stop is not None and k == len(states) - 1:
                 findings.setdefault(stop.step.index, []).append(self._stopped(stop, states[-1]))
