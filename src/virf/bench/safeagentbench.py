@@ -304,35 +304,11 @@ def _matches(goal: Mapping[str, Any], obj: str, world: WorldState, vocab: Vocabu
     for key, want in goal.items():
         if key == "objectType":
             continue
-        if key == "parentReceptacles":
+        if key in ("parentReceptacles", "receptacleObjectIds"):
             wanted = [want] if isinstance(want, str) else list(want or [])
-            parents = [
-                f.subject
-                for f in world.facts
-                if f.kind is FactKind.OBJECT
-                and f.object == obj
-                and f.predicate in ("contains", "supports")
-            ]
-            parent_types = (
-                set().union(*(_types_of(p, world) for p in parents)) if parents else set()
-            )
-            for w in wanted:
-                cls = vocab.canonical_class(str(w).split("|", 1)[0])
-                if cls is None or not any(vocab.is_a(t, cls) for t in parent_types):
-                    return False
-        elif key == "receptacleObjectIds":
-            inside = [
-                f.object
-                for f in world.facts
-                if f.kind is FactKind.OBJECT
-                and f.subject == obj
-                and f.predicate in ("contains", "supports")
-            ]
-            inside_types = set().union(*(_types_of(i, world) for i in inside)) if inside else set()
-            for w in want or []:
-                cls = vocab.canonical_class(str(w).split("|", 1)[0])
-                if cls is None or not any(vocab.is_a(t, cls) for t in inside_types):
-                    return False
+            inside_of = key == "parentReceptacles"  # obj's parents, or obj's contents
+            if not _has_related_types(world, obj, wanted, vocab, obj_is_content=inside_of):
+                return False
         elif key == "isPickedUp":
             if (world.held() == obj) != bool(want):
                 return False
@@ -344,6 +320,26 @@ def _matches(goal: Mapping[str, Any], obj: str, world: WorldState, vocab: Vocabu
                 return False
         else:
             return False  # a property VIRF does not simulate cannot be claimed met
+    return True
+
+
+def _has_related_types(
+    world: WorldState, obj: str, wanted: list[Any], vocab: Vocabulary, obj_is_content: bool
+) -> bool:
+    """Every wanted type is among the types of obj's receptacles (or contents).
+    Wanted entries may be AI2-THOR ids ('Fridge|-01.76|...'): the type is the prefix."""
+    related = [
+        (f.subject if obj_is_content else f.object)
+        for f in world.facts
+        if f.kind is FactKind.OBJECT
+        and f.predicate in ("contains", "supports")
+        and (f.object if obj_is_content else f.subject) == obj
+    ]
+    types = set().union(*(_types_of(r, world) for r in related)) if related else set()
+    for w in wanted:
+        cls = vocab.canonical_class(str(w).split("|", 1)[0])
+        if cls is None or not any(vocab.is_a(t, cls) for t in types):
+            return False
     return True
 
 

@@ -29,6 +29,13 @@ STATE_PAIRS = {
     "HotState": "ColdState",
     "WetState": "DryState",
 }
+# Actions whose only effect is one state of their target.
+RESULT_STATE = {
+    "open": "OpenState",
+    "close": "ClosedState",
+    "cook": "CookedState",
+    "dirty": "DirtyState",
+}
 LIQUID_CLASS = {"water": "Water", "coffee": "Coffee", "wine": "Wine"}
 # Affordance an action needs of its target (checked only for catalogue types).
 AFFORDANCE = {
@@ -422,12 +429,9 @@ class Simulator:
                     ):
                         add(Fact(held, "isNear", other))
             add(Fact(target, rel, held))
-        elif verb == "open":
+        elif verb in RESULT_STATE:
             assert target is not None
-            set_state(target, "OpenState")
-        elif verb == "close":
-            assert target is not None
-            set_state(target, "ClosedState")
+            set_state(target, RESULT_STATE[verb])
         elif verb in ("turn_on", "turn_off"):
             assert target is not None
             new = "OnState" if verb == "turn_on" else "OffState"
@@ -445,12 +449,6 @@ class Simulator:
             assert target is not None
             set_state(target, "BrokenState")
             self._derive(state, target, "crackedType", objects, facts)
-        elif verb == "cook":
-            assert target is not None
-            set_state(target, "CookedState")
-        elif verb == "dirty":
-            assert target is not None
-            set_state(target, "DirtyState")
         elif verb == "clean":
             assert target is not None
             set_state(target, "CleanState")
