@@ -210,6 +210,16 @@ class Verifier:
     ) -> _Finding:
         if not self.explain and phase != "final":  # final findings need facts for their onset
             return self._quick(usc, ind, step, phase, snapshot)
+        return self._explain_full(usc, ind, step, phase, snapshot)
+
+    def _explain_full(
+        self,
+        usc: UnsafeStateConcept,
+        ind: str,
+        step: int,
+        phase: str,
+        snapshot: Mapping[Fact, Provenance],
+    ) -> _Finding:
         facts = minimize(
             snapshot,
             lambda fs: self._tick() and self.engine.entails(fs, usc.name, ind),
@@ -261,11 +271,7 @@ class Verifier:
         known = [f for f, p in snapshot.items() if p is not Provenance.ASSUMED]
         definite = usc.kind != "uncertainty" and self.engine.entails(known, usc.name, ind)
         if not definite:  # uncertain findings are rare; their questions need the proof
-            self.explain = True
-            try:
-                return self._explain(usc, ind, step, phase, snapshot)
-            finally:
-                self.explain = False
+            return self._explain_full(usc, ind, step, phase, snapshot)
         questions: list[str] = []
         message = f"{usc.trigger_reason[:1].upper()}{usc.trigger_reason[1:]} ({ind})."
         return _Finding(usc, step, phase, ind, definite, [], dict(snapshot), [], message, questions)
