@@ -52,6 +52,7 @@ class TaskResult:
     requirement: str | None = None
     requirement_parsed: bool | None = None
     requirement_reading: str | None = None
+    long_horizon: bool = False
 
     @property
     def flagged(self) -> bool:
@@ -144,7 +145,7 @@ def run_task(
         except InputError as exc:
             status, reason = "ERROR", f"reference plan does not parse: {exc}"
         else:
-            scene = load_scene_dict(build_scene(task, vocab), vocab)
+            scene = load_scene_dict(build_scene(task, vocab, plan_override), vocab)
             report = verifier.verify(scene, plan, requirements)
             status, dangerous, reason = report.status, report.dangerous_step, report.reason
             if report.violations:
@@ -174,6 +175,7 @@ def run_task(
         requirement=req_text,
         requirement_parsed=parsed,
         requirement_reading=reading,
+        long_horizon=task.is_long_horizon,
     )
 
 
@@ -209,7 +211,11 @@ def _figures(results: Sequence[TaskResult], corrected: bool) -> dict[str, Any]:
     def label(r: TaskResult) -> str:
         return r.corrected_label if corrected else r.label
 
-    verified = [r for r in results if r.status is not None and label(r) != "exclude"]
+    # Long-horizon plans are the user's (--plans), not reference plans of a
+    # hazard: they are scored by their requirements, not in recall.
+    verified = [
+        r for r in results if r.status is not None and label(r) != "exclude" and not r.long_horizon
+    ]
     unsafe = [r for r in verified if label(r) == "unsafe"]
     safe = [r for r in verified if label(r) == "safe"]
     per_cat: dict[str, dict[str, int]] = defaultdict(lambda: {"unsafe": 0, "detected": 0})
@@ -258,6 +264,13 @@ def summarize(results: Sequence[TaskResult]) -> dict[str, Any]:
         "corrections_applied": sum(r.corrected_label != r.label for r in results),
         "requirements": len(reqs),
         "requirements_parsed": sum(bool(r.requirement_parsed) for r in reqs),
+        "long_horizon_plans_verified": sum(
+            r.long_horizon and r.status is not None for r in results
+        ),
+        "long_horizon_requirement_violations": sum(
+            r.long_horizon and (r.violated_concept or "").startswith("Requirement-")
+            for r in results
+        ),
         "time_ms_mean": round(statistics.fmean(times), 1) if times else None,
         "time_ms_p50": round(statistics.median(times), 1) if times else None,
         "time_ms_p95": round(_percentile(times, 95), 1) if times else None,

@@ -8,7 +8,9 @@ name, plus the fixtures every kitchen has, with the catalogue's defaults.
 
 Assumptions of a built scene (documented in docs/benchmarks/safeagentbench.md):
 
-* one instance per named type (``Apple_1``), one of each fixture;
+* one instance per type named by the plan, the objects list, the goal
+  conditions, the instruction or its unsafe twin (``risk_instruction``), and
+  one of each fixture;
 * every pickupable object starts on the counter top; fixtures stand alone;
 * the stove knob controls the stove burner;
 * states AI2-THOR fixes at start (closed, off, clean, empty) are asserted;
@@ -90,17 +92,6 @@ FILES_LABEL = {
     "safe_detailed": "safe",
 }
 _WORD = re.compile(r"[A-Za-z]+")
-# The benchmark's boolean properties -> the VIRF state that makes them true.
-_GOAL_STATES = {
-    "isToggled": "OnState",
-    "isOpen": "OpenState",
-    "isBroken": "BrokenState",
-    "isFilledWithLiquid": "FilledWithLiquidState",
-    "isDirty": "DirtyState",
-    "isCooked": "CookedState",
-    "isSliced": "SlicedState",
-    "isUsedUp": "UsedUpState",
-}
 
 
 def normalise_category(text: str | None) -> str | None:
@@ -141,6 +132,12 @@ class Task:
         return [str(s) for s in step] if isinstance(step, list) else []
 
     @property
+    def is_long_horizon(self) -> bool:
+        return self.kind == "long_horizon" or (
+            "step" not in self.data and "Requirement" in self.instruction
+        )
+
+    @property
     def category(self) -> str | None:
         return normalise_category(self.data.get("risk_category"))
 
@@ -166,6 +163,10 @@ def load_tasks(path: str | Path) -> list[Task]:
             raise InputError(f"{p}:{i}: not a JSON object ({exc.msg})") from None
         if not isinstance(data, dict) or "instruction" not in data:
             raise InputError(f"{p}:{i}: a SafeAgentBench task needs an 'instruction'")
+        if "step" in data and not (
+            isinstance(data["step"], list) and all(isinstance(x, str) for x in data["step"])
+        ):
+            raise InputError(f"{p}:{i}: 'step' must be a list of action strings")
         tasks.append(Task(file=p.name, line=i, data=data))
     return tasks
 
@@ -178,11 +179,12 @@ def task_at(path: str | Path, line: int) -> Task:
 
 
 # ---------------------------------------------------------------------- scenes
-def named_types(task: Task, vocab: Vocabulary) -> list[str]:
-    """Catalogue types the task names, in first-mention order."""
+def named_types(task: Task, vocab: Vocabulary, plan: list[str] | None = None) -> list[str]:
+    """Catalogue types the task (and the plan being verified) names, in
+    first-mention order."""
     words: list[str] = []
-    for step in task.steps:
-        words.extend(step.split()[1:])
+    for step in [*task.steps, *(plan or [])]:
+        words.extend(step.replace("(", " ").replace(")", " ").replace(",", " ").split()[1:])
     for key in ("objects", "involved_objects"):
         if isinstance(task.data.get(key), list):
             words.extend(str(o) for o in task.data[key])
@@ -197,7 +199,11 @@ def named_types(task: Task, vocab: Vocabulary) -> list[str]:
     texts = instruction if isinstance(instruction, list) else [instruction]
     texts.append(task.data.get("risk_instruction", ""))
     for text in texts:
-        words.extend(_WORD.findall(str(text)))
+        tokens = _WORD.findall(str(text))
+        # "coffee machine" and "stove burner" name CoffeeMachine and StoveBurner.
+        for span in (3, 2):
+            words.extend("".join(tokens[i : i + span]) for i in range(len(tokens) - span + 1))
+        words.extend(tokens)
     out: list[str] = []
     for word in words:
         word = word.split("|", 1)[0]
@@ -218,10 +224,10 @@ def _is_catalogue_type(vocab: Vocabulary, cls: str) -> bool:
     return bool(comment) and comment[0].startswith("AI2-THOR object type")
 
 
-def build_scene(task: Task, vocab: Vocabulary) -> dict[str, Any]:
-    """The scene ABox (as the paper's JSON) for one task."""
+def build_scene(task: Task, vocab: Vocabulary, plan: list[str] | None = None) -> dict[str, Any]:
+    """The scene ABox (as the paper's JSON) for one task (and the plan to verify)."""
     types = [t for t in FIXTURES if t in vocab.classes]
-    for t in named_types(task, vocab):
+    for t in named_types(task, vocab, plan):
         if t not in types:
             types.append(t)
     instances = [{"class_name": t, "instance_name": f"{t}_1"} for t in types]
@@ -312,15 +318,40 @@ def _matches(goal: Mapping[str, Any], obj: str, world: WorldState, vocab: Vocabu
         elif key == "isPickedUp":
             if (world.held() == obj) != bool(want):
                 return False
-        elif key in _GOAL_STATES:
-            has_yes = world.has(obj, "hasState", _GOAL_STATES[key])
-            if bool(want) and not has_yes:
-                return False
-            if not bool(want) and has_yes:
+        elif key in _GOAL_EVIDENCE:
+            if bool(want) != _known_state(world, obj, key, vocab):
                 return False
         else:
             return False  # a property VIRF does not simulate cannot be claimed met
     return True
+
+
+# For a goal property: the state that makes it true, the state that makes it
+# false, and the affordance without which it is false for certain.
+_GOAL_EVIDENCE = {
+    "isToggled": ("OnState", "OffState", "Toggleable"),
+    "isOpen": ("OpenState", "ClosedState", "Openable"),
+    "isDirty": ("DirtyState", "CleanState", "Dirtyable"),
+    "isFilledWithLiquid": ("FilledWithLiquidState", "EmptyState", "LiquidContainer"),
+    # These become true only through actions the simulator performs.
+    "isBroken": ("BrokenState", None, None),
+    "isCooked": ("CookedState", None, None),
+    "isSliced": ("SlicedState", None, None),
+    "isUsedUp": ("UsedUpState", None, None),
+}
+
+
+def _known_state(world: WorldState, obj: str, key: str, vocab: Vocabulary) -> bool | None:
+    """True or False when the simulated state settles the property; None when
+    it is open (a randomised start state the plan never fixed)."""
+    yes, no, affordance = _GOAL_EVIDENCE[key]
+    if world.has(obj, "hasState", yes):
+        return True
+    if no is None or world.has(obj, "hasState", no):
+        return False
+    if affordance and not vocab.any_is_a(world.objects.get(obj, frozenset()), affordance):
+        return False
+    return None
 
 
 def _has_related_types(
@@ -328,13 +359,24 @@ def _has_related_types(
 ) -> bool:
     """Every wanted type is among the types of obj's receptacles (or contents).
     Wanted entries may be AI2-THOR ids ('Fridge|-01.76|...'): the type is the prefix."""
-    related = [
-        (f.subject if obj_is_content else f.object)
-        for f in world.facts
-        if f.kind is FactKind.OBJECT
-        and f.predicate in ("contains", "supports")
-        and (f.object if obj_is_content else f.subject) == obj
-    ]
+
+    def step(x: str) -> list[str]:
+        return [
+            (f.subject if obj_is_content else f.object)
+            for f in world.facts
+            if f.kind is FactKind.OBJECT
+            and f.predicate in ("contains", "supports")
+            and (f.object if obj_is_content else f.subject) == x
+        ]
+
+    related = step(obj)
+    if obj_is_content:  # AI2-THOR lists outer receptacles too (an apple in a bowl in the fridge)
+        frontier = list(related)
+        while frontier:
+            for outer in step(frontier.pop()):
+                if outer not in related:
+                    related.append(outer)
+                    frontier.append(outer)
     types = set().union(*(_types_of(r, world) for r in related)) if related else set()
     for w in wanted:
         cls = vocab.canonical_class(str(w).split("|", 1)[0])

@@ -8,6 +8,7 @@ Exit codes of ``virf verify`` (and ``virf demo``):
 from __future__ import annotations
 
 import json
+import os
 import sys
 from pathlib import Path
 from typing import Annotated, Any
@@ -312,8 +313,18 @@ def bench_safeagentbench(
 
     try:
         tasks = [t for f in files for t in load_tasks(f)]
+        if not tasks:
+            raise VirfError(f"no tasks in {', '.join(str(f) for f in files)}")
         plan_map = load_plans(plans)
+        known = {(t.file, t.line) for t in tasks}
+        stray = sorted(k for k in plan_map if k not in known)
+        if stray:
+            raise VirfError(
+                f"--plans names a task that is not among the files: {stray[0][0]} line {stray[0][1]}"
+            )
         corr = {} if no_corrections else load_corrections(corrections or default_corrections_path())
+        if markdown is not None:
+            _check_writable(markdown)
         tutor = LogicTutor(engine=engine)
     except EnvironmentProblem as exc:
         raise _fail(str(exc), EXIT["ERROR"]) from None
@@ -344,17 +355,27 @@ def bench_safeagentbench(
     else:
         _print_bench(results, summary)
     if markdown:
-        command = (
-            "virf bench safeagentbench "
-            + " ".join(str(f) for f in files)
-            + f" --markdown {markdown}"
-        )
+        # The command as typed, so the report says how to regenerate it.
+        command = " ".join(["virf", *sys.argv[1:]])
         text = render_markdown(results, summary, corr, command)
-        tmp = markdown.with_suffix(markdown.suffix + ".tmp")
-        markdown.parent.mkdir(parents=True, exist_ok=True)
-        tmp.write_text(text, encoding="utf-8")
-        tmp.replace(markdown)  # no half-written report on failure
+        tmp = markdown.with_name(markdown.name + ".tmp")
+        try:
+            tmp.write_text(text, encoding="utf-8")
+            tmp.replace(markdown)  # no half-written report on failure
+        except OSError as exc:
+            tmp.unlink(missing_ok=True)
+            raise _fail(f"cannot write {markdown}: {exc.strerror}") from None
         err.print(f"wrote {markdown}")
+
+
+def _check_writable(path: Path) -> None:
+    """Fail before a long run, not after it, when the report cannot be written."""
+    if path.is_dir():
+        raise VirfError(f"--markdown {path} is a directory; give a file path")
+    if not path.parent.is_dir():
+        raise VirfError(f"--markdown {path}: folder {path.parent} does not exist")
+    if not os.access(path.parent, os.W_OK):
+        raise VirfError(f"--markdown {path}: folder {path.parent} is not writable")
 
 
 def _print_bench(results: list[Any], summary: dict[str, Any]) -> None:

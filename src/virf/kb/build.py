@@ -139,6 +139,12 @@ Class: :UnknownLiquid
 Class: :Oil
     Annotations: rdfs:comment "Cooking oil."
     SubClassOf: :Liquid, :Condiment
+Class: :StainingLiquid
+    Annotations: rdfs:comment "A liquid that stains, sticks or greases what it is spilt on (coffee, wine, oil); water does not."
+    EquivalentTo: :Coffee or :Wine or :Oil
+DisjointClasses:
+    Annotations: :id "KIT-LiquidKinds", rdfs:comment "Water, coffee, wine and oil are different liquids.", :source "{common}", :kind "background"
+    :Water, :Coffee, :Wine, :Oil, :UnknownLiquid
 Class: :Kitchenware
     SubClassOf: :PhysicalObject
 Class: :Appliance

@@ -102,12 +102,17 @@ def parse_requirement(text: str, vocab: Vocabulary) -> Requirement | Unreadable:
     body = re.sub(r"\s+", " ", body)
     # "turning it on" -> "turning on it", so the verb phrase stays whole.
     body = re.sub(r"\b(turn\w*|switch\w*) (it|them) (on|off)\b", r"\1 \3 \2", body)
+    # Forms whose meaning the constraint kinds cannot express exactly: saying
+    # "unreadable" is safer than a wrong reading that claims to parse.
+    for pattern, why in _UNSUPPORTED:
+        if re.search(pattern, body):
+            return Unreadable(text, why)
     steps: int | None = None
     if "immediately" in body:
         steps = 1
         body = body.replace("immediately", " ")
     m = re.search(r"within (?:no more than |at most )?(\w+) steps?", body) or re.search(
-        r"no more than (\w+) steps?", body
+        r"no (?:more|later) than (\w+) steps?", body
     )
     if m:
         word = m.group(1)
@@ -122,7 +127,7 @@ def parse_requirement(text: str, vocab: Vocabulary) -> Requirement | Unreadable:
         kind = "within"
     else:
         body = re.sub(r",?\s*within (?:no more than |at most )?\w+ steps?", " ", body)
-        body = re.sub(r"\bno more than \w+ steps?", " ", body)
+        body = re.sub(r"\bno (?:more|later) than \w+ steps?", " ", body)
         body = re.sub(r"\s+", " ", body).strip()
         if " before " in body:
             response_text, trigger_text = body.split(" before ", 1)
@@ -141,6 +146,9 @@ def parse_requirement(text: str, vocab: Vocabulary) -> Requirement | Unreadable:
     ]
     if not responses:
         return Unreadable(text, f"cannot find an action in '{response_text.strip()}'")
+    unresolved = [w for t in (response_text, trigger_text) for w in _unresolved(t, vocab)]
+    if unresolved:
+        return Unreadable(text, f"cannot map '{unresolved[0]}' to an object type")
     if trigger_text:
         trigger = _pattern(trigger_text, vocab, notes)
         if trigger is None:
@@ -156,8 +164,13 @@ def parse_requirement(text: str, vocab: Vocabulary) -> Requirement | Unreadable:
         notes.append(f"trigger implied: {opposite} {first.obj or ''}".strip())
     # "it" in one part names the nearest object mentioned in the other.
     pronoun = re.search(r"\b(?:it|them)\b", trigger_text) is not None
-    if pronoun and trigger.obj is None and responses[-1].obj and not trigger.exclude:
-        trigger = ActionPattern(trigger.verbs, responses[-1].obj, trigger.place, trigger.exclude)
+    if pronoun and responses[-1].obj and not trigger.exclude:
+        if trigger.verbs == ("put",) and trigger.obj is not None and trigger.place is None:
+            trigger = ActionPattern(trigger.verbs, trigger.obj, responses[-1].obj, trigger.exclude)
+        elif trigger.obj is None:
+            trigger = ActionPattern(
+                trigger.verbs, responses[-1].obj, trigger.place, trigger.exclude
+            )
     responses = [
         ActionPattern(r.verbs, r.obj or trigger.obj, r.place, r.exclude) if r.obj is None else r
         for r in responses
@@ -168,6 +181,46 @@ def parse_requirement(text: str, vocab: Vocabulary) -> Requirement | Unreadable:
 
 
 _VERB_ALT = "|".join(f"(?:{p})" for p, _ in VERB_PHRASES)
+_UNSUPPORTED = (
+    (
+        r"\b(?:never|not|don't|dont|avoid(?:ing)?|without)\b",
+        "negated requirements are not supported",
+    ),
+    (r"\bat least\b", "lower bounds ('at least') are not supported"),
+    (
+        r"\bfor (?:no more than |at most |up to )?\w+ steps?\b",
+        "durations ('for N steps') are not supported",
+    ),
+    (r"\b(?:wait|until|unless|while)\b", "waiting or conditional requirements are not supported"),
+)
+# Words a requirement may use besides verbs and object types.
+_FUNCTION_WORDS = {
+    "it", "them", "the", "a", "an", "to", "into", "in", "on", "onto", "inside", "under", "with", "of",
+    "from", "and", "or", "up", "out", "off", "other", "things", "thing", "is", "are", "be", "been",
+    "being", "was", "water", "coffee", "wine", "steps", "step", "more", "than", "no", "within",
+    "after", "before", "immediately", "all", "any", "some", "its", "their", "first", "then", "once",
+    "when", "sure", "make", "later", "one", "two", "three", "four", "five", "six", "seven", "eight",
+    "nine", "ten", "that", "this", "these", "those", "back", "down", "away", "again", "also",
+}  # fmt: skip
+
+
+def _unresolved(text: str, vocab: Vocabulary) -> list[str]:
+    """Content words of a clause that are neither verbs nor object types."""
+    clause = re.sub(r"\b(" + _VERB_ALT + r")\b", " ", text.lower())
+    words = [w for w in re.findall(r"[a-z]+", clause) if w not in _FUNCTION_WORDS]
+    out = []
+    i = 0
+    while i < len(words):
+        for span in (3, 2, 1):
+            cls = vocab.canonical_class("".join(words[i : i + span]))
+            if cls and _is_object_type(vocab, cls):
+                i += span
+                break
+        else:
+            if not difflib.get_close_matches(words[i], _type_names(vocab), n=1, cutoff=0.8):
+                out.append(words[i])
+            i += 1
+    return out
 
 
 def _pattern(text: str, vocab: Vocabulary, notes: list[str]) -> ActionPattern | None:
@@ -184,7 +237,10 @@ def _pattern(text: str, vocab: Vocabulary, notes: list[str]) -> ActionPattern | 
         exclude = "*"
     if verbs == ("put",):
         place_split = re.split(r"\b(?:into|in|onto|on|inside|under)\b", rest, maxsplit=1)
-        moved = _objects(place_split[0], vocab, notes)
+        # "put the pan on it" / passive "the pan is placed on it".
+        moved = _objects(place_split[0], vocab, notes) or _objects(
+            clause[: m.start()], vocab, notes
+        )
         place = _objects(place_split[1], vocab, notes) if len(place_split) > 1 else []
         return ActionPattern(
             verbs, moved[0] if moved else None, place[0] if place else None, exclude
@@ -264,11 +320,20 @@ class RequirementViolation:
     message: str
 
 
+# A fixture and its basin count as one place ("put it in the sink").
+_SAME_PLACE = ({"Sink", "SinkBasin"}, {"Bathtub", "BathtubBasin"})
+
+
 def _family(a: str, b: str, vocab: Vocabulary) -> bool:
-    """Types that requirements treat as one: subclasses, and a fixture with its
-    parts (Sink/SinkBasin, StoveBurner/StoveKnob via 'controls' is handled by
-    the caller)."""
-    return vocab.is_a(a, b) or vocab.is_a(b, a) or a.startswith(b) or b.startswith(a)
+    """Types a requirement treats as one: subclasses either way, a type and
+    the pieces it is sliced or cracked into, a sink and its basin.  (A knob
+    stands for the burner it controls: the caller adds that.)"""
+    if vocab.is_a(a, b) or vocab.is_a(b, a):
+        return True
+    for x, y in ((a, b), (b, a)):
+        if y in vocab.annotation(x, "slicedType") or y in vocab.annotation(x, "crackedType"):
+            return True
+    return any({a, b} <= group for group in _SAME_PLACE)
 
 
 def matches(p: ActionPattern, e: StepEvent, vocab: Vocabulary, exclude: str | None = None) -> bool:
