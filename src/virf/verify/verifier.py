@@ -558,7 +558,10 @@ class Verifier:
             action = plan[step - 1].text
         trace = self._trace(plan, states, resolved, stop, findings)
         if primary is None:
-            reason = "every simulated state and action satisfies every safety rule"
+            reason = (
+                f"every simulated state and action satisfies the {len(self.vocab.uscs)} safety rules "
+                f"of scenario '{self.tbox.scenario}'"
+            )
         elif status == "UNSAFE":
             reason = f"step {step}: {primary.description}"
         else:
