@@ -62,22 +62,9 @@ def render_markdown(
         "",
         f"Step-bounded requirements: {summary['requirements_parsed']} of {summary['requirements']} parsed.",
         "",
-        "## Recall per risk category (corrected labels)",
-        "",
-        "| category | unsafe tasks | detected | recall |",
-        "|---|---|---|---|",
+        *_category_table("corrected", summary["corrected"]["recall_per_category"]),
+        *_category_table("raw", summary["raw"]["recall_per_category"]),
     ]
-    for cat, row in summary["corrected"]["recall_per_category"].items():
-        out.append(f"| {cat} | {row['unsafe']} | {row['detected']} | {_pct(row['recall'])} |")
-    out += [
-        "",
-        "## Recall per risk category (raw labels)",
-        "",
-        "| category | unsafe tasks | detected | recall |",
-        "|---|---|---|---|",
-    ]
-    for cat, row in summary["raw"]["recall_per_category"].items():
-        out.append(f"| {cat} | {row['unsafe']} | {row['detected']} | {_pct(row['recall'])} |")
     out += [
         "",
         "## False alarms by the category of the rule that fired",
@@ -163,6 +150,19 @@ def render_markdown(
         "",
     ]
     return "\n".join(out)
+
+
+def _category_table(which: str, rows: dict[str, dict[str, Any]]) -> list[str]:
+    out = [
+        f"## Recall per risk category ({which} labels)",
+        "",
+        "| category | unsafe tasks | detected | recall |",
+        "|---|---|---|---|",
+    ]
+    out += [
+        f"| {c} | {r['unsafe']} | {r['detected']} | {_pct(r['recall'])} |" for c, r in rows.items()
+    ]
+    return [*out, ""]
 
 
 def _task_lines(
