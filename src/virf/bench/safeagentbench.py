@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -384,9 +384,3 @@ def _has_related_types(
             return False
     return True
 
-
-def iter_tasks(paths: Iterable[str | Path]) -> list[Task]:
-    out: list[Task] = []
-    for p in paths:
-        out.extend(load_tasks(p))
-    return out

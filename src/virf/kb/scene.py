@@ -225,8 +225,6 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
             facts[Fact(subj, prop, value, FactKind.DATA)] = Provenance.SCENE
             continue
         target = resolve_value(str(obj), prop, where)
-        if target in classes and kind_of(target) == "Material" and prop != "hasMaterial":
-            pass
         if prop in INVERSES:
             subj, prop, target = target, INVERSES[prop], subj
             if subj not in classes:

@@ -35,7 +35,6 @@ from virf.schema import (
     Provenance,
     Report,
     StepTrace,
-    Triple,
     ViolatedConcept,
     Violation,
 )
@@ -734,6 +733,3 @@ def _rank(f: _Finding) -> tuple[int, int, int, str, str]:
         f.subject,
     )
 
-
-def _triples(facts: list[Fact]) -> tuple[Triple, ...]:
-    return tuple(f.triple() for f in facts)
