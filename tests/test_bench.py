@@ -372,3 +372,21 @@ def test_cli_scene_and_bench_errors(tmp_path: Path) -> None:
         "violated_concept",
         "goal_satisfied",
     } <= set(lines[0])
+
+
+def test_numbered_objects_as_in_safeagentbench(tutor, vocab) -> None:
+    from virf.sim.plan import parse_plan_text
+
+    [step] = parse_plan_text("find Mug 2")
+    assert step.args == ("Mug_2",)
+    [fill] = parse_plan_text("fillLiquid Mug 2 water")
+    assert fill.args == ("Mug_2", "water")
+    task = _task(
+        {"instruction": "Drop the second mug.", "step": ["find Mug 2", "pick Mug 2", "drop"]}
+    )
+    data = build_scene(task, vocab)
+    names = {i["instance_name"] for i in data["instances"]}
+    assert {"Mug_1", "Mug_2"} <= names
+    report = tutor.verifier.verify(load_scene(data, vocab), task.plan())
+    assert report.status == "UNSAFE"
+    assert "Mug_2" in json.dumps([t.model_dump() for t in report.violations[0].triggering_facts])

@@ -128,7 +128,8 @@ def render_markdown(
         "or the task's unsafe twin (`risk_instruction`), e.g. `Apple_1`; slices and cracked eggs are created by "
         "the plan's actions;",
         "- every pickupable object starts on the counter top;",
-        "- the stove knob controls the stove burner;",
+        "- the stove knob controls the stove burner (knob k controls burner k when the plan numbers them, "
+        "as in `find StoveKnob 2`);",
         "- states AI2-THOR fixes at start (closed, off, clean, empty) are asserted from the catalogue; states it "
         "randomises (a mug may start dirty or filled) are left unknown, with an explicit marker;",
         "- the robot has found nothing yet, so it must `find` an object before acting on it;",

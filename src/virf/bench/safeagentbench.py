@@ -12,7 +12,7 @@ Assumptions of a built scene (documented in docs/benchmarks/safeagentbench.md):
   conditions, the instruction or its unsafe twin (``risk_instruction``), and
   one of each fixture;
 * every pickupable object starts on the counter top; fixtures stand alone;
-* the stove knob controls the stove burner;
+* the stove knob controls the stove burner (knob k controls burner k);
 * states AI2-THOR fixes at start (closed, off, clean, empty) are asserted;
   states it randomises (a mug may start dirty or filled) are left unknown;
 * the robot starts having found nothing (``unlocated_by_default``);
@@ -224,20 +224,33 @@ def _is_catalogue_type(vocab: Vocabulary, cls: str) -> bool:
     return bool(comment) and comment[0].startswith("AI2-THOR object type")
 
 
+def _numbered(steps: list[str], vocab: Vocabulary) -> dict[str, int]:
+    """Type -> highest instance number a plan names ("find Mug 2")."""
+    out: dict[str, int] = {}
+    for step in steps:
+        for a, b in zip(step.split(), step.split()[1:], strict=False):
+            cls = vocab.canonical_class(a)
+            if cls and b.isdigit() and int(b) > 0:
+                out[cls] = max(out.get(cls, 1), int(b))
+    return out
+
+
 def build_scene(task: Task, vocab: Vocabulary, plan: list[str] | None = None) -> dict[str, Any]:
     """The scene ABox (as the paper's JSON) for one task (and the plan to verify)."""
     types = [t for t in FIXTURES if t in vocab.classes]
     for t in named_types(task, vocab, plan):
         if t not in types:
             types.append(t)
+    counts = _numbered([*task.steps, *(plan or [])], vocab)
     instances = [{"class_name": t, "instance_name": f"{t}_1"} for t in types]
+    for t, n in counts.items():
+        instances += [{"class_name": t, "instance_name": f"{t}_{k}"} for k in range(2, n + 1)]
     assertions: list[dict[str, str]] = []
 
     def state(ind: str, value: str) -> None:
         assertions.append({"subject": ind, "property": "hasState", "object": value})
 
-    for t in types:
-        ind = f"{t}_1"
+    for t, ind in [(i["class_name"], i["instance_name"]) for i in instances]:
         randomised = set(vocab.annotation(t, "randomState"))
         blocked = {
             "dirty": {"CleanState", "DirtyState"},
@@ -251,10 +264,11 @@ def build_scene(task: Task, vocab: Vocabulary, plan: list[str] | None = None) ->
                 state(ind, value)
         if vocab.is_a(t, "Pickupable") and t != "CounterTop":
             assertions.append({"subject": ind, "property": "isOn", "object": "CounterTop_1"})
-    if "StoveKnob" in types and "StoveBurner" in types:
-        assertions.append(
-            {"subject": "StoveKnob_1", "property": "controls", "object": "StoveBurner_1"}
-        )
+    names = {i["instance_name"] for i in instances}
+    for k in range(1, max(counts.get("StoveKnob", 1), counts.get("StoveBurner", 1)) + 1):
+        knob, burner = f"StoveKnob_{k}", f"StoveBurner_{k}"
+        if knob in names and burner in names:  # knob k switches burner k
+            assertions.append({"subject": knob, "property": "controls", "object": burner})
     return {
         "name": f"{task.kind}:{task.line}",
         "description": f"SafeAgentBench {task.file} line {task.line}: {task.instruction}",
@@ -383,4 +397,3 @@ def _has_related_types(
         if cls is None or not any(vocab.is_a(t, cls) for t in types):
             return False
     return True
-

@@ -166,6 +166,14 @@ def parse_line(line: str, line_no: int = 1, index: int = 1) -> PlanStep:
     verb = _ALIASES.get(word)
     if verb is None:
         raise _unknown_verb(clip(word, 40), line_no)
+    # SafeAgentBench numbers instances of one type: "find Mug 2" means Mug_2.
+    merged: list[str] = []
+    for a in args:
+        if a.isdigit() and int(a) > 0 and merged and not merged[-1].isdigit():
+            merged[-1] = f"{merged[-1]}_{a}"
+        else:
+            merged.append(a)
+    args = merged
     if verb == "put" and not call:
         # "put X in R", "put the X into the R", "put in R": drop connecting words,
         # but only where a connector can stand, so an object named "A" survives.

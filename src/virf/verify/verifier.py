@@ -732,4 +732,3 @@ def _rank(f: _Finding) -> tuple[int, int, int, str, str]:
         f.concept.id,
         f.subject,
     )
-
