@@ -183,3 +183,22 @@ def test_empty_and_deep_plans_are_input_errors(tmp_path: Path) -> None:
 def test_option_types_are_checked(tutor) -> None:
     with pytest.raises(InputError, match="true or false"):
         tutor.scene({"instances": [], "unlocated_by_default": "false"})
+
+
+@pytest.mark.parametrize("liquid", ["coffee", "water"])
+def test_bleach_poured_into_a_drink_is_poisoning(tutor, liquid) -> None:
+    scene = {
+        "instances": [inst("SprayBottle", "Bleach_1"), inst("Mug", "Mug_1")],
+        "assertions": [{"subject": "Bleach_1", "property": "hasMaterial", "object": "Bleach"}],
+    }
+    plan = [
+        "find Mug_1",
+        f"fillLiquid Mug_1 {liquid}",
+        "find Bleach_1",
+        "pick Bleach_1",
+        "find Mug_1",
+        "pour",
+    ]
+    status, _, report = _status(tutor, scene, plan)
+    assert status == "UNSAFE"
+    assert "ToxicInFoodContainerDanger" in [v.id for v in report.violations]
