@@ -36,6 +36,10 @@ class Engine(ABC):
         self.tbox = tbox
         self.timeout_s = timeout_s
 
+    def fork(self) -> Engine:
+        """An independent engine of the same kind, for another thread."""
+        return type(self)(self.tbox, self.timeout_s)
+
     def classify(self, facts: Iterable[Fact], concepts: Sequence[str]) -> Classification:
         """Consistency, then the ABox instances of each concept."""
         unknown = [c for c in concepts if c not in self.tbox.vocabulary.classes]
@@ -87,4 +91,4 @@ def make_engine(name: str, tbox: TBox, timeout_s: float = 30.0) -> Engine:
 
 def _load_builtin() -> None:
     if not _REGISTRY:
-        from virf.reasoning import owlapi  # noqa: F401  (registers hermit and pellet)
+        from virf.reasoning import fast, owlapi  # noqa: F401  (registers the engines)

@@ -1,0 +1,570 @@
+"""The fast engine: exact answers from a lower and an upper bound, with the
+reference reasoner behind it.
+
+For a question "is ``x`` an instance of ``C``?" over ``TBox + facts``:
+
+* the **lower bound** is the least model of the Horn rules compiled from the
+  knowledge-base axioms (:mod:`virf.reasoning.program`).  Rules are sound, so a
+  clash there proves inconsistency, and a query that holds there *with certain
+  semantics* (negation only where adding the negated fact derives a clash,
+  ``only`` and ``max 0`` only through closure facts) is entailed;
+* the **upper bound** is a candidate model: the same least model, possibly
+  extended with assertions chosen to falsify the query.  It counts only after
+  every axiom the rules do not capture has been checked on it, so a query that
+  is false there is not entailed.
+
+When the bounds meet, the answer is exact.  When they do not (the candidate
+is not a model, or no falsifying extension is found), or when the TBox uses a
+construct outside the fragment (detected when the engine is built), or the
+input asserts a query or sink class, the question goes to the reference
+engine.  Every fallback is counted in :attr:`FastEngine.stats`.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import Counter
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import Any
+
+from virf.kb.tbox import TBox
+from virf.reasoning import Classification, Engine, register
+from virf.reasoning.fragment import NOTHING, THING, Axiom, Expr, Fragment, Role, load_fragment
+from virf.reasoning.program import ChaseLimit, Model, Program, compile_program
+from virf.schema import Fact, FactKind
+
+_FRAGMENTS: dict[int, Fragment] = {}
+_LOCK = threading.Lock()
+
+
+def fragment_of(tbox: TBox) -> Fragment:
+    """The TBox converted once per loaded TBox."""
+    with _LOCK:
+        frag = _FRAGMENTS.get(id(tbox))
+        if frag is None:
+            frag = load_fragment(tbox.logical_axioms(), tbox.render)
+            _FRAGMENTS[id(tbox)] = frag
+        return frag
+
+
+class Fallback(Exception):
+    """The bounds did not meet: ask the reference engine."""
+
+
+class _Eval:
+    """Query evaluation over one model: classical truth, certain truth, and
+    the search for a falsifying extension."""
+
+    def __init__(self, model: Model, defs: dict[str, Expr], sinks: frozenset[str]) -> None:
+        self.m = model
+        self.defs = defs
+        self.sinks = sinks
+        self._version = -1
+        self._classical: dict[tuple[Expr, str], bool] = {}
+        self._cert: dict[tuple[Expr, str], bool] = {}
+        self._cert_not: dict[tuple[Expr, str], bool] = {}
+
+    def _fresh(self) -> None:
+        if self._version != self.m.version:
+            self._version = self.m.version
+            self._classical.clear()
+            self._cert.clear()
+            self._cert_not.clear()
+
+    # ------------------------------------------------------------------ classical
+    def holds(self, e: Expr, x: str) -> bool:
+        """Truth of ``e`` at ``x`` in the model, read as a finite interpretation."""
+        self._fresh()
+        key = (e, x)
+        hit = self._classical.get(key)
+        if hit is None:
+            hit = self._holds(e, x)
+            self._classical[key] = hit
+        return hit
+
+    def _holds(self, e: Expr, x: str) -> bool:
+        m, tag = self.m, e[0]
+        if tag == "C":
+            name = e[1]
+            if name in self.defs:
+                return self.holds(self.defs[name], x)
+            if name in self.sinks:
+                return True
+            return name in m.types[x]
+        if tag == "and":
+            return all(self.holds(c, x) for c in e[1])
+        if tag == "or":
+            return any(self.holds(c, x) for c in e[1])
+        if tag == "not":
+            return not self.holds(e[1], x)
+        if tag == "some":
+            return any(self.holds(e[2], y) for y in m.rsucc(e[1], x))
+        if tag == "all":
+            return all(self.holds(e[2], y) for y in m.rsucc(e[1], x))
+        if tag == "value":
+            return e[2] in m.rsucc(e[1], x)
+        if tag == "min":
+            return sum(1 for y in m.rsucc(e[2], x) if self.holds(e[3], y)) >= int(e[1])
+        if tag == "max":
+            return sum(1 for y in m.rsucc(e[2], x) if self.holds(e[3], y)) <= int(e[1])
+        if tag == "oneof":
+            return x in e[1]
+        if tag == "dvalue":
+            return e[2] in m.data[x][e[1]] if x in m.data else False
+        raise Fallback(f"cannot evaluate {tag}")
+
+    # ------------------------------------------------------------------ certain
+    def certain(self, e: Expr, x: str) -> bool:
+        """Sound: True only if ``e(x)`` is entailed (the model is the lower bound)."""
+        self._fresh()
+        key = (e, x)
+        hit = self._cert.get(key)
+        if hit is None:
+            hit = self._certain(e, x)
+            self._cert[key] = hit
+        return hit
+
+    def _certain(self, e: Expr, x: str) -> bool:
+        m, tag = self.m, e[0]
+        if tag == "C":
+            name = e[1]
+            if name in self.defs:
+                return self.certain(self.defs[name], x)
+            if name in self.sinks:
+                return False
+            return name in m.types[x]
+        if tag == "and":
+            return all(self.certain(c, x) for c in e[1])
+        if tag == "or":
+            return any(self.certain(c, x) for c in e[1])
+        if tag == "not":
+            return self.certain_not(e[1], x)
+        if tag == "some" or (tag == "min" and e[1] == 1):
+            role, filler = (e[1], e[2]) if tag == "some" else (e[2], e[3])
+            return any(self.certain(filler, y) for y in m.rsucc(role, x))
+        if tag == "value":
+            return e[2] in m.rsucc(e[1], x)
+        if tag == "all":
+            bound = self.bound(e[1], x)
+            return bound is not None and all(self.certain(e[2], s) for s in bound)
+        if tag == "max" and e[1] == 0:
+            bound = self.bound(e[2], x)
+            return bound is not None and all(self.certain_not(e[3], s) for s in bound)
+        if tag == "oneof":
+            return x in e[1]
+        if tag == "dvalue":
+            return x in m.data and e[2] in m.data[x][e[1]]
+        return False
+
+    def bound(self, r: Role, x: str) -> frozenset[str] | None:
+        """Individuals that every r-successor of x must be, from closure facts
+        on r or on a super-property of r (None when nothing bounds them)."""
+        if r[1]:
+            return None
+        out: frozenset[str] | None = None
+        for q in [(r[0], False), *self.m.prog.supers(r[0])]:
+            if q[1]:
+                continue
+            members = self.m.closures.get((x, q[0]))
+            if members is not None:
+                out = members if out is None else out & members
+        return out
+
+    def certain_not(self, e: Expr, x: str) -> bool:
+        """Sound: True only if ``not e(x)`` is entailed, i.e. asserting ``e(x)``
+        makes the rules derive a clash."""
+        self._fresh()
+        key = (e, x)
+        hit = self._cert_not.get(key)
+        if hit is not None:
+            return hit
+        if e[0] == "or":
+            hit = all(self.certain_not(c, x) for c in e[1])
+        elif e[0] == "C" and e[1] in self.defs:
+            hit = self.certain_not(self.defs[e[1]], x)
+        elif not _assertable(e, self.defs):
+            hit = False
+        else:
+            m = self.m
+            token = m.begin()
+            try:
+                self.impose(e, x)
+                m.run()
+                hit = m.clash is not None
+            finally:
+                m.rollback(token)
+        self._fresh()
+        self._cert_not[key] = hit
+        return hit
+
+    def impose(self, e: Expr, x: str) -> None:
+        m, tag = self.m, e[0]
+        if tag == "C":
+            if e[1] != THING:
+                m.cls(x, e[1])
+        elif tag == "and":
+            for c in e[1]:
+                self.impose(c, x)
+        elif tag == "some" or (tag == "min" and e[1] == 1):
+            role, filler = (e[1], e[2]) if tag == "some" else (e[2], e[3])
+            n = m.new_element()
+            m.role(role, x, n)
+            self.impose(filler, n)
+        elif tag == "value":
+            m.role(e[1], x, e[2])
+        elif tag == "dvalue":
+            m.datum(x, e[1], e[2])
+        else:
+            raise Fallback(f"cannot assert {tag}")
+
+    # ------------------------------------------------------------------ refutation
+    def falsifiers(self, e: Expr, x: str) -> list[tuple[Any, ...]] | None:
+        """Assertions that may make ``e(x)`` false (``e`` holds now), or None."""
+        m, tag = self.m, e[0]
+        if not self.holds(e, x):
+            return []
+        if tag == "C":
+            if e[1] in self.defs:
+                return self.falsifiers(self.defs[e[1]], x)
+            return None
+        if tag == "and":
+            for c in e[1]:
+                if not self.certain(c, x):
+                    f = self.falsifiers(c, x)
+                    if f is not None:
+                        return f
+            return None
+        if tag == "or":
+            out: list[tuple[Any, ...]] = []
+            for c in e[1]:
+                f = self.falsifiers(c, x)
+                if f is None:
+                    return None
+                out += f
+            return out
+        if tag == "not":
+            inner = e[1]
+            if inner[0] == "C" and inner[1] in self.defs:
+                inner = self.defs[inner[1]]
+            # To falsify "not (A or B)" it is enough to make one disjunct true.
+            options = inner[1] if inner[0] == "or" else (inner,)
+            for option in options:
+                if _assertable(option, self.defs) and not self.certain_not(option, x):
+                    return [("assert", option, x)]
+            return None
+        if tag == "some":
+            out = []
+            for y in sorted(m.rsucc(e[1], x)):
+                f = self.falsifiers(e[2], y)
+                if f is None:
+                    return None
+                out += f
+            return out
+        if tag == "all":  # needs one successor outside the filler
+            role, filler = e[1], e[2]
+            bound = self.bound(role, x)
+            if bound is None:
+                return [("fresh", role, x)]
+            for s in sorted(bound):
+                if self.certain(filler, s):
+                    continue
+                linked = s in m.rsucc(role, x)
+                f = self.falsifiers(filler, s)
+                if f is not None:
+                    return ([] if linked else [("link", role, x, s)]) + f
+            return None
+        if tag == "max" and e[1] == 0:  # needs one successor inside the filler
+            role, filler = e[2], e[3]
+            if not _assertable(filler, self.defs):
+                return None
+            bound = self.bound(role, x)
+            if bound is None:
+                return [("fresh-assert", role, x, filler)]
+            for s in sorted(bound):
+                if self.certain_not(filler, s):
+                    continue
+                linked = s in m.rsucc(role, x)
+                return ([] if linked else [("link", role, x, s)]) + [("assert", filler, s)]
+            return None
+        return None
+
+    def apply(self, ops: list[tuple[Any, ...]]) -> None:
+        m = self.m
+        for op in ops:
+            if op[0] == "assert":
+                self.impose(op[1], op[2])
+            elif op[0] == "link":
+                m.role(op[1], op[2], op[3])
+            elif op[0] == "fresh":
+                m.role(op[1], op[2], m.new_element())
+            elif op[0] == "fresh-assert":
+                n = m.new_element()
+                m.role(op[1], op[2], n)
+                self.impose(op[3], n)
+        m.run()
+
+    def violations(self, checks: list[Axiom]) -> str | None:
+        """The first knowledge-base axiom the model does not satisfy."""
+        closure = self.m.closure_violation()
+        if closure:
+            return closure
+        for ax in checks:
+            if not self._satisfied(ax):
+                return ax.text
+        return None
+
+    def _satisfied(self, ax: Axiom) -> bool:
+        m, k, a = self.m, ax.kind, ax.args
+
+        def sub(left: Expr, right: Expr) -> bool:
+            pool = m.members.get(left[1], set()) if left[0] == "C" else m.types.keys()
+            return all(self.holds(right, x) for x in list(pool) if self.holds(left, x))
+
+        if k == "sub":
+            return sub(a[0], a[1])
+        if k == "eq":
+            return all(sub(x, y) for x in a[0] for y in a[0] if x is not y)
+        if k == "disj":
+            return all(sub(x, ("not", y)) for i, x in enumerate(a[0]) for y in a[0][i + 1 :])
+        if k == "cassert":
+            return a[1] in m.types and self.holds(a[0], a[1])
+        if k == "domain":
+            return sub(("some", a[0], ("C", THING)), a[1])
+        if k == "range":
+            return sub(("C", THING), ("all", a[0], a[1]))
+        if k == "ddomain":
+            return sub(("or", (("dvalue", a[0], True), ("dvalue", a[0], False))), a[1])
+        raise Fallback(f"no model check for {k}")
+
+
+def _guard(e: Expr, defs: dict[str, Expr]) -> frozenset[str] | None:
+    """Named classes one of which every instance of ``e`` must belong to in
+    any interpretation (None when there is no such set)."""
+    tag = e[0]
+    if tag == "C":
+        if e[1] in defs:
+            return _guard(defs[e[1]], defs)
+        return None if e[1] == THING else frozenset([e[1]])
+    if tag == "and":
+        found = [g for g in (_guard(c, defs) for c in e[1]) if g is not None]
+        return min(found, key=lambda g: (len(g), sorted(g))) if found else None
+    if tag == "or":
+        parts = [_guard(c, defs) for c in e[1]]
+        if any(p is None for p in parts):
+            return None
+        return frozenset().union(*parts)  # type: ignore[arg-type]
+    return None
+
+
+def _assertable(e: Expr, defs: dict[str, Expr]) -> bool:
+    tag = e[0]
+    if tag == "C":
+        return e[1] not in defs and e[1] != NOTHING
+    if tag == "and":
+        return all(_assertable(c, defs) for c in e[1])
+    if tag in ("some",):
+        return _assertable(e[2], defs)
+    if tag == "min":
+        return e[1] == 1 and _assertable(e[3], defs)
+    return tag in ("value", "dvalue")
+
+
+class FastEngine(Engine):
+    """Exact answers without a DL reasoner for the fragment VIRF's ontology uses."""
+
+    complete = True
+    name = "fast"
+
+    def __init__(self, tbox: TBox, timeout_s: float = 30.0) -> None:
+        super().__init__(tbox, timeout_s)
+        self.fragment = fragment_of(tbox)
+        self._programs: dict[frozenset[str], Program] = {}
+        self._reference: Engine | None = None
+        self.stats: Counter[str] = Counter()
+        self._lock = threading.Lock()
+        self._guards = {
+            q: g
+            for q in self.fragment.query_defs
+            if (g := _guard(("C", q), self.fragment.query_defs)) is not None
+        }
+
+    # ------------------------------------------------------------------ plumbing
+    @property
+    def reference(self) -> Engine:
+        if self._reference is None:
+            from virf.reasoning.owlapi import HermitEngine
+
+            self._reference = HermitEngine(self.tbox, self.timeout_s)
+        return self._reference
+
+    def program(self, without: frozenset[str]) -> Program:
+        prog = self._programs.get(without)
+        if prog is None:
+            prog = compile_program(self.fragment, without)
+            if len(self._programs) > 256:
+                self._programs.clear()
+            self._programs[without] = prog
+        return prog
+
+    def _model(self, facts: list[Fact], without: frozenset[str]) -> tuple[Model, _Eval]:
+        if self.fragment.problems:
+            raise Fallback("TBox outside the fragment: " + self.fragment.problems[0])
+        guarded = self.fragment.sinks | self.fragment.query_defs.keys()
+        prog = self.program(without)
+        m = prog.base()
+        for f in facts:
+            if f.kind is FactKind.CLOSURE:
+                key = (f.subject, f.predicate)
+                members = frozenset(f.members())
+                old = m.closures.get(key)
+                m.closures[key] = members if old is None else old & members
+        for f in facts:
+            if f.kind is FactKind.TYPE:
+                if f.object in guarded:
+                    raise Fallback(f"the input asserts the defined class {f.object}")
+                m.cls(f.subject, f.object)
+            elif f.kind is FactKind.OBJECT:
+                m.role((f.predicate, False), f.subject, f.object)
+            elif f.kind is FactKind.DATA:
+                m.datum(f.subject, f.predicate, f.object == "true")
+            else:
+                m.element(f.subject)
+                for member in f.members():
+                    m.element(member)
+        m.run()
+        return m, _Eval(m, self._definitions(without), self.fragment.sinks)
+
+    def _definitions(self, without: frozenset[str]) -> dict[str, Expr]:
+        """Query definitions minus the removed ones.  A query class whose
+        definition is removed is a class no axiom constrains: it gets a name
+        no rule mentions, so it is empty in the model and assertable."""
+        frag = self.fragment
+        if not without:
+            return frag.query_defs
+        return {
+            q: (e if frag.query_axiom[q].id not in without else ("C", f"undefined:{q}"))
+            for q, e in frag.query_defs.items()
+        }
+
+    def _decide(self, ev: _Eval, concept: str, x: str) -> bool:
+        """Is ``concept(x)`` entailed?  The model must already be verified."""
+        if concept in self.fragment.sinks:
+            raise Fallback(f"{concept} is a sink class")
+        e = ev.defs.get(concept)
+        if e is None:  # a knowledge-base class: the verified least model decides
+            return concept in ev.m.types[x]
+        if not ev.holds(e, x):
+            return False
+        if ev.certain(e, x):
+            return True
+        if self._refuted(ev, e, x):
+            return False
+        raise Fallback(f"{concept}({x}) is neither proved nor refuted")
+
+    def _refuted(self, ev: _Eval, e: Expr, x: str) -> bool:
+        m = ev.m
+        token = m.begin()
+        try:
+            for _ in range(4):
+                ops = ev.falsifiers(e, x)
+                if not ops:
+                    return False
+                ev.apply(ops)
+                if m.clash is not None:
+                    return False
+                if not ev.holds(e, x):
+                    return ev.violations(m.prog.checks) is None
+            return False
+        finally:
+            m.rollback(token)
+
+    def _answer(self, name: str, exact: Callable[[], Any], fallback: Callable[[], Any]) -> Any:
+        with self._lock:
+            self.stats["calls"] += 1
+            try:
+                return exact()
+            except (Fallback, ChaseLimit) as why:
+                self.stats["fallbacks"] += 1
+                self.stats[f"fallback: {why}"] += 1
+        return fallback()
+
+    # ------------------------------------------------------------------ engine API
+    def _classify(self, facts: list[Fact], concepts: list[str]) -> Classification:
+        def exact() -> Classification:
+            m, ev = self._model(facts, frozenset())
+            if m.clash is not None:
+                return Classification(False, {})
+            bad = ev.violations(m.prog.checks)
+            if bad is not None:
+                raise Fallback(f"candidate model violates: {bad}")
+            abox = {f.subject for f in facts} | {
+                f.object for f in facts if f.kind is FactKind.OBJECT
+            }
+            found: dict[str, tuple[str, ...]] = {}
+            for concept in concepts:
+                guard = self._guards.get(concept)
+                if guard is None:
+                    pool = abox
+                else:  # only members of the guard classes can satisfy the concept
+                    pool = set().union(*(m.members.get(g, ()) for g in guard)) & abox
+                names = tuple(x for x in sorted(pool) if self._decide(ev, concept, x))
+                if names:
+                    found[concept] = names
+            return Classification(True, found)
+
+        result: Classification = self._answer(
+            "classify", exact, lambda: self.reference._classify(facts, concepts)
+        )
+        return result
+
+    def _entails(
+        self, facts: list[Fact], concept: str, individual: str, without: frozenset[str]
+    ) -> bool:
+        def exact() -> bool:
+            m, ev = self._model(facts, without)
+            if m.clash is not None:
+                return True
+            bad = ev.violations(m.prog.checks)
+            if bad is not None:
+                raise Fallback(f"candidate model violates: {bad}")
+            if individual not in m.types:
+                m.element(individual)
+                m.run()
+            return self._decide(ev, concept, individual)
+
+        result: bool = self._answer(
+            "entails",
+            exact,
+            lambda: self.reference._entails(facts, concept, individual, without),
+        )
+        return result
+
+    def _consistent(self, facts: list[Fact], without: frozenset[str]) -> bool:
+        def exact() -> bool:
+            m, ev = self._model(facts, without)
+            if m.clash is not None:
+                return False
+            bad = ev.violations(m.prog.checks)
+            if bad is not None:
+                raise Fallback(f"candidate model violates: {bad}")
+            return True
+
+        result: bool = self._answer(
+            "consistent", exact, lambda: self.reference._consistent(facts, without)
+        )
+        return result
+
+    @contextmanager
+    def counting(self) -> Iterator[Counter[str]]:
+        """Stats of the calls made inside the block."""
+        before = Counter(self.stats)
+        delta: Counter[str] = Counter()
+        try:
+            yield delta
+        finally:
+            delta.update(self.stats)
+            delta.subtract(before)
+
+
+register("fast", FastEngine)

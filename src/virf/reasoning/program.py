@@ -1,0 +1,587 @@
+"""Knowledge-base axioms compiled to forward-chaining rules, and the model they build.
+
+Every rule is a sound consequence of one axiom, so whatever the rules derive
+(including a clash) is entailed: the materialised model is a *lower bound*.
+An axiom whose meaning the rules capture completely is marked *compiled*;
+the least model of the rules satisfies it by construction.  The others
+(existential or disjunctive right-hand sides, negation on the left) are
+evaluated on the finished model by :func:`Model.violations`; when none is
+violated the model is a genuine model of the knowledge base, which makes it a
+countermodel for everything false in it.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict, deque
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from itertools import count
+from typing import Any
+
+from virf.reasoning.fragment import NOTHING, THING, Axiom, Expr, Fragment, Role
+
+
+def nominal(individual: str) -> str:
+    """The class {individual}; the braces keep it apart from every OWL name."""
+    return "{" + individual + "}"
+
+
+@dataclass
+class Program:
+    """Rules of one knowledge base (a fragment minus some axioms)."""
+
+    sub: dict[str, list[str]] = field(default_factory=lambda: defaultdict(list))
+    conj: dict[str, list[tuple[tuple[str, ...], str]]] = field(
+        default_factory=lambda: defaultdict(list)
+    )
+    # ∃r.A ⊑ B, indexed by role and by filler
+    exists_by_role: dict[Role, list[tuple[str, str]]] = field(
+        default_factory=lambda: defaultdict(list)
+    )
+    exists_by_filler: dict[str, list[tuple[Role, str]]] = field(
+        default_factory=lambda: defaultdict(list)
+    )
+    # A ⊑ ∀r.B, indexed by role and by A
+    all_by_role: dict[Role, list[tuple[str, str]]] = field(
+        default_factory=lambda: defaultdict(list)
+    )
+    all_by_class: dict[str, list[tuple[Role, str]]] = field(
+        default_factory=lambda: defaultdict(list)
+    )
+    value_head: dict[str, list[tuple[Role, str]]] = field(default_factory=lambda: defaultdict(list))
+    data_rule: dict[tuple[str, bool], list[str]] = field(default_factory=lambda: defaultdict(list))
+    role_up: dict[str, list[Role]] = field(default_factory=dict)  # p -> super roles, not p itself
+    chain_first: dict[Role, list[tuple[Role, Role]]] = field(
+        default_factory=lambda: defaultdict(list)
+    )
+    chain_second: dict[Role, list[tuple[Role, Role]]] = field(
+        default_factory=lambda: defaultdict(list)
+    )
+    functional_data: set[str] = field(default_factory=set)
+    # A ⊑ ∃r.M: every A gets its own witness (a restricted chase)
+    some_head: dict[str, list[tuple[Role, str]]] = field(default_factory=lambda: defaultdict(list))
+    data_head: dict[str, list[tuple[str, bool]]] = field(default_factory=lambda: defaultdict(list))
+    facts: list[tuple[Any, ...]] = field(default_factory=list)
+    checks: list[Axiom] = field(default_factory=list)
+    _aux: dict[Expr, str] = field(default_factory=dict)
+
+    # ------------------------------------------------------------------ compile
+    def aux(self, e: Expr) -> str:
+        name = self._aux.get(e)
+        if name is None:
+            name = f"aux:{len(self._aux)}"
+            self._aux[e] = name
+        return name
+
+    def left(self, e: Expr) -> str | None:
+        """A class name N with rules that make every instance of ``e`` an N
+        in the least model, or None when ``e`` is not an EL concept."""
+        tag = e[0]
+        if tag == "C":
+            return str(e[1])
+        if e in self._aux:
+            return self._aux[e]
+        if tag == "and":
+            parts = [self.left(c) for c in e[1]]
+            if any(p is None for p in parts):
+                return None
+            n = self.aux(e)
+            body = tuple(sorted(set(p for p in parts if p is not None)))
+            for b in body:
+                self.conj[b].append((body, n))
+            return n
+        if tag == "or":
+            parts = [self.left(c) for c in e[1]]
+            if any(p is None for p in parts):
+                return None
+            n = self.aux(e)
+            for p in parts:
+                assert p is not None
+                self.sub[p].append(n)
+            return n
+        if tag == "some" or (tag == "min" and e[1] == 1):
+            role, filler = (e[1], e[2]) if tag == "some" else (e[2], e[3])
+            inner = self.left(filler)
+            if inner is None:
+                return None
+            n = self.aux(e)
+            self.exists_by_role[role].append((inner, n))
+            self.exists_by_filler[inner].append((role, n))
+            return n
+        if tag == "value":
+            n = self.aux(e)
+            inner = nominal(e[2])
+            self.exists_by_role[e[1]].append((inner, n))
+            self.exists_by_filler[inner].append((e[1], n))
+            return n
+        if tag == "oneof":
+            n = self.aux(e)
+            for i in e[1]:
+                self.sub[nominal(i)].append(n)
+            return n
+        if tag == "dvalue":
+            n = self.aux(e)
+            self.data_rule[(e[1], e[2])].append(n)
+            return n
+        return None
+
+    def right(self, n: str, e: Expr) -> bool:
+        """Rules for ``n ⊑ e``; True when they capture it completely."""
+        tag = e[0]
+        if tag == "C":
+            if e[1] != THING:
+                self.sub[n].append(e[1])
+            return True
+        if tag == "and":
+            done = [self.right(n, c) for c in e[1]]
+            return all(done)
+        if tag == "value":
+            self.value_head[n].append((e[1], e[2]))
+            return True
+        if tag == "all":
+            m = self.aux(("all-head", n, e))
+            self.all_by_role[e[1]].append((n, m))
+            self.all_by_class[n].append((e[1], m))
+            return self.right(m, e[2])
+        if tag == "max" and e[1] == 0:
+            return self.right(n, ("all", e[2], ("not", e[3])))
+        if tag == "some" or (tag == "min" and e[1] == 1):
+            role, filler = (e[1], e[2]) if tag == "some" else (e[2], e[3])
+            m = self.aux(("some-head", n, e))
+            self.some_head[n].append((role, m))
+            return self.right(m, filler)
+        if tag == "not":
+            inner = self.left(e[1])
+            if inner is None:
+                return False
+            body = tuple(sorted({n, inner}))
+            for b in body:
+                self.conj[b].append((body, NOTHING))
+            return True
+        if tag == "dvalue":
+            self.data_head[n].append((e[1], e[2]))
+            return True
+        return False  # or, min > 1, oneof on the right: left to the model check
+
+    def add(self, ax: Axiom) -> None:
+        k, a = ax.kind, ax.args
+        complete = True
+        if k == "sub":
+            n = self.left(a[0])
+            complete = n is not None and self.right(n, a[1])
+        elif k == "eq":
+            for x in a[0]:
+                for y in a[0]:
+                    if x is not y:
+                        n = self.left(x)
+                        complete = (n is not None and self.right(n, y)) and complete
+        elif k == "disj":
+            for i, x in enumerate(a[0]):
+                for y in a[0][i + 1 :]:
+                    lx, ly = self.left(x), self.left(y)
+                    if lx is None or ly is None:
+                        complete = False
+                        continue
+                    body = tuple(sorted({lx, ly}))
+                    for b in body:
+                        self.conj[b].append((body, NOTHING))
+        elif k == "cassert":
+            self.facts.append(("element", a[1]))
+            complete = self.right(nominal(a[1]), a[0])
+        elif k == "passert":
+            self.facts.append(("role", a[0], a[1], a[2]))
+        elif k == "dassert":
+            self.facts.append(("data", a[1], a[0], a[2]))
+        elif k == "domain":
+            n = self.left(("some", a[0], ("C", THING)))
+            assert n is not None
+            complete = self.right(n, a[1])
+        elif k == "range":
+            complete = self.right(THING, ("all", a[0], a[1]))
+        elif k == "ddomain":
+            for v in (True, False):
+                n = self.left(("dvalue", a[0], v))
+                assert n is not None
+                complete = self.right(n, a[1]) and complete
+        elif k == "dfunc":
+            self.functional_data.add(a[0])
+        elif k in ("drange", "different"):
+            pass  # hold in every candidate model (boolean values, distinct names)
+        elif k in ("subprop", "inverse", "eqprop", "trans", "sym", "chain"):
+            pass  # collected by roles()
+        else:
+            complete = False
+        if not complete:
+            self.checks.append(ax)
+
+    def roles(self, axioms: Iterable[Axiom], properties: Iterable[str]) -> None:
+        edges: dict[Role, set[Role]] = defaultdict(set)
+
+        def sub(r: Role, s: Role) -> None:
+            edges[r].add(s)
+            edges[(r[0], not r[1])].add((s[0], not s[1]))
+
+        for ax in axioms:
+            k, a = ax.kind, ax.args
+            if k == "subprop":
+                sub(a[0], a[1])
+            elif k == "inverse":
+                sub(a[0], (a[1][0], not a[1][1]))
+                sub(a[1], (a[0][0], not a[0][1]))
+            elif k == "eqprop":
+                for x in a[0]:
+                    for y in a[0]:
+                        if x != y:
+                            sub(x, y)
+            elif k == "sym":
+                sub(a[0], (a[0][0], not a[0][1]))
+            elif k == "trans":
+                self._chain(a[0], a[0], a[0])
+            elif k == "chain":
+                self._chain(a[0][0], a[0][1], a[1])
+        names = set(properties)
+        for r in list(edges):
+            names.add(r[0])
+        for p in sorted(names):
+            seen: set[Role] = set()
+            todo = [(p, False)]
+            while todo:
+                r = todo.pop()
+                for s in edges.get(r, ()):
+                    if s not in seen:
+                        seen.add(s)
+                        todo.append(s)
+            seen.discard((p, False))
+            self.role_up[p] = sorted(seen)
+
+    def _chain(self, r1: Role, r2: Role, r: Role) -> None:
+        self.chain_first[r1].append((r2, r))
+        self.chain_second[r2].append((r1, r))
+
+    def supers(self, p: str) -> list[Role]:
+        return self.role_up.get(p, [])
+
+    def finish(self) -> None:
+        """Index the rules by trigger: one lookup per new class or role fact."""
+        self.ctrig: dict[str, tuple[Any, ...]] = {}
+        names = (
+            set(self.sub)
+            | set(self.conj)
+            | set(self.value_head)
+            | set(self.all_by_class)
+            | set(self.exists_by_filler)
+            | set(self.some_head)
+            | set(self.data_head)
+        )
+        for a in names:
+            entry = (
+                tuple(self.sub.get(a, ())),
+                tuple(self.conj.get(a, ())),
+                tuple(self.value_head.get(a, ())),
+                tuple(self.all_by_class.get(a, ())),
+                tuple(self.exists_by_filler.get(a, ())),
+                tuple(self.some_head.get(a, ())),
+                tuple(self.data_head.get(a, ())),
+            )
+            if any(entry):
+                self.ctrig[a] = entry
+        self.rtrig: dict[str, tuple[Any, ...]] = {}
+        props = (
+            set(self.role_up)
+            | {r[0] for r in self.exists_by_role}
+            | {r[0] for r in self.all_by_role}
+        )
+        props |= {r[0] for r in self.chain_first} | {r[0] for r in self.chain_second}
+        for p in props:
+            sides = []
+            for r in ((p, False), (p, True)):
+                sides.append(
+                    (
+                        tuple(self.exists_by_role.get(r, ())),
+                        tuple(self.all_by_role.get(r, ())),
+                        tuple(self.chain_first.get(r, ())),
+                        tuple(self.chain_second.get(r, ())),
+                    )
+                )
+            self.rtrig[p] = (tuple(self.role_up.get(p, ())), sides[0], sides[1])
+        self._base: Model | None = None
+
+    def base(self) -> Model:
+        """The least model of the TBox's own facts, built once and copied."""
+        if self._base is None:
+            m = Model(self)
+            for fact in self.facts:
+                if fact[0] == "element":
+                    m.element(fact[1])
+                elif fact[0] == "role":
+                    m.role(fact[1], fact[2], fact[3])
+                elif fact[0] == "data":
+                    m.datum(fact[1], fact[2], fact[3])
+            m.run()
+            self._base = m
+        return self._base.copy()
+
+
+def compile_program(frag: Fragment, without: frozenset[str]) -> Program:
+    prog = Program()
+    axioms = [a for a in frag.kb if a.id is None or a.id not in without]
+    for ax in axioms:
+        prog.add(ax)
+    prog.roles(axioms, ())
+    prog.checks.sort(key=lambda a: a.text)
+    prog.finish()
+    return prog
+
+
+WITNESS_LIMIT = 5000
+
+
+class ChaseLimit(Exception):
+    """Existential axioms keep creating witnesses: the fast engine gives up."""
+
+
+class Model:
+    """A finite interpretation grown by the rules.  Changes can be recorded in
+    a journal and rolled back (used to try an assertion and undo it)."""
+
+    def __init__(self, prog: Program) -> None:
+        self.prog = prog
+        self.types: dict[str, set[str]] = {}
+        self.members: dict[str, set[str]] = defaultdict(set)
+        self.succ: dict[str, dict[str, set[str]]] = defaultdict(lambda: defaultdict(set))
+        self.pred: dict[str, dict[str, set[str]]] = defaultdict(lambda: defaultdict(set))
+        self.data: dict[str, dict[str, set[bool]]] = defaultdict(lambda: defaultdict(set))
+        self.closures: dict[tuple[str, str], frozenset[str]] = {}
+        self.clash: str | None = None
+        self.journal: list[tuple[Any, ...]] | None = None
+        self.queue: deque[tuple[Any, ...]] = deque()
+        self.fresh = 0
+        self.witness: dict[tuple[str, Role, str], str] = {}
+        self.version = next(_STATES)
+
+    def copy(self) -> Model:
+        assert not self.queue and self.journal is None
+        m = Model.__new__(Model)
+        m.prog = self.prog
+        m.types = {x: set(ts) for x, ts in self.types.items()}
+        m.members = defaultdict(set, {a: set(xs) for a, xs in self.members.items()})
+        m.succ = defaultdict(lambda: defaultdict(set))
+        for p, table in self.succ.items():
+            m.succ[p] = defaultdict(set, {x: set(ys) for x, ys in table.items()})
+        m.pred = defaultdict(lambda: defaultdict(set))
+        for p, table in self.pred.items():
+            m.pred[p] = defaultdict(set, {x: set(ys) for x, ys in table.items()})
+        m.data = defaultdict(lambda: defaultdict(set))
+        for x, table2 in self.data.items():
+            m.data[x] = defaultdict(set, {d: set(vs) for d, vs in table2.items()})
+        m.closures = dict(self.closures)
+        m.clash = self.clash
+        m.journal = None
+        m.queue = deque()
+        m.fresh = self.fresh
+        m.witness = dict(self.witness)
+        m.version = next(_STATES)
+        return m
+
+    # ------------------------------------------------------------------ growth
+    def element(self, x: str) -> None:
+        if x in self.types:
+            return
+        self.types[x] = set()
+        if self.journal is not None:
+            self.journal.append(("e", x))
+        self.cls(x, THING)
+        self.cls(x, nominal(x))
+
+    def new_element(self) -> str:
+        self.fresh += 1
+        name = f"_:fresh{self.fresh}"
+        self.element(name)
+        return name
+
+    def cls(self, x: str, a: str) -> None:
+        ts = self.types.get(x)
+        if ts is None:
+            self.element(x)
+            ts = self.types[x]
+        if a in ts:
+            return
+        ts.add(a)
+        self.members[a].add(x)
+        self.version = next(_STATES)
+        if self.journal is not None:
+            self.journal.append(("t", x, a))
+        self.queue.append(("t", x, a))
+
+    def role(self, r: Role, x: str, y: str) -> None:
+        p, inv = r
+        if inv:
+            x, y = y, x
+        if x not in self.types:
+            self.element(x)
+        if y not in self.types:
+            self.element(y)
+        ys = self.succ[p][x]
+        if y in ys:
+            return
+        ys.add(y)
+        self.pred[p][y].add(x)
+        self.version = next(_STATES)
+        if self.journal is not None:
+            self.journal.append(("r", p, x, y))
+        self.queue.append(("r", p, x, y))
+
+    def datum(self, x: str, d: str, v: bool) -> None:
+        if x not in self.types:
+            self.element(x)
+        vs = self.data[x][d]
+        if v in vs:
+            return
+        vs.add(v)
+        self.version = next(_STATES)
+        if self.journal is not None:
+            self.journal.append(("d", x, d, v))
+        self.queue.append(("d", x, d, v))
+
+    def rsucc(self, r: Role, x: str) -> set[str]:
+        p, inv = r
+        table = self.pred if inv else self.succ
+        inner = table.get(p)
+        if inner is None:
+            return _EMPTY
+        return inner.get(x, _EMPTY)
+
+    def rpred(self, r: Role, x: str) -> set[str]:
+        return self.rsucc((r[0], not r[1]), x)
+
+    def run(self) -> None:
+        ctrig = self.prog.ctrig
+        rtrig = self.prog.rtrig
+        q = self.queue
+        types = self.types
+        while q:
+            if self.clash is not None:
+                q.clear()
+                return
+            item = q.popleft()
+            if item[0] == "t":
+                _, x, a = item
+                if a == NOTHING:
+                    self.clash = f"{x} is an instance of owl:Nothing"
+                    continue
+                trig = ctrig.get(a)
+                if trig is None:
+                    continue
+                subs, conj, value_head, all_by_class, exists_by_filler, some_head, data_head = trig
+                ts = types[x]
+                for b in subs:
+                    if b not in ts:
+                        self.cls(x, b)
+                for body, head in conj:
+                    if head not in ts and all(c in ts for c in body):
+                        self.cls(x, head)
+                for r, i in value_head:
+                    self.role(r, x, i)
+                for r, b in all_by_class:
+                    for y in list(self.rsucc(r, x)):
+                        self.cls(y, b)
+                for r, b in exists_by_filler:
+                    for z in list(self.rpred(r, x)):
+                        self.cls(z, b)
+                for r, w in some_head:
+                    key = (x, r, w)
+                    if key not in self.witness:
+                        if self.fresh > WITNESS_LIMIT:
+                            raise ChaseLimit(f"more than {WITNESS_LIMIT} anonymous witnesses")
+                        y = self.new_element()
+                        self.witness[key] = y
+                        if self.journal is not None:
+                            self.journal.append(("w", key))
+                        self.role(r, x, y)
+                        self.cls(y, w)
+                for d, v in data_head:
+                    self.datum(x, d, v)
+            elif item[0] == "r":
+                _, p, x, y = item
+                if self.closures:
+                    bound = self.closures.get((x, p))
+                    if bound is not None and not bound:
+                        self.clash = f"{x} {p} {y} contradicts '{x} {p} nothing'"
+                        continue
+                rt = rtrig.get(p)
+                if rt is None:
+                    continue
+                up, forward, backward = rt
+                for s in up:
+                    self.role(s, x, y)
+                for (exists_r, all_r, chain1, chain2), a, b in ((forward, x, y), (backward, y, x)):
+                    if exists_r:
+                        tb = types[b]
+                        for filler, head in exists_r:
+                            if filler in tb:
+                                self.cls(a, head)
+                    if all_r:
+                        ta = types[a]
+                        for cls_, head in all_r:
+                            if cls_ in ta:
+                                self.cls(b, head)
+                    for r2, r3 in chain1:
+                        for c in list(self.rsucc(r2, b)):
+                            self.role(r3, a, c)
+                    for r1, r3 in chain2:
+                        for w in list(self.rpred(r1, a)):
+                            self.role(r3, w, b)
+            else:
+                _, x, d, v = item
+                for head in self.prog.data_rule.get((d, v), ()):
+                    self.cls(x, head)
+                if d in self.prog.functional_data and len(self.data[x][d]) > 1:
+                    self.clash = f"{x} has two values for the functional property {d}"
+
+    # ------------------------------------------------------------------ journal
+    def begin(self) -> tuple[int, int, str | None]:
+        """Start recording; the token returned by :meth:`rollback` restores
+        this exact state (including its version, so caches stay valid)."""
+        if self.journal is None:
+            self.journal = []
+        return (len(self.journal), self.version, self.clash)
+
+    def rollback(self, token: tuple[int, int, str | None]) -> None:
+        mark, version, clash = token
+        assert self.journal is not None
+        self.queue.clear()
+        while len(self.journal) > mark:
+            entry = self.journal.pop()
+            if entry[0] == "t":
+                _, x, a = entry
+                self.types[x].discard(a)
+                self.members[a].discard(x)
+            elif entry[0] == "r":
+                _, p, x, y = entry
+                self.succ[p][x].discard(y)
+                self.pred[p][y].discard(x)
+            elif entry[0] == "d":
+                _, x, d, v = entry
+                self.data[x][d].discard(v)
+            elif entry[0] == "w":
+                del self.witness[entry[1]]
+            else:
+                del self.types[entry[1]]
+        self.clash = clash
+        self.version = version
+        if mark == 0:
+            self.journal = None
+
+    # ------------------------------------------------------------------ checks
+    def closure_violation(self) -> str | None:
+        for (x, p), bound in sorted(self.closures.items()):
+            extra = self.rsucc((p, False), x) - bound
+            if extra:
+                return f"{x} {p} {sorted(extra)[0]} is outside its closure"
+        return None
+
+
+_EMPTY: set[str] = set()
+# Every model state gets a number never used before, so a cache keyed by it
+# cannot confuse two states.
+_STATES = count()
