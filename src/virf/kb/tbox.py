@@ -189,7 +189,11 @@ def _literal(value: Any) -> str:
 class TBox:
     """The loaded ontology for one scenario (its import closure)."""
 
-    def __init__(self, scenario: str = DEFAULT_SCENARIO) -> None:
+    def __init__(
+        self, scenario: str = DEFAULT_SCENARIO, extra_modules: tuple[str, ...] = ()
+    ) -> None:
+        """``extra_modules``: further Manchester-syntax files imported into the
+        scenario (synthetic domain modules for scaling runs, test fixtures)."""
         names = scenario_names()
         if scenario not in names:
             raise InputError(
@@ -212,6 +216,20 @@ class TBox:
         except Exception as exc:  # OWLAPI reports every parser it tried; keep the Manchester one
             raise OntologyLoadError(_manchester_message(str(exc))) from None
         self.factory = self.manager.getOWLDataFactory()
+        self.extra_modules = tuple(str(p) for p in extra_modules)
+        for extra in self.extra_modules:
+            from org.semanticweb.owlapi.model import AddImport
+
+            if not Path(extra).is_file():
+                raise InputError(f"ontology module not found: {extra}")
+            try:
+                ont = self.manager.loadOntologyFromOntologyDocument(File(extra))
+            except Exception as exc:
+                raise OntologyLoadError(_manchester_message(str(exc))) from None
+            iri = ont.getOntologyID().getOntologyIRI().get()
+            self.manager.applyChange(
+                AddImport(self.root, self.factory.getOWLImportsDeclaration(iri))
+            )
         self.closure = list(self.root.getImportsClosure())
         self._renderer = _make_renderer()
         self.vocabulary, self.module_stats = self._index()
@@ -479,6 +497,6 @@ def _make_renderer() -> Any:
 
 
 @cache
-def load_tbox(scenario: str = DEFAULT_SCENARIO) -> TBox:
-    """The TBox for ``scenario``, loaded once per process."""
-    return TBox(scenario)
+def load_tbox(scenario: str = DEFAULT_SCENARIO, extra_modules: tuple[str, ...] = ()) -> TBox:
+    """The TBox for ``scenario`` (plus ``extra_modules``), loaded once per process."""
+    return TBox(scenario, extra_modules)
