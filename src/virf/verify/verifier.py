@@ -21,12 +21,14 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
+from queue import Queue
 from typing import Literal
 
 from virf.kb.scene import Scene
 from virf.kb.tbox import TBox, UnsafeStateConcept
-from virf.reasoning import Engine, ReasonerFailure
+from virf.reasoning import Classification, Engine, ReasonerFailure
 from virf.schema import (
     BackgroundKnowledge,
     CausalChain,
@@ -85,12 +87,26 @@ class _Finding:
 
 class Verifier:
     def __init__(
-        self, tbox: TBox, engine: Engine, timeout_s: float = 120.0, explain: bool = True
+        self,
+        tbox: TBox,
+        engine: Engine,
+        timeout_s: float = 120.0,
+        explain: bool = True,
+        workers: int = 1,
     ) -> None:
         """``explain=False`` skips the minimal explanations (batch runs that only
         need verdicts): findings then carry no triggering facts, and whether
         they are definite is decided by one entailment test without the
-        assumed facts."""
+        assumed facts.
+
+        ``workers > 1`` classifies the plan's snapshots in parallel, each on
+        its own engine instance (the paper's parallel step checking).  The
+        snapshots are still built in order and the results are read in
+        order, so reports do not depend on the worker count."""
+        if workers < 1:
+            raise ValueError("workers must be at least 1")
+        self.workers = workers
+        self._engines: Queue[Engine] | None = None
         self.explain = explain
         self.tbox = tbox
         self.vocab = tbox.vocabulary
@@ -129,20 +145,7 @@ class Verifier:
     ) -> Report:
         deadline = time.monotonic() + self.timeout_s
         self._deadline = deadline
-        states: list[WorldState] = [self.sim.initial(scene)]
-        resolved: list[ResolvedStep] = []
-        stop: MissingObject | PreconditionFailure | None = None
-        for step in plan:
-            r = self.sim.resolve(states[-1], step)
-            if isinstance(r, MissingObject):
-                stop = r
-                break
-            resolved.append(r)
-            nxt = self.sim.apply(states[-1], r)
-            if isinstance(nxt, PreconditionFailure):
-                stop = nxt
-                break
-            states.append(nxt)
+        states, resolved, stop = self._simulate(scene, plan)
         complete = stop is None
         n = len(states) - 1
 
@@ -152,18 +155,23 @@ class Verifier:
         self._checked = -1  # last snapshot the reasoner answered for
         seen: set[tuple[str, str]] = set()
         first_definite: int | None = None
-        for k, state in enumerate(states):
+        snapshots = [self._snapshot(states, resolved, k) for k in range(len(states))]
+        concept_lists = [
+            self.always + (self.final if complete and k == n else []) for k in range(len(states))
+        ]
+        ahead = self._classify_ahead(snapshots, concept_lists)
+        for k in range(len(states)):
             if time.monotonic() > deadline:
                 raise VerificationTimeout(f"more than {self.timeout_s:.0f}s at step {k}")
-            snapshot: dict[Fact, Provenance] = dict(state.facts)
-            snapshot.update(self.sim.closure_facts(state))
+            snapshot = snapshots[k]
             action_ind = None
             if k < len(resolved):
-                snapshot.update(self.sim.action_facts(state, resolved[k]))
                 action_ind = Simulator.action_individual(resolved[k].step)
-            final = complete and k == n
-            concepts = self.always + (self.final if final else [])
-            result = self.engine.classify(snapshot.keys(), concepts)
+            result = (
+                ahead[k].result()
+                if ahead
+                else self.engine.classify(snapshot.keys(), concept_lists[k])
+            )
             self._checked = k
             if not result.consistent:
                 findings.setdefault(k, []).append(self._inconsistency(snapshot, k))
@@ -196,7 +204,68 @@ class Verifier:
             if definite:
                 first_definite = min(definite)
                 break
+        for pending in ahead:  # snapshots after the first definite finding are not needed
+            pending.cancel()
         return self._report(plan, states, resolved, stop, findings, first_definite)
+
+    def _simulate(
+        self, scene: Scene, plan: Sequence[PlanStep]
+    ) -> tuple[list[WorldState], list[ResolvedStep], MissingObject | PreconditionFailure | None]:
+        """States S0..Sn, stopping at an unknown object or a failed precondition."""
+        states: list[WorldState] = [self.sim.initial(scene)]
+        resolved: list[ResolvedStep] = []
+        stop: MissingObject | PreconditionFailure | None = None
+        for step in plan:
+            r = self.sim.resolve(states[-1], step)
+            if isinstance(r, MissingObject):
+                stop = r
+                break
+            resolved.append(r)
+            nxt = self.sim.apply(states[-1], r)
+            if isinstance(nxt, PreconditionFailure):
+                stop = nxt
+                break
+            states.append(nxt)
+        return states, resolved, stop
+
+    def snapshots(self, scene: Scene, plan: Sequence[PlanStep]) -> list[dict[Fact, Provenance]]:
+        """The ABox the reasoner sees for each step (for baselines and tools)."""
+        states, resolved, _ = self._simulate(scene, plan)
+        return [self._snapshot(states, resolved, k) for k in range(len(states))]
+
+    def _snapshot(
+        self, states: list[WorldState], resolved: list[ResolvedStep], k: int
+    ) -> dict[Fact, Provenance]:
+        """State k, its closure facts, and action k+1 (the one-step lookahead)."""
+        state = states[k]
+        snapshot: dict[Fact, Provenance] = dict(state.facts)
+        snapshot.update(self.sim.closure_facts(state))
+        if k < len(resolved):
+            snapshot.update(self.sim.action_facts(state, resolved[k]))
+        return snapshot
+
+    def _classify_ahead(
+        self, snapshots: list[dict[Fact, Provenance]], concepts: list[list[str]]
+    ) -> list[Future[Classification]]:
+        """Start classifying every snapshot in parallel (empty when workers is 1)."""
+        if self.workers == 1 or len(snapshots) < 2:
+            return []
+        if self._engines is None:
+            self._engines = Queue()
+            self._engines.put(self.engine)
+            for _ in range(self.workers - 1):
+                self._engines.put(self.engine.fork())
+            self._pool = ThreadPoolExecutor(self.workers, thread_name_prefix="virf-step")
+        engines = self._engines
+
+        def classify(k: int) -> Classification:
+            engine = engines.get()
+            try:
+                return engine.classify(snapshots[k].keys(), concepts[k])
+            finally:
+                engines.put(engine)
+
+        return [self._pool.submit(classify, k) for k in range(len(snapshots))]
 
     # ------------------------------------------------------------------ findings
     def _explain(
