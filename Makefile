@@ -10,7 +10,7 @@ STAMP  := $(VENV)/.virf-installed
 
 SAB    ?= ../shared/benchmarks/safeagentbench
 
-.PHONY: demo test test-full lint java install clean bench-report
+.PHONY: demo test test-full lint java install clean bench-report bench-latency
 
 demo: $(STAMP)
 	$(BIN)/virf demo examples
@@ -20,12 +20,24 @@ test: $(STAMP)
 	$(BIN)/mypy
 	$(BIN)/pytest
 
+# The full equivalence sweep: every SafeAgentBench dev plan and a few hundred
+# random scenes, plans and fact sets, fast engine against the reference.
+test-full: $(STAMP)
+	$(BIN)/ruff check src tests
+	$(BIN)/mypy
+	VIRF_FULL=1 $(BIN)/pytest
+
 install: $(STAMP)
 
 # Regenerates docs/benchmarks/safeagentbench.md from a run over the benchmark files.
 bench-report: $(STAMP)
 	$(BIN)/virf bench safeagentbench $(SAB)/unsafe_detailed.jsonl $(SAB)/abstract.jsonl \
 	  $(SAB)/long_horizon.jsonl $(SAB)/safe_detailed.jsonl --markdown docs/benchmarks/safeagentbench.md
+
+# Latency of the paper's method, the reference engine and the fast engine
+# (creates .venv-paper with owlready2 0.49 for the paper's method).
+bench-latency: $(STAMP)
+	$(BIN)/virf bench latency $(SAB)/unsafe_detailed.jsonl $(SAB)/safe_detailed.jsonl $(SAB)/abstract.jsonl
 
 $(STAMP): pyproject.toml | java
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "error: $(PYTHON) not found; install Python 3.11 or run 'make PYTHON=/path/to/python3.11'" >&2; exit 1; }

@@ -52,7 +52,14 @@ def rel(subject: str, prop: str, obj: str, kind: str = "object_property") -> dic
 
 @pytest.fixture(scope="session")
 def tutor() -> LogicTutor:
+    """The default tutor (fast engine)."""
     return LogicTutor()
+
+
+@pytest.fixture(scope="session")
+def reference_tutor() -> LogicTutor:
+    """The same knowledge base with the reference engine (HermiT)."""
+    return LogicTutor(engine="reference")
 
 
 @pytest.fixture(scope="session")

@@ -1,6 +1,6 @@
 """Public API: load the knowledge base once, verify scene + plan pairs.
 
->>> tutor = LogicTutor()                      # kitchen scenario, HermiT
+>>> tutor = LogicTutor()                      # kitchen scenario, fast engine
 >>> report = tutor.verify_files("examples/walkthrough/scene.json",
 ...                             "examples/walkthrough/plan.txt")
 >>> report.status, report.dangerous_step
@@ -20,7 +20,7 @@ from virf.schema import Report
 from virf.sim.plan import PlanStep, load_plan_file, parse_plan
 from virf.verify.verifier import Verifier
 
-DEFAULT_ENGINE = "hermit"
+DEFAULT_ENGINE = "fast"
 
 
 class LogicTutor:
@@ -31,10 +31,11 @@ class LogicTutor:
         scenario: str = DEFAULT_SCENARIO,
         engine: str = DEFAULT_ENGINE,
         timeout_s: float = 120.0,
+        workers: int = 1,
     ) -> None:
         self.tbox: TBox = load_tbox(scenario)
         self.engine: Engine = make_engine(engine, self.tbox, timeout_s=timeout_s)
-        self.verifier = Verifier(self.tbox, self.engine, timeout_s=timeout_s)
+        self.verifier = Verifier(self.tbox, self.engine, timeout_s=timeout_s, workers=workers)
 
     def scene(self, data: dict[str, Any] | str | Path) -> Scene:
         if isinstance(data, dict):

@@ -43,7 +43,10 @@ ScenarioOpt = Annotated[
 EngineOpt = Annotated[
     str,
     typer.Option(
-        "--engine", "-e", help="Reasoning engine: hermit (reference, default) or pellet (Openllet)."
+        "--engine",
+        "-e",
+        help="Reasoning engine: fast (default; exact, falls back to the reference when its "
+        "bounds do not meet), reference (= hermit, HermiT 1.4) or pellet (Openllet 2.6).",
     ),
 ]
 
@@ -67,10 +70,18 @@ def verify(
         typer.Option("--feedback", help="Also print the paper's feedback prompt for the planner."),
     ] = False,
     scenario: ScenarioOpt = "kitchen",
-    engine: EngineOpt = "hermit",
+    engine: EngineOpt = "fast",
     timeout: Annotated[
         float, typer.Option(help="Give up (status ERROR) after this many seconds.")
     ] = 120.0,
+    workers: Annotated[
+        int,
+        typer.Option(
+            min=1,
+            help="Classify the plan's snapshots on this many engines in parallel "
+            "(pays off with the reference engine; the report is the same).",
+        ),
+    ] = 1,
 ) -> None:
     """Verify PLAN in SCENE.  Exit 0 SAFE, 1 UNSAFE, 3 UNKNOWN, 4 ERROR, 2 bad input."""
     from virf.api import LogicTutor
@@ -80,7 +91,7 @@ def verify(
 
     try:
         steps = load_plan_file(plan)
-        tutor = LogicTutor(scenario=scenario, engine=engine, timeout_s=timeout)
+        tutor = LogicTutor(scenario=scenario, engine=engine, timeout_s=timeout, workers=workers)
         sc = load_scene_file(scene, tutor.tbox.vocabulary)
     except EnvironmentProblem as exc:
         raise _fail(str(exc), EXIT["ERROR"]) from None
@@ -101,7 +112,7 @@ def demo(
     folder: Annotated[
         Path, typer.Argument(help="Folder of examples: one sub-folder per scene.json + plan.txt.")
     ] = Path("examples"),
-    engine: EngineOpt = "hermit",
+    engine: EngineOpt = "fast",
 ) -> None:
     """Verify every example and print the reports; checks each against its expected.json."""
     from rich.console import Console
@@ -223,6 +234,19 @@ def kb_check(
         console.print(cats)
         console.print(f"Precondition definitions (simulator): {result['preconditions']}")
         console.print(f"Annotated background axioms: {result['background_axioms']}")
+        fe = result["fast_engine"]
+        if fe["exact_fragment"]:
+            console.print(
+                f"Fast engine: inside its fragment ({fe['query_classes']} query classes, "
+                f"{fe['sink_classes']} sink classes, {fe['kb_axioms']} knowledge-base axioms, "
+                f"{fe['compiled_axioms']} compiled to rules, {fe['model_checked_axioms']} "
+                "checked on candidate models)"
+            )
+        else:
+            console.print(
+                "Fast engine: OUTSIDE its fragment, every question goes to the reference "
+                f"engine: {'; '.join(fe['problems'][:3])}"
+            )
     if not result["consistent"] or result["unsatisfiable_uscs"] or result["unsatisfiable_classes"]:
         raise typer.Exit(1)
 
@@ -293,7 +317,7 @@ def bench_safeagentbench(
     explain: Annotated[
         bool, typer.Option(help="Compute minimal explanations too (slower; verdicts are the same).")
     ] = False,
-    engine: EngineOpt = "hermit",
+    engine: EngineOpt = "fast",
 ) -> None:
     """Verify every task's reference plan and print hazard recall, false alarms and fidelity."""
     from rich.console import Console
@@ -366,6 +390,180 @@ def bench_safeagentbench(
             tmp.unlink(missing_ok=True)
             raise _fail(f"cannot write {markdown}: {exc.strerror}") from None
         err.print(f"wrote {markdown}")
+
+
+@bench_app.command("latency")
+def bench_latency(
+    files: Annotated[
+        list[Path],
+        typer.Argument(help="SafeAgentBench JSONL files whose reference plans are timed."),
+    ],
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print one JSON object with every figure.")
+    ] = False,
+    repeats: Annotated[
+        int, typer.Option(min=1, help="Fast-engine runs per plan (the median counts).")
+    ] = 3,
+    reference_sample: Annotated[
+        int,
+        typer.Option(min=0, help="Time the reference engine on this many plans (0 = all)."),
+    ] = 0,
+    paper_sample: Annotated[
+        int,
+        typer.Option(
+            min=0, help="Time the paper's method on this many plans (0 = all; ~5 s per step)."
+        ),
+    ] = 20,
+    paper_max_objects: Annotated[
+        int, typer.Option(help="Largest synthetic scene the paper's method is timed on.")
+    ] = 200,
+    no_paper: Annotated[
+        bool, typer.Option("--no-paper", help="Skip the paper's method (needs .venv-paper).")
+    ] = False,
+    sizes: Annotated[
+        str, typer.Option(help="Synthetic scene sizes (objects), comma-separated.")
+    ] = "20,50,200,1000",
+) -> None:
+    """Time the paper's method, the reference engine and the fast engine on the same plans."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from virf.bench.latency import run_latency
+
+    try:
+        for f in files:
+            if not f.is_file():
+                raise VirfError(f"no such file: {f}")
+        try:
+            size_list = [int(x) for x in sizes.split(",") if x.strip()]
+        except ValueError:
+            raise VirfError(f"--sizes '{sizes}': give whole numbers, e.g. 20,50,200") from None
+        if not size_list or min(size_list) < 10:
+            raise VirfError(f"--sizes '{sizes}': every size must be at least 10 objects")
+        err = Console(stderr=True)
+        with Progress(
+            TextColumn("[progress.description]{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            console=err,
+            transient=True,
+            disable=not err.is_terminal,
+        ) as progress:
+
+            def bar(label: str, total: int) -> Any:
+                task = progress.add_task(label, total=total)
+                return lambda: progress.advance(task)
+
+            figures = run_latency(
+                [str(f) for f in files],
+                repeats=repeats,
+                reference_sample=reference_sample,
+                paper_sample=paper_sample,
+                paper=not no_paper,
+                sizes=size_list,
+                paper_max_objects=paper_max_objects,
+                progress=bar,
+            )
+    except EnvironmentProblem as exc:
+        raise _fail(str(exc), EXIT["ERROR"]) from None
+    except VirfError as exc:
+        raise _fail(str(exc)) from None
+    if as_json:
+        typer.echo(json.dumps(figures, sort_keys=True))
+    else:
+        _print_latency(figures)
+
+
+def _print_latency(fig: dict[str, Any]) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console(highlight=False, width=140)
+    m = fig["machine"]
+    console.print(
+        f"machine: {m['cpus']} CPUs, Python {m['python']}, Java {m['java']}, {m['platform']}"
+    )
+    table = Table(title=f"Per-plan verification latency ({fig['plans']} SafeAgentBench plans)")
+    for col in ("method", "plans", "p50 ms", "p95 ms", "mean ms", "note"):
+        table.add_column(col)
+    paper = fig.get("paper")
+    if paper:
+        table.add_row(
+            "(a) paper: owlready2 + Pellet per step",
+            str(paper["plans"]),
+            f"{paper['p50_ms']:.0f}",
+            f"{paper['p95_ms']:.0f}",
+            f"{paper['mean_ms']:.0f}",
+            f"per call p50 {paper['per_call_p50_ms']:.0f} ms; owlready2 {paper['owlready2']}",
+        )
+    ref, fast = fig["reference"], fig["fast"]
+    table.add_row(
+        "(b) reference engine (HermiT)",
+        str(ref["plans"]),
+        f"{ref['p50_ms']:.0f}",
+        f"{ref['p95_ms']:.0f}",
+        f"{ref['mean_ms']:.0f}",
+        "with minimal explanations",
+    )
+    table.add_row(
+        "(c) fast engine",
+        str(fig["plans"]),
+        f"{fast['p50_ms']:.1f}",
+        f"{fast['p95_ms']:.1f}",
+        f"{fast['mean_ms']:.1f}",
+        f"{fast['reasoner_calls']} calls, {fast['fallbacks']} fallbacks",
+    )
+    console.print(table)
+    same = fig["identical_reports"]
+    ratio = fig.get("ratio")
+    console.print(
+        f"ratio a/c (median over plans): {ratio if ratio is not None else 'n/a'}; "
+        f"reports identical (b vs c): {same['identical']}/{same['compared']}"
+    )
+    mem = fig["memory"]
+    console.print(
+        f"memory: process RSS {mem['process_rss_after_tbox_mb']:.0f} MB after TBox load, "
+        f"peak {mem['process_rss_peak_after_fast_mb']:.0f} MB after (c), "
+        f"{mem['process_rss_peak_after_reference_mb']:.0f} MB after (b); "
+        f"fast engine Python heap peak {mem['fast_python_heap_peak_mb']:.1f} MB"
+        + (f"; paper method peak {paper['peak_rss_mb']} MB" if paper else "")
+    )
+    scale = Table(title="Scaling with scene size (10-step plan)")
+    for col in (
+        "objects",
+        "verdict",
+        "fast ms",
+        "reference ms",
+        "paper ms",
+        "fast ms/object",
+        "same",
+    ):
+        scale.add_column(col)
+    for row in fig["scene_scaling"]:
+        paper_ms = row.get("paper_ms")
+        scale.add_row(
+            str(row["requested_objects"]),
+            row["status"],
+            f"{row['fast_ms']:.1f}",
+            f"{row['reference_ms']:.0f}",
+            "-" if paper_ms is None else f"{paper_ms:.0f}",
+            f"{row['fast_ms'] / row['requested_objects']:.3f}",
+            "yes" if row["identical"] else "NO",
+        )
+    console.print(scale)
+    tb = Table(title="Scaling with TBox size (50-object scene, 10-step plan)")
+    for col in ("TBox", "logical axioms", "fast ms", "reference ms", "same"):
+        tb.add_column(col)
+    for row in fig["tbox_scaling"]:
+        tb.add_row(
+            f"x{row['factor']}",
+            str(row["logical_axioms"]),
+            f"{row['fast_ms']:.1f}",
+            f"{row['reference_ms']:.0f}",
+            "yes" if row["identical"] else "NO",
+        )
+    console.print(tb)
 
 
 def _check_writable(path: Path) -> None:

@@ -90,5 +90,6 @@ def make_engine(name: str, tbox: TBox, timeout_s: float = 30.0) -> Engine:
 
 
 def _load_builtin() -> None:
-    if not _REGISTRY:
-        from virf.reasoning import fast, owlapi  # noqa: F401  (registers the engines)
+    # Imported here, not at the top: they import this module.  Importing is
+    # idempotent, and each registers its engines.
+    from virf.reasoning import fast, owlapi  # noqa: F401

@@ -1,0 +1,204 @@
+"""The fast engine and the reference engine give identical reports.
+
+Identical means the whole report (status, dangerous step, violated concepts,
+triggering facts, background knowledge, questions, trace), byte for byte,
+except the field naming the engine.  Checked on every example, on
+SafeAgentBench reference plans, and on random scenes and plans.
+
+``make test`` runs a subset; ``make test-full`` (``VIRF_FULL=1``) runs every
+dev-split plan and a few hundred random cases.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import pytest
+from conftest import ROOT, case_params
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from virf.api import LogicTutor
+from virf.bench.latency import Case, dev_cases, sample
+from virf.kb.scene import build_scene
+from virf.schema import Report
+from virf.sim.plan import ARITY, VERBS, load_plan_file, parse_plan
+from virf.verify.verifier import Verifier
+
+FULL = os.environ.get("VIRF_FULL") == "1"
+SAB = ROOT.parent / "shared" / "benchmarks" / "safeagentbench"
+SAB_FILES = ["unsafe_detailed.jsonl", "safe_detailed.jsonl", "abstract.jsonl"]
+
+
+def comparable(report: Report) -> str:
+    data = json.loads(report.to_json())
+    assert data.pop("engine") in ("fast", "hermit", "pellet")
+    return json.dumps(data, sort_keys=True, indent=1)
+
+
+@pytest.mark.parametrize("case", case_params())
+def test_examples_identical(
+    case: Path, tutor: LogicTutor, reference_tutor: LogicTutor, example_report
+) -> None:
+    fast = example_report(case.name)
+    assert fast.engine == "fast"
+    ref = reference_tutor.verify_files(case / "scene.json", case / "plan.txt")
+    assert comparable(fast) == comparable(ref)
+
+
+def _dev_cases(tutor: LogicTutor) -> list[Case]:
+    if not SAB.is_dir():
+        pytest.skip(f"SafeAgentBench dev split not found at {SAB}")
+    cases = dev_cases([SAB / f for f in SAB_FILES], tutor.tbox)
+    return cases if FULL else sample(cases, 12)
+
+
+def test_safeagentbench_plans_identical(tutor: LogicTutor, reference_tutor: LogicTutor) -> None:
+    cases = _dev_cases(tutor)
+    assert cases
+    different = []
+    for c in cases:
+        fast = tutor.verifier.verify(c.scene, c.plan, c.requirements)
+        ref = reference_tutor.verifier.verify(c.scene, c.plan, c.requirements)
+        if comparable(fast) != comparable(ref):
+            different.append(c.name)
+    assert not different, different
+
+
+def test_the_fast_engine_answered_without_falling_back(tutor: LogicTutor) -> None:
+    """The dev plans are inside the fragment: the fast engine itself answered."""
+    cases = _dev_cases(tutor)[:6]
+    with tutor.engine.counting() as delta:  # type: ignore[attr-defined]
+        for c in cases:
+            tutor.verifier.verify(c.scene, c.plan, c.requirements)
+    assert delta["calls"] > 0
+    assert delta["fallbacks"] == 0, dict(delta)
+
+
+@pytest.mark.parametrize("workers", [2, 3])
+@pytest.mark.parametrize("engine", ["fast", "reference"])
+def test_parallel_step_checking_gives_the_same_report(
+    workers: int, engine: str, tutor: LogicTutor, reference_tutor: LogicTutor
+) -> None:
+    base = tutor if engine == "fast" else reference_tutor
+    parallel = Verifier(base.tbox, base.engine.fork(), workers=workers)
+    for name in ("walkthrough", "burner-left-on", "noise-uncertainty", "safe-fridge"):
+        case = ROOT / "examples" / name
+        scene = base.scene(case / "scene.json")
+        plan = load_plan_file(case / "plan.txt")
+        one = base.verifier.verify(scene, plan)
+        assert parallel.verify(scene, plan).to_json() == one.to_json()
+
+
+# ---------------------------------------------------------------------- random scenes
+KINDS = [
+    "Apple",
+    "Bread",
+    "Egg",
+    "Tomato",
+    "Potato",
+    "Mug",
+    "Cup",
+    "Bowl",
+    "Plate",
+    "Pot",
+    "Pan",
+    "Kettle",
+    "Fork",
+    "Knife",
+    "ButterKnife",
+    "Spatula",
+    "SoapBottle",
+    "DishSponge",
+    "WineBottle",
+    "Bottle",
+    "Box",
+    "CellPhone",
+    "Book",
+    "Vase",
+    "Candle",
+    "Fridge",
+    "Microwave",
+    "Toaster",
+    "CoffeeMachine",
+    "StoveBurner",
+    "StoveKnob",
+    "Sink",
+    "Faucet",
+    "CounterTop",
+    "Cabinet",
+    "Drawer",
+    "DiningTable",
+    "GarbageCan",
+]
+STATES = (
+    "OnState",
+    "OffState",
+    "OpenState",
+    "ClosedState",
+    "EmptyState",
+    "FilledWithLiquidState",
+    "WetState",
+    "DirtyState",
+    "CleanState",
+    "HotState",
+)
+RELATIONS = ("isOn", "isInside", "isNear")
+
+
+@st.composite
+def scenes_and_plans(draw: st.DrawFn) -> tuple[dict[str, object], list[str]]:
+    kinds = draw(st.lists(st.sampled_from(KINDS), min_size=2, max_size=7))
+    names = [f"{k}_{i}" for i, k in enumerate(kinds)]
+    instances = [{"class_name": k, "instance_name": n} for k, n in zip(kinds, names, strict=True)]
+    assertions = []
+    for n in names:
+        for s in draw(st.lists(st.sampled_from(STATES), max_size=2, unique=True)):
+            assertions.append({"subject": n, "property": "hasState", "object": s})
+    for _ in range(draw(st.integers(0, 5))):
+        a, b = draw(st.sampled_from(names)), draw(st.sampled_from(names))
+        if a != b:
+            rel = draw(st.sampled_from(RELATIONS))
+            assertions.append({"subject": a, "property": rel, "object": b})
+    scene: dict[str, object] = {"instances": instances, "assertions": assertions}
+    if draw(st.booleans()):
+        scene["closed_world"] = draw(
+            st.lists(st.sampled_from(["contains", "supports"]), unique=True)
+        )
+    if draw(st.booleans()):
+        scene["unlocated_by_default"] = draw(st.booleans())
+    steps = []
+    for _ in range(draw(st.integers(1, 6))):
+        verb = draw(st.sampled_from(VERBS))
+        lo, hi = ARITY[verb]
+        args = [draw(st.sampled_from(names)) for _ in range(draw(st.integers(lo, hi)))]
+        if verb == "fillLiquid":
+            args = [args[0], "water"]
+        steps.append(" ".join([verb, *args]))
+    return scene, steps
+
+
+RANDOM = settings(
+    max_examples=250 if FULL else 12,
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
+
+
+def test_random_scenes_and_plans_identical(tutor: LogicTutor, reference_tutor: LogicTutor) -> None:
+    vocab = tutor.tbox.vocabulary
+
+    @RANDOM
+    @given(scenes_and_plans())
+    def check(case: tuple[dict[str, object], list[str]]) -> None:
+        data, steps = case
+        scene = build_scene(data, vocab)
+        plan = parse_plan(steps)
+        fast = tutor.verifier.verify(scene, plan)
+        ref = reference_tutor.verifier.verify(scene, plan)
+        assert comparable(fast) == comparable(ref)
+
+    check()
