@@ -1,0 +1,133 @@
+"""The paper's owlready2 + Pellet baseline: TBox export, job checks, and (opt-in) a real run.
+
+The real run needs ``.venv-paper`` (owlready2 0.49 from PyPI) and starts one
+JVM per snapshot, so it only runs with ``VIRF_PAPER_BASELINE=1``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import pytest
+
+from virf.api import LogicTutor
+from virf.bench import paper_baseline
+from virf.bench.paper import (
+    INDIVIDUAL_NS,
+    ensure_paper_env,
+    export_tbox,
+    fact_json,
+    run_paper_baseline,
+)
+from virf.kb.tbox import NS
+from virf.schema import Fact, FactKind
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def test_export_tbox_is_one_rdfxml_ontology_with_every_logical_axiom(
+    tutor: LogicTutor, tmp_path: Path
+) -> None:
+    from java.io import File
+    from java.util import HashSet
+    from org.semanticweb.owlapi.apibinding import OWLManager
+    from org.semanticweb.owlapi.formats import RDFXMLDocumentFormat
+
+    path = tmp_path / "tbox.owl"
+    written = export_tbox(tutor.tbox, path)
+    expected = HashSet()
+    for ax in tutor.tbox.logical_axioms():
+        expected.add(ax.getAxiomWithoutAnnotations())
+    assert written == expected.size() > 0
+
+    manager = OWLManager.createOWLOntologyManager()
+    loaded = manager.loadOntologyFromOntologyDocument(File(str(path)))
+    assert isinstance(manager.getOntologyFormat(loaded), RDFXMLDocumentFormat)
+    assert loaded.getImportsDeclarations().isEmpty()
+    assert loaded.getLogicalAxiomCount() == written
+    classes = {str(c.getIRI().toString()) for c in loaded.getClassesInSignature()}
+    assert NS + "FridgeLeftOpenDanger" in classes
+    # Punned individuals moved out of the class namespace, classes stayed.
+    individuals = {str(i.getIRI().toString()) for i in loaded.getIndividualsInSignature()}
+    assert INDIVIDUAL_NS + "Metal" in individuals
+    assert NS + "Metal" in classes
+    assert not any(i.startswith(NS) for i in individuals)
+
+
+def test_fact_json_spells_closures_with_members() -> None:
+    closure = Fact("Fridge_1", "contains", "Apple_1,Egg_1", FactKind.CLOSURE)
+    assert fact_json(closure) == {
+        "s": "Fridge_1",
+        "p": "contains",
+        "o": "Apple_1,Egg_1",
+        "kind": "closure",
+        "members": ["Apple_1", "Egg_1"],
+    }
+    assert fact_json(Fact("Fridge_1", "isLocated", "true", FactKind.DATA))["kind"] == "data"
+
+
+@pytest.mark.parametrize(
+    ("job", "message"),
+    [
+        ("[1]", "job must be a JSON object"),
+        ('{"tbox": "/no/such.owl", "namespace": "x"}', "TBox file not found"),
+        ("{bad", "is not JSON"),
+    ],
+)
+def test_script_rejects_bad_jobs_in_one_line(
+    job: str, message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "job.json"
+    path.write_text(job, encoding="utf-8")
+    assert paper_baseline.main([str(path), str(tmp_path / "out.json")]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
+
+
+def test_script_rejects_a_bad_fact(tmp_path: Path) -> None:
+    tbox = tmp_path / "tbox.owl"
+    tbox.write_text("", encoding="utf-8")
+    job = {
+        "tbox": str(tbox),
+        "namespace": NS,
+        "concepts": [],
+        "plans": [{"id": "p", "snapshots": [[{"s": "A", "p": "q", "o": "x", "kind": "data"}]]}],
+    }
+    path = tmp_path / "job.json"
+    path.write_text(json.dumps(job), encoding="utf-8")
+    with pytest.raises(paper_baseline.JobError, match=r"snapshots\[0\]\[0\].*'true' or 'false'"):
+        paper_baseline.load_job(path)
+
+
+@pytest.mark.skipif(
+    os.environ.get("VIRF_PAPER_BASELINE") != "1",
+    reason="needs .venv-paper (owlready2 0.49 from PyPI) and a JVM per snapshot; "
+    "set VIRF_PAPER_BASELINE=1",
+)
+def test_paper_baseline_finds_what_our_engine_finds(tutor: LogicTutor, tmp_path: Path) -> None:
+    python = ensure_paper_env(ROOT)
+
+    def fridge(state: str) -> list[Fact]:
+        return [
+            Fact("Fridge_1", "type", "Fridge", FactKind.TYPE),
+            Fact("Fridge_1", "hasState", state),
+            Fact("Fridge_1", "isLocated", "true", FactKind.DATA),
+            Fact("Fridge_1", "contains", "", FactKind.CLOSURE),
+        ]
+
+    snapshots = [fridge("OpenState"), fridge("ClosedState")]
+    concepts = ["FridgeLeftOpenDanger"]
+    out = run_paper_baseline(tutor.tbox, [("fridge", snapshots)], concepts, tmp_path, python)
+
+    assert out["owlready2"] == "0.49"
+    plan = out["plans"][0]
+    assert plan["consistent"] == [True, True]
+    assert plan["findings"] == [[{"concept": "FridgeLeftOpenDanger", "individual": "Fridge_1"}], []]
+    assert len(plan["step_ms"]) == 2 and plan["total_ms"] > 0
+    for snapshot, found in zip(snapshots, plan["findings"], strict=True):
+        ours = tutor.engine.classify(snapshot, concepts)
+        assert {(c, i) for c, inds in ours.instances.items() for i in inds} == {
+            (f["concept"], f["individual"]) for f in found
+        }
