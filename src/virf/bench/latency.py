@@ -1,0 +1,455 @@
+"""``virf bench latency``: how long verification takes, three ways, on the same inputs.
+
+* (a) the paper's method: owlready2 + Pellet, one reasoner call per step on a
+  fresh copy of ontology + ABox (:mod:`virf.bench.paper`, its own venv);
+* (b) the reference engine (HermiT in-process, :mod:`virf.reasoning.owlapi`);
+* (c) the fast engine (:mod:`virf.reasoning.fast`).
+
+(b) and (c) time the whole Logic Tutor (simulation, classification of every
+snapshot, minimal explanations, report); (a) times the paper's reasoner calls
+for the same snapshots, stopping at the first snapshot where it finds a
+hazard, as the paper's loop does.  Inputs: the SafeAgentBench reference plans
+given on the command line, and a 10-step plan over synthetic kitchens of
+growing size.  The TBox scaling rows load extra synthetic domain modules
+(copies of the kitchen layer under new class names).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import re
+import resource
+import statistics
+import tempfile
+import time
+import tracemalloc
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from virf.bench.safeagentbench import build_scene as task_scene
+from virf.bench.safeagentbench import load_tasks
+from virf.errors import InputError
+from virf.kb.scene import Scene, build_scene
+from virf.kb.tbox import TBox, load_tbox, ontology_dir
+from virf.reasoning import Engine, make_engine
+from virf.schema import Report
+from virf.sim.plan import PlanStep, parse_plan
+from virf.verify.requirements import Requirement, Unreadable, parse_requirement, requirement_text
+from virf.verify.verifier import Verifier
+
+SCENE_SIZES = (20, 50, 200, 1000)
+SYNTHETIC_STEPS = (
+    "find Apple_1",
+    "pick Apple_1",
+    "find Fridge_1",
+    "open Fridge_1",
+    "put Fridge_1",
+    "close Fridge_1",
+    "find Mug_1",
+    "pick Mug_1",
+    "find DiningTable_1",
+    "put DiningTable_1",
+)
+# Harmless things to fill a kitchen with (only types the catalogue knows are used).
+FILLER = [
+    "Apple",
+    "Bread",
+    "Tomato",
+    "Potato",
+    "Lettuce",
+    "Egg",
+    "Mug",
+    "Cup",
+    "Bowl",
+    "Plate",
+    "Fork",
+    "Spoon",
+    "ButterKnife",
+    "Spatula",
+    "Ladle",
+    "SaltShaker",
+    "PepperShaker",
+    "DishSponge",
+    "PaperTowelRoll",
+    "Bottle",
+    "Book",
+    "CreditCard",
+    "Vase",
+    "Statue",
+    "Kettle",
+    "Pan",
+    "Pot",
+    "WineBottle",
+    "SoapBottle",
+    "Newspaper",
+    "KeyChain",
+    "CellPhone",
+    "Pen",
+    "Pencil",
+    "Watch",
+    "TissueBox",
+    "Box",
+    "Candle",
+]
+
+
+@dataclass(frozen=True)
+class Case:
+    name: str
+    scene: Scene
+    plan: tuple[PlanStep, ...]
+    requirements: tuple[Requirement | Unreadable, ...] = ()
+
+
+def dev_cases(files: Sequence[str | Path], tbox: TBox) -> list[Case]:
+    """Every task in ``files`` that ships a reference plan."""
+    vocab = tbox.vocabulary
+    out = []
+    for f in files:
+        for task in load_tasks(f):
+            if not task.steps:
+                continue
+            try:
+                plan = parse_plan(task.steps)
+            except InputError:
+                continue
+            scene = build_scene(task_scene(task, vocab), vocab)
+            text = requirement_text(task.instruction)
+            reqs = (parse_requirement(text, vocab),) if text else ()
+            out.append(Case(f"{Path(task.file).name}:{task.line}", scene, plan, reqs))
+    return out
+
+
+def synthetic_scene(objects: int, tbox: TBox) -> dict[str, Any]:
+    """A kitchen with ``objects`` objects on which the synthetic plan runs safely."""
+    vocab = tbox.vocabulary
+    fixed = [
+        ("Fridge", "Fridge_1"),
+        ("DiningTable", "DiningTable_1"),
+        ("Microwave", "Microwave_1"),
+        ("Sink", "Sink_1"),
+        ("Faucet", "Faucet_1"),
+        ("Apple", "Apple_1"),
+        ("Mug", "Mug_1"),
+    ]
+    if objects < len(fixed) + 2:
+        raise InputError(f"a synthetic scene needs at least {len(fixed) + 2} objects")
+    instances = [{"class_name": c, "instance_name": n} for c, n in fixed]
+    assertions: list[dict[str, str]] = [
+        {"subject": "Fridge_1", "property": "hasState", "object": "ClosedState"},
+        {"subject": "Microwave_1", "property": "hasState", "object": "ClosedState"},
+        {"subject": "Microwave_1", "property": "hasState", "object": "OffState"},
+        {"subject": "Faucet_1", "property": "hasState", "object": "OffState"},
+        {"subject": "Mug_1", "property": "hasState", "object": "EmptyState"},
+    ]
+    counters = max(1, (objects - len(fixed)) // 10)
+    for i in range(1, counters + 1):
+        instances.append({"class_name": "CounterTop", "instance_name": f"CounterTop_{i}"})
+    assertions.append({"subject": "Apple_1", "property": "isOn", "object": "CounterTop_1"})
+    assertions.append({"subject": "Mug_1", "property": "isOn", "object": "CounterTop_1"})
+    kinds = [k for k in FILLER if k in vocab.classes]
+    seen: dict[str, int] = {"Apple": 1, "Mug": 1}
+    i = 0
+    while len(instances) < objects:
+        kind = kinds[i % len(kinds)]
+        seen[kind] = seen.get(kind, 0) + 1
+        name = f"{kind}_{seen[kind]}"
+        instances.append({"class_name": kind, "instance_name": name})
+        place = f"CounterTop_{i % counters + 1}"
+        assertions.append({"subject": name, "property": "isOn", "object": place})
+        i += 1
+    return {
+        "description": f"synthetic kitchen with {objects} objects",
+        "instances": instances,
+        "assertions": assertions,
+        "unlocated_by_default": True,
+    }
+
+
+def synthetic_case(objects: int, tbox: TBox) -> Case:
+    vocab = tbox.vocabulary
+    scene = build_scene(synthetic_scene(objects, tbox), vocab, name=f"synthetic-{objects}")
+    return Case(f"synthetic-{objects}", scene, parse_plan(list(SYNTHETIC_STEPS)))
+
+
+def synthetic_modules(copies: int, folder: Path) -> tuple[str, ...]:
+    """``copies`` renamed copies of the kitchen domain layer (for TBox scaling)."""
+    source = (ontology_dir() / "kitchen.omn").read_text(encoding="utf-8")
+    names = sorted(set(re.findall(r"^Class: :(\w+)", source, flags=re.M)), key=len, reverse=True)
+    pattern = re.compile(r":(" + "|".join(re.escape(n) for n in names) + r")\b")
+    out = []
+    for k in range(1, copies + 1):
+        text = pattern.sub(lambda m, k=k: f":Syn{k}_{m.group(1)}", source)  # type: ignore[misc]
+        text = text.replace(
+            "<http://virf.dev/ontology/kitchen>", f"<http://virf.dev/ontology/synthetic-{k}>"
+        )
+        text = re.sub(r':id "([^"]+)"', lambda m, k=k: f':id "SYN{k}-{m.group(1)}"', text)  # type: ignore[misc]
+        path = folder / f"synthetic-{k}.omn"
+        path.write_text(text, encoding="utf-8")
+        out.append(str(path))
+    return tuple(out)
+
+
+def time_plans(
+    verifier: Verifier, cases: Sequence[Case], repeats: int, tick: Callable[[], None] | None = None
+) -> tuple[list[float], list[Report]]:
+    """Per-case median wall time (ms) of a full verification, and the reports."""
+    times, reports = [], []
+    for case in cases:
+        runs = []
+        report = None
+        for _ in range(repeats):
+            start = time.perf_counter()
+            report = verifier.verify(case.scene, case.plan, case.requirements)
+            runs.append((time.perf_counter() - start) * 1000)
+        assert report is not None
+        times.append(statistics.median(runs))
+        reports.append(report)
+        if tick:
+            tick()
+    return times, reports
+
+
+def percentile(values: Sequence[float], pct: float) -> float:
+    ordered = sorted(values)
+    if not ordered:
+        return float("nan")
+    k = max(0, min(len(ordered) - 1, round(pct / 100 * (len(ordered) - 1))))
+    return ordered[k]
+
+
+def summary(values: Sequence[float]) -> dict[str, float]:
+    return {
+        "p50_ms": round(percentile(values, 50), 2),
+        "p95_ms": round(percentile(values, 95), 2),
+        "mean_ms": round(statistics.fmean(values), 2) if values else float("nan"),
+    }
+
+
+def sample(cases: Sequence[Case], n: int) -> list[Case]:
+    """``n`` cases spread evenly over the list (all when n <= 0 or n >= len)."""
+    if n <= 0 or n >= len(cases):
+        return list(cases)
+    step = len(cases) / n
+    return [cases[int(i * step)] for i in range(n)]
+
+
+def comparable(report: Report) -> str:
+    data = json.loads(report.to_json())
+    data.pop("engine", None)
+    return json.dumps(data, sort_keys=True)
+
+
+def _paper_plans(verifier: Verifier, cases: Sequence[Case]) -> list[tuple[str, list[list[Any]]]]:
+    return [(c.name, [sorted(s) for s in verifier.snapshots(c.scene, c.plan)]) for c in cases]
+
+
+def _paper_plan_ms(plan: dict[str, Any]) -> float | None:
+    """Sequential time of the paper's loop: steps up to its first finding."""
+    total = 0.0
+    for ms, found, consistent in zip(
+        plan["step_ms"], plan["findings"], plan["consistent"], strict=False
+    ):
+        if ms is None:
+            return None
+        total += ms
+        if found or consistent is False:
+            break
+    return total
+
+
+def rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def java_version() -> str:
+    from java.lang import System
+
+    return str(System.getProperty("java.version"))
+
+
+def run_latency(
+    files: Sequence[str | Path],
+    *,
+    repeats: int = 3,
+    reference_sample: int = 0,
+    paper_sample: int = 20,
+    paper: bool = True,
+    sizes: Sequence[int] = SCENE_SIZES,
+    paper_max_objects: int = 200,
+    tbox_factors: Sequence[int] = (1, 4),
+    progress: Callable[[str, int], Callable[[], None]] | None = None,
+) -> dict[str, Any]:
+    """All figures of ``virf bench latency`` as one dict."""
+
+    def bar(label: str, total: int) -> Callable[[], None]:
+        return progress(label, total) if progress else (lambda: None)
+
+    tbox = load_tbox()
+    fast = make_engine("fast", tbox)
+    reference = make_engine("reference", tbox)
+    vf, vr = Verifier(tbox, fast), Verifier(tbox, reference)
+    cases = dev_cases(files, tbox)
+    if not cases:
+        raise InputError("no task with a reference plan in the given files")
+    synthetic = [synthetic_case(n, tbox) for n in sizes]
+    out: dict[str, Any] = {
+        "machine": {
+            "cpus": os.cpu_count(),
+            "python": platform.python_version(),
+            "platform": platform.platform(),
+            "java": java_version(),
+        },
+        "plans": len(cases),
+    }
+    rss_start = rss_mb()
+
+    # (c) fast engine: a warm-up pass, then the median of `repeats` runs per plan.
+    tick = bar("fast engine: warm-up", len(cases))
+    time_plans(vf, cases, 1, tick)
+    stats_before = dict(fast.stats)  # type: ignore[attr-defined]
+    tick = bar("fast engine", len(cases))
+    fast_ms, fast_reports = time_plans(vf, cases, repeats, tick)
+    calls = fast.stats["calls"] - stats_before.get("calls", 0)  # type: ignore[attr-defined]
+    falls = fast.stats["fallbacks"] - stats_before.get("fallbacks", 0)  # type: ignore[attr-defined]
+    tracemalloc.start()
+    for case in cases[:20]:
+        vf.verify(case.scene, case.plan, case.requirements)
+    fast_heap = tracemalloc.get_traced_memory()[1] / 2**20
+    tracemalloc.stop()
+    rss_fast = rss_mb()
+
+    # (b) reference engine, one run per plan (after a short JVM warm-up).
+    ref_cases = sample(cases, reference_sample)
+    for case in ref_cases[:3]:
+        vr.verify(case.scene, case.plan, case.requirements)
+    tick = bar("reference engine", len(ref_cases))
+    ref_ms, ref_reports = time_plans(vr, ref_cases, 1, tick)
+    rss_ref = rss_mb()
+    index = {c.name: i for i, c in enumerate(cases)}
+    identical = sum(
+        comparable(r) == comparable(fast_reports[index[c.name]])
+        for c, r in zip(ref_cases, ref_reports, strict=True)
+    )
+    out["fast"] = summary(fast_ms) | {
+        "reasoner_calls": calls,
+        "fallbacks": falls,
+        "python_heap_peak_mb": round(fast_heap, 1),
+    }
+    out["reference"] = summary(ref_ms) | {"plans": len(ref_cases)}
+    out["identical_reports"] = {"compared": len(ref_cases), "identical": identical}
+    out["memory"] = {
+        "process_rss_after_tbox_mb": round(rss_start, 1),
+        "process_rss_peak_after_fast_mb": round(rss_fast, 1),
+        "process_rss_peak_after_reference_mb": round(rss_ref, 1),
+        "fast_python_heap_peak_mb": round(fast_heap, 1),
+    }
+    out["fast_p50_ms"] = out["fast"]["p50_ms"]
+    out["fast_p95_ms"] = out["fast"]["p95_ms"]
+    out["reference_p50_ms"] = out["reference"]["p50_ms"]
+    out["reference_p95_ms"] = out["reference"]["p95_ms"]
+
+    # Scaling with scene size: the same 10-step plan.
+    rows = []
+    tick = bar("scene scaling", len(synthetic))
+    for case in synthetic:
+        f_ms, f_rep = time_plans(vf, [case], repeats)
+        r_ms, r_rep = time_plans(vr, [case], 1)
+        rows.append(
+            {
+                "objects": len(case.scene.objects) if hasattr(case.scene, "objects") else None,
+                "requested_objects": int(case.name.split("-")[1]),
+                "steps": len(case.plan),
+                "status": f_rep[0].status,
+                "fast_ms": round(f_ms[0], 2),
+                "reference_ms": round(r_ms[0], 1),
+                "identical": comparable(f_rep[0]) == comparable(r_rep[0]),
+            }
+        )
+        tick()
+    out["scene_scaling"] = rows
+
+    # (a) the paper's method, on a sample of the same plans and the smaller scenes.
+    paper_rows: dict[str, float | None] = {}
+    if paper:
+        from virf.bench.paper import run_paper_baseline
+
+        paper_cases = sample(cases, paper_sample)
+        small = [c for c, n in zip(synthetic, sizes, strict=True) if n <= paper_max_objects]
+        with tempfile.TemporaryDirectory(prefix="virf-paper-") as work:
+            result = run_paper_baseline(
+                tbox,
+                _paper_plans(vf, paper_cases + small),
+                sorted(tbox.vocabulary.uscs),
+                work,
+            )
+        for plan in result["plans"]:
+            paper_rows[plan["id"]] = _paper_plan_ms(plan)
+        per_plan = [paper_rows[c.name] for c in paper_cases]
+        paper_ms = [v for v in per_plan if v is not None]
+        ratios = [
+            v / fast_ms[index[c.name]]
+            for c, v in zip(paper_cases, per_plan, strict=True)
+            if v is not None
+        ]
+        step_ms = [
+            ms for p in result["plans"] for ms in p["step_ms"] if isinstance(ms, (int, float))
+        ]
+        out["paper"] = summary(paper_ms) | {
+            "plans": len(paper_ms),
+            "per_call_p50_ms": round(percentile(step_ms, 50), 1),
+            "owlready2": result.get("owlready2"),
+            "peak_rss_mb": _paper_rss(result),
+        }
+        out["paper_p50_ms"] = out["paper"]["p50_ms"]
+        out["ratio"] = round(statistics.median(ratios), 1) if ratios else None
+        out["ratio_of_medians"] = (
+            round(out["paper"]["p50_ms"] / out["fast"]["p50_ms"], 1) if paper_ms else None
+        )
+        for row in rows:
+            row["paper_ms"] = paper_rows.get(f"synthetic-{row['requested_objects']}")
+    else:
+        out["paper_p50_ms"] = None
+        out["ratio"] = None
+
+    # Scaling with TBox size: x1 and xN (N-1 synthetic copies of the kitchen layer).
+    tb_rows = []
+    base_case = next((c for c in synthetic if c.name == "synthetic-50"), synthetic[0])
+    tick = bar("TBox scaling", len(tbox_factors))
+    with tempfile.TemporaryDirectory(prefix="virf-tbox-") as work:
+        for factor in tbox_factors:
+            extra = synthetic_modules(factor - 1, Path(work)) if factor > 1 else ()
+            big = load_tbox("kitchen", extra)
+            engines: list[Engine] = [make_engine("fast", big), make_engine("reference", big)]
+            vfb, vrb = Verifier(big, engines[0]), Verifier(big, engines[1])
+            scene = build_scene(synthetic_scene(50, big), big.vocabulary, name=base_case.name)
+            case = Case(base_case.name, scene, base_case.plan)
+            time_plans(vfb, [case], 1)
+            f_ms, f_rep = time_plans(vfb, [case], repeats)
+            r_ms, r_rep = time_plans(vrb, [case], 1)
+            tb_rows.append(
+                {
+                    "factor": factor,
+                    "logical_axioms": len(big.logical_axioms()),
+                    "fast_ms": round(f_ms[0], 2),
+                    "reference_ms": round(r_ms[0], 1),
+                    "identical": comparable(f_rep[0]) == comparable(r_rep[0]),
+                }
+            )
+            tick()
+    out["tbox_scaling"] = tb_rows
+    return out
+
+
+def _paper_rss(result: dict[str, Any]) -> float | None:
+    peak = result.get("peak_rss_kb")
+    if isinstance(peak, dict):
+        values = [v for v in peak.values() if isinstance(v, (int, float))]
+        return round(max(values) / 1024, 1) if values else None
+    if isinstance(peak, (int, float)):
+        return round(peak / 1024, 1)
+    return None
