@@ -398,21 +398,30 @@ class FastEngine(Engine):
             self._reference = HermitEngine(self.tbox, self.timeout_s)
         return self._reference
 
-    def program(self, without: frozenset[str]) -> Program:
+    def program(self, without: frozenset[str]) -> tuple[Program, frozenset[str]]:
+        """Rules for the knowledge base minus ``without``: the shared program
+        with those axioms' rules switched off, or, when an axiom shaped facts
+        or the role hierarchy, a program compiled without it."""
+        full = self._programs.get(frozenset())
+        if full is None:
+            full = compile_program(self.fragment, frozenset())
+            self._programs[frozenset()] = full
+        if not without & full.structural:
+            return full, without
         prog = self._programs.get(without)
         if prog is None:
             prog = compile_program(self.fragment, without)
-            if len(self._programs) > 256:
+            if len(self._programs) > 64:
                 self._programs.clear()
             self._programs[without] = prog
-        return prog
+        return prog, frozenset()
 
     def _model(self, facts: list[Fact], without: frozenset[str]) -> tuple[Model, _Eval]:
         if self.fragment.problems:
             raise Fallback("TBox outside the fragment: " + self.fragment.problems[0])
         guarded = self.fragment.sinks | self.fragment.query_defs.keys()
-        prog = self.program(without)
-        m = prog.base()
+        prog, disabled = self.program(without)
+        m = prog.base(disabled)
         for f in facts:
             if f.kind is FactKind.CLOSURE:
                 key = (f.subject, f.predicate)
@@ -434,6 +443,10 @@ class FastEngine(Engine):
                     m.element(member)
         m.run()
         return m, _Eval(m, self._definitions(without), self.fragment.sinks)
+
+    @staticmethod
+    def _checks(m: Model) -> list[Axiom]:
+        return [a for a in m.prog.checks if a.id is None or a.id not in m.disabled]
 
     def _definitions(self, without: frozenset[str]) -> dict[str, Expr]:
         """Query definitions minus the removed ones.  A query class whose
@@ -474,7 +487,7 @@ class FastEngine(Engine):
                 if m.clash is not None:
                     return False
                 if not ev.holds(e, x):
-                    return ev.violations(m.prog.checks) is None
+                    return ev.violations(self._checks(m)) is None
             return False
         finally:
             m.rollback(token)
@@ -495,7 +508,7 @@ class FastEngine(Engine):
             m, ev = self._model(facts, frozenset())
             if m.clash is not None:
                 return Classification(False, {})
-            bad = ev.violations(m.prog.checks)
+            bad = ev.violations(self._checks(m))
             if bad is not None:
                 raise Fallback(f"candidate model violates: {bad}")
             abox = {f.subject for f in facts} | {
@@ -525,7 +538,7 @@ class FastEngine(Engine):
             m, ev = self._model(facts, without)
             if m.clash is not None:
                 return True
-            bad = ev.violations(m.prog.checks)
+            bad = ev.violations(self._checks(m))
             if bad is not None:
                 raise Fallback(f"candidate model violates: {bad}")
             if individual not in m.types:
@@ -545,7 +558,7 @@ class FastEngine(Engine):
             m, ev = self._model(facts, without)
             if m.clash is not None:
                 return False
-            bad = ev.violations(m.prog.checks)
+            bad = ev.violations(self._checks(m))
             if bad is not None:
                 raise Fallback(f"candidate model violates: {bad}")
             return True

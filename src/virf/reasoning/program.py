@@ -30,8 +30,9 @@ def nominal(individual: str) -> str:
 class Program:
     """Rules of one knowledge base (a fragment minus some axioms)."""
 
-    sub: dict[str, list[str]] = field(default_factory=lambda: defaultdict(list))
-    conj: dict[str, list[tuple[tuple[str, ...], str]]] = field(
+    # Every rule entry ends with the id of the axiom it comes from (or None).
+    sub: dict[str, list[tuple[str, str | None]]] = field(default_factory=lambda: defaultdict(list))
+    conj: dict[str, list[tuple[tuple[str, ...], str, str | None]]] = field(
         default_factory=lambda: defaultdict(list)
     )
     # ∃r.A ⊑ B, indexed by role and by filler
@@ -42,13 +43,15 @@ class Program:
         default_factory=lambda: defaultdict(list)
     )
     # A ⊑ ∀r.B, indexed by role and by A
-    all_by_role: dict[Role, list[tuple[str, str]]] = field(
+    all_by_role: dict[Role, list[tuple[str, str, str | None]]] = field(
         default_factory=lambda: defaultdict(list)
     )
-    all_by_class: dict[str, list[tuple[Role, str]]] = field(
+    all_by_class: dict[str, list[tuple[Role, str, str | None]]] = field(
         default_factory=lambda: defaultdict(list)
     )
-    value_head: dict[str, list[tuple[Role, str]]] = field(default_factory=lambda: defaultdict(list))
+    value_head: dict[str, list[tuple[Role, str, str | None]]] = field(
+        default_factory=lambda: defaultdict(list)
+    )
     data_rule: dict[tuple[str, bool], list[str]] = field(default_factory=lambda: defaultdict(list))
     role_up: dict[str, list[Role]] = field(default_factory=dict)  # p -> super roles, not p itself
     chain_first: dict[Role, list[tuple[Role, Role]]] = field(
@@ -59,11 +62,22 @@ class Program:
     )
     functional_data: set[str] = field(default_factory=set)
     # A ⊑ ∃r.M: every A gets its own witness (a restricted chase)
-    some_head: dict[str, list[tuple[Role, str]]] = field(default_factory=lambda: defaultdict(list))
-    data_head: dict[str, list[tuple[str, bool]]] = field(default_factory=lambda: defaultdict(list))
+    some_head: dict[str, list[tuple[Role, str, str | None]]] = field(
+        default_factory=lambda: defaultdict(list)
+    )
+    data_head: dict[str, list[tuple[str, bool, str | None]]] = field(
+        default_factory=lambda: defaultdict(list)
+    )
     facts: list[tuple[Any, ...]] = field(default_factory=list)
     checks: list[Axiom] = field(default_factory=list)
+    # ids of axioms compiled into facts or role tables: removing one of them
+    # needs a fresh compile, not just disabled rules
+    structural: set[str] = field(default_factory=set)
     _aux: dict[Expr, str] = field(default_factory=dict)
+    # The axiom being compiled: rules from right-hand sides carry its id so
+    # that a question "without" that axiom can switch them off.  Rules from
+    # left-hand sides only define auxiliary names and carry no id.
+    _tag: str | None = None
 
     # ------------------------------------------------------------------ compile
     def aux(self, e: Expr) -> str:
@@ -88,7 +102,7 @@ class Program:
             n = self.aux(e)
             body = tuple(sorted(set(p for p in parts if p is not None)))
             for b in body:
-                self.conj[b].append((body, n))
+                self.conj[b].append((body, n, None))
             return n
         if tag == "or":
             parts = [self.left(c) for c in e[1]]
@@ -97,7 +111,7 @@ class Program:
             n = self.aux(e)
             for p in parts:
                 assert p is not None
-                self.sub[p].append(n)
+                self.sub[p].append((n, None))
             return n
         if tag == "some" or (tag == "min" and e[1] == 1):
             role, filler = (e[1], e[2]) if tag == "some" else (e[2], e[3])
@@ -117,7 +131,7 @@ class Program:
         if tag == "oneof":
             n = self.aux(e)
             for i in e[1]:
-                self.sub[nominal(i)].append(n)
+                self.sub[nominal(i)].append((n, None))
             return n
         if tag == "dvalue":
             n = self.aux(e)
@@ -130,25 +144,25 @@ class Program:
         tag = e[0]
         if tag == "C":
             if e[1] != THING:
-                self.sub[n].append(e[1])
+                self.sub[n].append((e[1], self._tag))
             return True
         if tag == "and":
             done = [self.right(n, c) for c in e[1]]
             return all(done)
         if tag == "value":
-            self.value_head[n].append((e[1], e[2]))
+            self.value_head[n].append((e[1], e[2], self._tag))
             return True
         if tag == "all":
             m = self.aux(("all-head", n, e))
-            self.all_by_role[e[1]].append((n, m))
-            self.all_by_class[n].append((e[1], m))
+            self.all_by_role[e[1]].append((n, m, self._tag))
+            self.all_by_class[n].append((e[1], m, self._tag))
             return self.right(m, e[2])
         if tag == "max" and e[1] == 0:
             return self.right(n, ("all", e[2], ("not", e[3])))
         if tag == "some" or (tag == "min" and e[1] == 1):
             role, filler = (e[1], e[2]) if tag == "some" else (e[2], e[3])
             m = self.aux(("some-head", n, e))
-            self.some_head[n].append((role, m))
+            self.some_head[n].append((role, m, self._tag))
             return self.right(m, filler)
         if tag == "not":
             inner = self.left(e[1])
@@ -156,15 +170,18 @@ class Program:
                 return False
             body = tuple(sorted({n, inner}))
             for b in body:
-                self.conj[b].append((body, NOTHING))
+                self.conj[b].append((body, NOTHING, self._tag))
             return True
         if tag == "dvalue":
-            self.data_head[n].append((e[1], e[2]))
+            self.data_head[n].append((e[1], e[2], self._tag))
             return True
         return False  # or, min > 1, oneof on the right: left to the model check
 
     def add(self, ax: Axiom) -> None:
         k, a = ax.kind, ax.args
+        self._tag = ax.id
+        if ax.id is not None and k in _STRUCTURAL:
+            self.structural.add(ax.id)
         complete = True
         if k == "sub":
             n = self.left(a[0])
@@ -184,7 +201,7 @@ class Program:
                         continue
                     body = tuple(sorted({lx, ly}))
                     for b in body:
-                        self.conj[b].append((body, NOTHING))
+                        self.conj[b].append((body, NOTHING, self._tag))
         elif k == "cassert":
             self.facts.append(("element", a[1]))
             complete = self.right(nominal(a[1]), a[0])
@@ -213,6 +230,7 @@ class Program:
             complete = False
         if not complete:
             self.checks.append(ax)
+        self._tag = None
 
     def roles(self, axioms: Iterable[Axiom], properties: Iterable[str]) -> None:
         edges: dict[Role, set[Role]] = defaultdict(set)
@@ -304,12 +322,16 @@ class Program:
                     )
                 )
             self.rtrig[p] = (tuple(self.role_up.get(p, ())), sides[0], sides[1])
-        self._base: Model | None = None
+        self._bases: dict[frozenset[str], Model] = {}
 
-    def base(self) -> Model:
-        """The least model of the TBox's own facts, built once and copied."""
-        if self._base is None:
-            m = Model(self)
+    def base(self, disabled: frozenset[str] = frozenset()) -> Model:
+        """The least model of the TBox's own facts (with the rules of the
+        ``disabled`` axioms switched off), built once and copied."""
+        found = self._bases.get(disabled)
+        if found is None:
+            if len(self._bases) > 64:
+                self._bases.clear()
+            m = Model(self, disabled)
             for fact in self.facts:
                 if fact[0] == "element":
                     m.element(fact[1])
@@ -318,8 +340,8 @@ class Program:
                 elif fact[0] == "data":
                     m.datum(fact[1], fact[2], fact[3])
             m.run()
-            self._base = m
-        return self._base.copy()
+            self._bases[disabled] = found = m
+        return found.copy()
 
 
 def compile_program(frag: Fragment, without: frozenset[str]) -> Program:
@@ -333,6 +355,17 @@ def compile_program(frag: Fragment, without: frozenset[str]) -> Program:
     return prog
 
 
+_STRUCTURAL = {
+    "passert",
+    "dassert",
+    "subprop",
+    "inverse",
+    "eqprop",
+    "trans",
+    "sym",
+    "chain",
+    "dfunc",
+}
 WITNESS_LIMIT = 5000
 
 
@@ -344,8 +377,9 @@ class Model:
     """A finite interpretation grown by the rules.  Changes can be recorded in
     a journal and rolled back (used to try an assertion and undo it)."""
 
-    def __init__(self, prog: Program) -> None:
+    def __init__(self, prog: Program, disabled: frozenset[str] = frozenset()) -> None:
         self.prog = prog
+        self.disabled = disabled
         self.types: dict[str, set[str]] = {}
         self.members: dict[str, set[str]] = defaultdict(set)
         self.succ: dict[str, dict[str, set[str]]] = defaultdict(lambda: defaultdict(set))
@@ -363,6 +397,7 @@ class Model:
         assert not self.queue and self.journal is None
         m = Model.__new__(Model)
         m.prog = self.prog
+        m.disabled = self.disabled
         m.types = {x: set(ts) for x, ts in self.types.items()}
         m.members = defaultdict(set, {a: set(xs) for a, xs in self.members.items()})
         m.succ = defaultdict(lambda: defaultdict(set))
@@ -457,6 +492,7 @@ class Model:
     def run(self) -> None:
         ctrig = self.prog.ctrig
         rtrig = self.prog.rtrig
+        off = self.disabled
         q = self.queue
         types = self.types
         while q:
@@ -474,23 +510,25 @@ class Model:
                     continue
                 subs, conj, value_head, all_by_class, exists_by_filler, some_head, data_head = trig
                 ts = types[x]
-                for b in subs:
-                    if b not in ts:
+                for b, tag in subs:
+                    if b not in ts and tag not in off:
                         self.cls(x, b)
-                for body, head in conj:
-                    if head not in ts and all(c in ts for c in body):
+                for body, head, tag in conj:
+                    if head not in ts and tag not in off and all(c in ts for c in body):
                         self.cls(x, head)
-                for r, i in value_head:
-                    self.role(r, x, i)
-                for r, b in all_by_class:
-                    for y in list(self.rsucc(r, x)):
-                        self.cls(y, b)
+                for r, i, tag in value_head:
+                    if tag not in off:
+                        self.role(r, x, i)
+                for r, b, tag in all_by_class:
+                    if tag not in off:
+                        for y in list(self.rsucc(r, x)):
+                            self.cls(y, b)
                 for r, b in exists_by_filler:
                     for z in list(self.rpred(r, x)):
                         self.cls(z, b)
-                for r, w in some_head:
+                for r, w, tag in some_head:
                     key = (x, r, w)
-                    if key not in self.witness:
+                    if key not in self.witness and tag not in off:
                         if self.fresh > WITNESS_LIMIT:
                             raise ChaseLimit(f"more than {WITNESS_LIMIT} anonymous witnesses")
                         y = self.new_element()
@@ -499,8 +537,9 @@ class Model:
                             self.journal.append(("w", key))
                         self.role(r, x, y)
                         self.cls(y, w)
-                for d, v in data_head:
-                    self.datum(x, d, v)
+                for d, v, tag in data_head:
+                    if tag not in off:
+                        self.datum(x, d, v)
             elif item[0] == "r":
                 _, p, x, y = item
                 if self.closures:
@@ -522,8 +561,8 @@ class Model:
                                 self.cls(a, head)
                     if all_r:
                         ta = types[a]
-                        for cls_, head in all_r:
-                            if cls_ in ta:
+                        for cls_, head, tag in all_r:
+                            if cls_ in ta and tag not in off:
                                 self.cls(b, head)
                     for r2, r3 in chain1:
                         for c in list(self.rsucc(r2, b)):
