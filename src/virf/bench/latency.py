@@ -42,17 +42,20 @@ from virf.verify.requirements import Requirement, Unreadable, parse_requirement,
 from virf.verify.verifier import Verifier
 
 SCENE_SIZES = (20, 50, 200, 1000)
-SYNTHETIC_STEPS = (
+PLAN_LENGTHS = (10, 20, 40, 80)
+# Ten safe steps that end where they started, so a plan of any multiple of ten
+# steps is the cycle repeated.
+SYNTHETIC_CYCLE = (
     "find Apple_1",
     "pick Apple_1",
     "find Fridge_1",
     "open Fridge_1",
     "put Fridge_1",
+    "find Apple_1",
+    "pick Apple_1",
     "close Fridge_1",
-    "find Mug_1",
-    "pick Mug_1",
-    "find DiningTable_1",
-    "put DiningTable_1",
+    "find CounterTop_1",
+    "put CounterTop_1",
 )
 # Harmless things to fill a kitchen with (only types the catalogue knows are used).
 FILLER = [
@@ -170,10 +173,13 @@ def synthetic_scene(objects: int, tbox: TBox) -> dict[str, Any]:
     }
 
 
-def synthetic_case(objects: int, tbox: TBox) -> Case:
+def synthetic_case(objects: int, tbox: TBox, steps: int = 10) -> Case:
+    """The synthetic kitchen with the ten-step cycle repeated to ``steps`` steps."""
     vocab = tbox.vocabulary
     scene = build_scene(synthetic_scene(objects, tbox), vocab, name=f"synthetic-{objects}")
-    return Case(f"synthetic-{objects}", scene, parse_plan(list(SYNTHETIC_STEPS)))
+    cycles = max(1, steps // len(SYNTHETIC_CYCLE))
+    name = f"synthetic-{objects}" + (f"x{steps}" if steps != len(SYNTHETIC_CYCLE) else "")
+    return Case(name, scene, parse_plan(list(SYNTHETIC_CYCLE) * cycles))
 
 
 def synthetic_modules(copies: int, folder: Path) -> tuple[str, ...]:
@@ -353,25 +359,36 @@ def run_latency(
     out["reference_p50_ms"] = out["reference"]["p50_ms"]
     out["reference_p95_ms"] = out["reference"]["p95_ms"]
 
-    # Scaling with scene size: the same 10-step plan.
-    rows = []
-    tick = bar("scene scaling", len(synthetic))
-    for case in synthetic:
+    # Scaling with scene size (the 10-step plan) and plan length (50 objects).
+    # The reference engine is also timed with two workers (parallel steps).
+    vr2 = Verifier(tbox, reference.fork(), workers=2)
+
+    def scaling_row(case: Case) -> dict[str, Any]:
         f_ms, f_rep = time_plans(vf, [case], repeats)
         r_ms, r_rep = time_plans(vr, [case], 1)
-        rows.append(
-            {
-                "objects": len(case.scene.objects) if hasattr(case.scene, "objects") else None,
-                "requested_objects": int(case.name.split("-")[1]),
-                "steps": len(case.plan),
-                "status": f_rep[0].status,
-                "fast_ms": round(f_ms[0], 2),
-                "reference_ms": round(r_ms[0], 1),
-                "identical": comparable(f_rep[0]) == comparable(r_rep[0]),
-            }
-        )
+        p_ms, p_rep = time_plans(vr2, [case], 1)
+        return {
+            "objects": len(case.scene.objects),
+            "steps": len(case.plan),
+            "status": f_rep[0].status,
+            "fast_ms": round(f_ms[0], 2),
+            "reference_ms": round(r_ms[0], 1),
+            "reference_2_workers_ms": round(p_ms[0], 1),
+            "identical": comparable(f_rep[0]) == comparable(r_rep[0]) == comparable(p_rep[0]),
+        }
+
+    rows = []
+    tick = bar("scene scaling", len(synthetic))
+    for n, case in zip(sizes, synthetic, strict=True):
+        rows.append(scaling_row(case) | {"requested_objects": n})
         tick()
     out["scene_scaling"] = rows
+    lengths = []
+    tick = bar("plan-length scaling", len(PLAN_LENGTHS))
+    for steps in PLAN_LENGTHS:
+        lengths.append(scaling_row(synthetic_case(50, tbox, steps)))
+        tick()
+    out["length_scaling"] = lengths
 
     # (a) the paper's method, on a sample of the same plans and the smaller scenes.
     paper_rows: dict[str, float | None] = {}
