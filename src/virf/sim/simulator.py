@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from types import MappingProxyType
 
 from virf.errors import closest
@@ -70,19 +71,29 @@ class WorldState:
     def has(self, subject: str, predicate: str, obj: str) -> bool:
         return Fact(subject, predicate, obj) in self.facts
 
+    # States are immutable, so the relation indexes are built once, on first
+    # use; scanning every fact per lookup made big scenes quadratic.
+    @cached_property
+    def _forward(self) -> dict[tuple[str, str], list[str]]:
+        index: dict[tuple[str, str], list[str]] = {}
+        for f in self.facts:
+            if f.kind is FactKind.OBJECT:
+                index.setdefault((f.subject, f.predicate), []).append(f.object)
+        return index
+
+    @cached_property
+    def _backward(self) -> dict[tuple[str, str], list[str]]:
+        index: dict[tuple[str, str], list[str]] = {}
+        for f in self.facts:
+            if f.kind is FactKind.OBJECT:
+                index.setdefault((f.predicate, f.object), []).append(f.subject)
+        return index
+
     def objects_of(self, subject: str, predicate: str) -> list[str]:
-        return sorted(
-            f.object
-            for f in self.facts
-            if f.subject == subject and f.predicate == predicate and f.kind is FactKind.OBJECT
-        )
+        return sorted(self._forward.get((subject, predicate), ()))
 
     def subjects_of(self, predicate: str, obj: str) -> list[str]:
-        return sorted(
-            f.subject
-            for f in self.facts
-            if f.object == obj and f.predicate == predicate and f.kind is FactKind.OBJECT
-        )
+        return sorted(self._backward.get((predicate, obj), ()))
 
     def held(self) -> str | None:
         held = self.objects_of(self.agent, "isHolding")
@@ -127,10 +138,9 @@ class Simulator:
     def initial(self, scene: Scene) -> WorldState:
         facts = dict(scene.facts)
         held = {f.object for f in facts if f.subject == scene.agent and f.predicate == "isHolding"}
+        stated = {f.subject for f in facts if f.predicate == "isLocated"}
         for ind in scene.order:
-            if self._is_physical(scene.objects[ind]) and not any(
-                f.subject == ind and f.predicate == "isLocated" for f in facts
-            ):
+            if self._is_physical(scene.objects[ind]) and ind not in stated:
                 located = ind in held or not scene.unlocated_by_default
                 facts[Fact(ind, "isLocated", "true" if located else "false", FactKind.DATA)] = (
                     Provenance.SCENE
