@@ -38,6 +38,8 @@ def render_markdown(
     summary: dict[str, Any],
     corrections: dict[tuple[str, int], dict[str, Any]],
     command: str,
+    engine: str = "fast",
+    explain: bool = False,
 ) -> str:
     out: list[str] = [
         "# SafeAgentBench: hazard detection by the Logic Tutor",
@@ -57,8 +59,13 @@ def render_markdown(
         + f". Label corrections applied: {summary['corrections_applied']}.",
         "",
         f"Time per verified task: mean {summary['time_ms_mean']} ms, p50 {summary['time_ms_p50']} ms, "
-        f"p95 {summary['time_ms_p95']} ms (HermiT, fast mode without minimal explanations, "
-        f"Python {platform.python_version()}, {platform.machine()}).",
+        f"p95 {summary['time_ms_p95']} ms (engine {engine}, "
+        + (
+            "with minimal explanations, "
+            if explain
+            else "verdicts only, without minimal explanations, "
+        )
+        + f"Python {platform.python_version()}, {platform.machine()}).",
         "",
         f"Step-bounded requirements: {summary['requirements_parsed']} of {summary['requirements']} parsed.",
         "",

@@ -381,7 +381,7 @@ def bench_safeagentbench(
     if markdown:
         # The command as typed, so the report says how to regenerate it.
         command = " ".join(["virf", *sys.argv[1:]])
-        text = render_markdown(results, summary, corr, command)
+        text = render_markdown(results, summary, corr, command, tutor.engine.name, explain)
         tmp = markdown.with_name(markdown.name + ".tmp")
         try:
             tmp.write_text(text, encoding="utf-8")
@@ -423,6 +423,16 @@ def bench_latency(
     sizes: Annotated[
         str, typer.Option(help="Synthetic scene sizes (objects), comma-separated.")
     ] = "20,50,200,1000",
+    lengths: Annotated[
+        str, typer.Option(help="Synthetic plan lengths (multiples of 10 steps), comma-separated.")
+    ] = "10,20,40,80",
+    tbox_factors: Annotated[
+        str,
+        typer.Option(help="TBox sizes to time, as multiples of the kitchen TBox, comma-separated."),
+    ] = "1,4",
+    markdown: Annotated[
+        Path | None, typer.Option(help="Also write the figures as Markdown (docs/performance.md).")
+    ] = None,
 ) -> None:
     """Time the paper's method, the reference engine and the fast engine on the same plans."""
     from rich.console import Console
@@ -440,6 +450,22 @@ def bench_latency(
             raise VirfError(f"--sizes '{sizes}': give whole numbers, e.g. 20,50,200") from None
         if not size_list or min(size_list) < 10:
             raise VirfError(f"--sizes '{sizes}': every size must be at least 10 objects")
+        try:
+            factors = [int(x) for x in tbox_factors.split(",") if x.strip()]
+        except ValueError:
+            raise VirfError(
+                f"--tbox-factors '{tbox_factors}': give whole numbers, e.g. 1,4"
+            ) from None
+        if not factors or min(factors) < 1 or max(factors) > 16:
+            raise VirfError(f"--tbox-factors '{tbox_factors}': each factor must be 1 to 16")
+        try:
+            length_list = [int(x) for x in lengths.split(",") if x.strip()]
+        except ValueError:
+            raise VirfError(f"--lengths '{lengths}': give whole numbers, e.g. 10,20,40") from None
+        if not length_list or any(n < 10 or n % 10 for n in length_list):
+            raise VirfError(f"--lengths '{lengths}': each length must be a multiple of 10 steps")
+        if markdown is not None:
+            _check_writable(markdown)
         err = Console(stderr=True)
         with Progress(
             TextColumn("[progress.description]{task.description}"),
@@ -463,6 +489,8 @@ def bench_latency(
                 paper=not no_paper,
                 sizes=size_list,
                 paper_max_objects=paper_max_objects,
+                tbox_factors=factors,
+                lengths=length_list,
                 progress=bar,
             )
     except EnvironmentProblem as exc:
@@ -473,6 +501,10 @@ def bench_latency(
         typer.echo(json.dumps(figures, sort_keys=True))
     else:
         _print_latency(figures)
+    if markdown:
+        from virf.bench.latency import render_markdown
+
+        _write_atomically(markdown, render_markdown(figures, " ".join(["virf", *sys.argv[1:]])))
 
 
 def _print_latency(fig: dict[str, Any]) -> None:
@@ -571,6 +603,18 @@ def _print_latency(fig: dict[str, Any]) -> None:
             "yes" if row["identical"] else "NO",
         )
     console.print(tb)
+
+
+def _write_atomically(path: Path, text: str) -> None:
+    """No half-written file on failure."""
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        tmp.replace(path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise _fail(f"cannot write {path}: {exc.strerror}") from None
+    typer.echo(f"wrote {path}", err=True)
 
 
 def _check_writable(path: Path) -> None:

@@ -1,0 +1,136 @@
+"""``virf bench latency``: its inputs are valid, its figures are complete, bad input is refused.
+
+Timings themselves are not asserted (they belong to the benchmark, not to
+unit tests); the synthetic inputs and the shape of the output are.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from conftest import ROOT
+
+from virf.api import LogicTutor
+from virf.bench.latency import (
+    SYNTHETIC_CYCLE,
+    render_markdown,
+    sample,
+    synthetic_case,
+    synthetic_modules,
+)
+from virf.kb.tbox import load_tbox
+from virf.reasoning.fast import fragment_of
+
+SAB = ROOT.parent / "shared" / "benchmarks" / "safeagentbench"
+
+
+@pytest.mark.parametrize(("objects", "steps"), [(20, 10), (50, 10), (50, 30), (200, 10)])
+def test_synthetic_plans_run_safely_to_the_end(tutor: LogicTutor, objects: int, steps: int) -> None:
+    case = synthetic_case(objects, tutor.tbox, steps)
+    assert len(case.scene.objects) == objects + 1  # and the robot
+    assert len(case.plan) == steps
+    report = tutor.verifier.verify(case.scene, case.plan)
+    assert report.status == "SAFE", report.reason
+    assert all(t.outcome == "ok" for t in report.trace)
+
+
+def test_the_cycle_returns_to_the_same_world(tutor: LogicTutor) -> None:
+    """After the first pass (which also marks objects found and near), every
+    pass of the cycle ends in the same state, so longer plans repeat equal work."""
+    case = synthetic_case(20, tutor.tbox, 30)
+    states, _, stop = tutor.verifier._simulate(case.scene, case.plan)
+    n = len(SYNTHETIC_CYCLE)
+    assert stop is None and len(states) == 3 * n + 1
+    assert dict(states[n].facts) == dict(states[2 * n].facts) == dict(states[3 * n].facts)
+
+
+def test_synthetic_domain_modules_load_and_stay_in_the_fragment(tmp_path: Path) -> None:
+    base = load_tbox()
+    extra = synthetic_modules(1, tmp_path)
+    bigger = load_tbox("kitchen", extra)
+    assert len(bigger.logical_axioms()) > 1.5 * len(base.logical_axioms())
+    assert fragment_of(bigger).exact
+    assert any(c.startswith("Syn1_") for c in bigger.vocabulary.classes)
+
+
+def test_sample_spreads_evenly() -> None:
+    items = list(range(10))
+    assert sample(items, 0) == items  # type: ignore[arg-type]
+    assert sample(items, 5) == [0, 2, 4, 6, 8]  # type: ignore[arg-type]
+    assert sample(items, 50) == items  # type: ignore[arg-type]
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "virf.cli.main", "bench", "latency", *args],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--sizes", "abc"], "--sizes 'abc'"),
+        (["--sizes", "5"], "at least 10 objects"),
+        (["--lengths", "15"], "multiple of 10"),
+        (["--tbox-factors", "0"], "1 to 16"),
+    ],
+)
+def test_bad_options_give_one_line(args: list[str], message: str) -> None:
+    tasks = SAB / "unsafe_detailed.jsonl"
+    result = _cli(str(tasks), *args)
+    assert result.returncode == 2
+    assert result.stderr.count("\n") == 1 and message in result.stderr
+    assert "Traceback" not in result.stderr
+
+
+def test_missing_file_gives_one_line(tmp_path: Path) -> None:
+    result = _cli(str(tmp_path / "nope.jsonl"), "--no-paper")
+    assert result.returncode == 2
+    assert result.stderr.startswith("error: no such file")
+
+
+def test_a_small_run_prints_every_figure(tmp_path: Path) -> None:
+    if not SAB.is_dir():
+        pytest.skip(f"SafeAgentBench dev split not found at {SAB}")
+    tasks = tmp_path / "tasks.jsonl"
+    lines = (SAB / "unsafe_detailed.jsonl").read_text(encoding="utf-8").splitlines()[:3]
+    tasks.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    md = tmp_path / "performance.md"
+    result = _cli(
+        str(tasks),
+        "--json",
+        "--no-paper",
+        "--sizes",
+        "10,12",
+        "--lengths",
+        "10,20",
+        "--tbox-factors",
+        "1",
+        "--repeats",
+        "1",
+        "--markdown",
+        str(md),
+    )
+    assert result.returncode == 0, result.stderr
+    fig = json.loads(result.stdout)
+    for key in ("ratio", "fast_p50_ms", "fast_p95_ms", "reference_p50_ms", "paper_p50_ms"):
+        assert key in fig
+    assert fig["plans"] == 3
+    assert fig["identical_reports"] == {"compared": 3, "identical": 3}
+    assert fig["fast"]["fallbacks"] == 0
+    assert [r["requested_objects"] for r in fig["scene_scaling"]] == [10, 12]
+    assert [r["steps"] for r in fig["length_scaling"]] == [10, 20]
+    assert all(r["identical"] for r in fig["scene_scaling"] + fig["length_scaling"])
+    text = md.read_text(encoding="utf-8")
+    assert "## Scaling with plan length" in text and "| x1 |" in text
+    assert "| (c) fast engine | 3 |" in text
+    assert render_markdown(fig, "virf bench latency X").startswith("# Performance")
