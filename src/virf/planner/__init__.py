@@ -1,0 +1,34 @@
+"""The apprentice side of VIRF: LLM planner clients, offline planners and the run log."""
+
+from __future__ import annotations
+
+from virf.planner.apprentices import (
+    Apprentice,
+    Proposal,
+    ProposalRequest,
+    ReplayApprentice,
+    ScriptedApprentice,
+    export_replay,
+    load_replay,
+)
+from virf.planner.clients import ClientSettings, Endpoint, OpenAIApprentice
+from virf.planner.factory import make_apprentice
+from virf.planner.runlog import MIGRATIONS, CallRecord, Migration, RunLog
+
+__all__ = [
+    "MIGRATIONS",
+    "Apprentice",
+    "CallRecord",
+    "ClientSettings",
+    "Endpoint",
+    "Migration",
+    "OpenAIApprentice",
+    "Proposal",
+    "ProposalRequest",
+    "ReplayApprentice",
+    "RunLog",
+    "ScriptedApprentice",
+    "export_replay",
+    "load_replay",
+    "make_apprentice",
+]

@@ -1,0 +1,452 @@
+"""The apprentice interface the refinement loop calls, and the offline apprentices.
+
+An apprentice turns a chat (the loop's prompt messages) into one plan proposal.
+The loop never sees transport details: retries, re-asks and run logging happen
+behind ``propose``.  A failed proposal (the model answered nothing usable) is a
+``Proposal`` with ``ok=False`` and ``text=None``, so it can never be mistaken
+for a plan; problems the loop cannot work around (no server, a rejected key, a
+bad replay file) raise a ``VirfError`` with one line.
+
+Offline apprentices:
+
+* ``ReplayApprentice`` re-serves proposals recorded in a JSONL file, one object
+  per line, so a recorded LLM run can be re-scored exactly::
+
+      {"task_id": "t1", "iteration": 1, "method": "virf", "text": "find Pot\\npick Pot"}
+
+  ``method`` is optional (an entry without one serves every method); ``ok``,
+  ``reason``, ``prompt_tokens``, ``completion_tokens``, ``latency_ms`` and
+  ``attempts`` are optional and default to what the text implies.
+  ``export_replay`` writes such a file from a run log.
+* ``ScriptedApprentice`` serves a fixed queue of replies, for tests.
+"""
+
+from __future__ import annotations
+
+import json
+from abc import ABC, abstractmethod
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Any, Final, Self
+
+from virf.errors import InputError, clip, read_input_file
+from virf.planner.runlog import CallRecord, RunLog
+
+ROLES: Final = ("system", "user", "assistant")
+
+
+@dataclass(frozen=True)
+class Proposal:
+    """One answer of the apprentice to one request of the loop.
+
+    ``text`` is the model's reply when ``ok``; a failed proposal carries
+    ``None`` so no caller can parse it as a plan by accident.  Token counts are
+    ``None`` when the server did not report them (they are summed over re-asks).
+    ``latency_ms`` is the wall time of every HTTP attempt; ``attempts`` counts
+    them, SDK retries and re-asks included.
+    """
+
+    text: str | None
+    ok: bool
+    reason: str = ""
+    prompt_tokens: int | None = None
+    completion_tokens: int | None = None
+    latency_ms: float = 0.0
+    attempts: int = 1
+
+    def __post_init__(self) -> None:
+        # The invariant is what makes "never returned as a plan" checkable.
+        if self.ok and (self.text is None or not self.text.strip()):
+            raise ValueError("an ok proposal needs non-empty text")
+        if not self.ok and self.text is not None:
+            raise ValueError("a failed proposal carries no text")
+        if not self.ok and not self.reason:
+            raise ValueError("a failed proposal needs a reason")
+
+    @classmethod
+    def accepted(cls, text: str, **usage: Any) -> Proposal:
+        return cls(text=text, ok=True, reason="", **usage)
+
+    @classmethod
+    def failed(cls, reason: str, **usage: Any) -> Proposal:
+        return cls(text=None, ok=False, reason=reason, **usage)
+
+
+@dataclass(frozen=True)
+class ProposalRequest:
+    """What the loop asked for: the chat and where in the run it belongs."""
+
+    messages: tuple[tuple[str, str], ...]
+    task_id: str
+    iteration: int
+    method: str
+
+    def as_messages(self) -> list[dict[str, str]]:
+        return [{"role": role, "content": content} for role, content in self.messages]
+
+
+def check_request(
+    messages: Sequence[Mapping[str, str]], task_id: str, iteration: int, method: str
+) -> ProposalRequest:
+    """Validate the loop's arguments once, for every apprentice alike."""
+    if not isinstance(task_id, str) or not task_id:
+        raise InputError("task_id must be a non-empty string")
+    if isinstance(iteration, bool) or not isinstance(iteration, int) or iteration < 0:
+        raise InputError(f"iteration must be an integer >= 0, got {iteration!r}")
+    if not isinstance(method, str) or not method:
+        raise InputError("method must be a non-empty string (the name of the planning method)")
+    if not messages:
+        raise InputError(f"no messages to send for task {task_id} iteration {iteration}")
+    pairs: list[tuple[str, str]] = []
+    for n, msg in enumerate(messages, start=1):
+        role, content = msg.get("role"), msg.get("content")
+        if role not in ROLES:
+            raise InputError(f"message {n} has role {role!r}; choose one of {', '.join(ROLES)}")
+        if not isinstance(content, str):
+            raise InputError(f"message {n} ({role}) has no text 'content'")
+        extra = sorted(set(msg) - {"role", "content"})
+        if extra:
+            raise InputError(
+                f"message {n} has unsupported keys {', '.join(extra)}; use role and content"
+            )
+        pairs.append((role, content))
+    return ProposalRequest(tuple(pairs), task_id, iteration, method)
+
+
+def empty_reason(text: str | None) -> str | None:
+    """Why a reply cannot be a plan, or ``None`` when it can be one."""
+    if text is None:
+        return "the reply had no text content"
+    if not text.strip():
+        return "the reply was empty" if not text else "the reply was only whitespace"
+    return None
+
+
+class Apprentice(ABC):
+    """An LLM task planner, as the refinement loop sees it.
+
+    Implementations log every request and reply to ``run_log`` when one is
+    given, so online and offline runs leave the same trail.
+    """
+
+    def __init__(self, *, run_log: RunLog | None = None) -> None:
+        self.run_log = run_log
+
+    @property
+    @abstractmethod
+    def label(self) -> str:
+        """The spec this apprentice was built from, e.g. ``openai:gpt-4o``; logged."""
+
+    @property
+    def model(self) -> str | None:
+        """The model name sent to a server, when there is one."""
+        return None
+
+    def propose(
+        self,
+        messages: Sequence[Mapping[str, str]],
+        *,
+        task_id: str,
+        iteration: int,
+        method: str,
+    ) -> Proposal:
+        """Ask for one plan.  Never returns an empty or malformed reply as ``ok``."""
+        return self._propose(check_request(messages, task_id, iteration, method))
+
+    @abstractmethod
+    def _propose(self, request: ProposalRequest) -> Proposal: ...
+
+    def _log(
+        self,
+        request: ProposalRequest,
+        *,
+        reply: str | None,
+        ok: bool,
+        reason: str,
+        prompt_tokens: int | None,
+        completion_tokens: int | None,
+        latency_ms: float,
+        attempts: int,
+        ask: int = 1,
+    ) -> None:
+        if self.run_log is None:
+            return
+        self.run_log.log_call(
+            method=request.method,
+            task_id=request.task_id,
+            iteration=request.iteration,
+            ask=ask,
+            apprentice=self.label,
+            model=self.model,
+            messages=request.as_messages(),
+            reply=reply,
+            ok=ok,
+            reason=reason,
+            prompt_tokens=prompt_tokens,
+            completion_tokens=completion_tokens,
+            latency_ms=latency_ms,
+            attempts=attempts,
+        )
+
+    def _log_proposal(
+        self, request: ProposalRequest, proposal: Proposal, reply: str | None
+    ) -> None:
+        self._log(
+            request,
+            reply=reply,
+            ok=proposal.ok,
+            reason=proposal.reason,
+            prompt_tokens=proposal.prompt_tokens,
+            completion_tokens=proposal.completion_tokens,
+            latency_ms=proposal.latency_ms,
+            attempts=proposal.attempts,
+        )
+
+    def close(self) -> None:
+        """Release network resources; offline apprentices hold none."""
+        return None
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+# ---------------------------------------------------------------------------
+# Replay
+
+_ReplayKey = tuple[str, int, str | None]
+_REPLAY_FIELDS: Final = frozenset(
+    {
+        "task_id",
+        "iteration",
+        "method",
+        "text",
+        "ok",
+        "reason",
+        "prompt_tokens",
+        "completion_tokens",
+        "latency_ms",
+        "attempts",
+    }
+)
+
+
+def _optional_int(entry: Mapping[str, Any], name: str, where: str) -> int | None:
+    value = entry.get(name)
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise InputError(f"{where}: '{name}' must be an integer >= 0")
+    return value
+
+
+def _replay_entry(entry: Any, where: str) -> tuple[_ReplayKey, Proposal]:
+    if not isinstance(entry, dict):
+        raise InputError(f"{where} is not a JSON object")
+    unknown = sorted(set(entry) - _REPLAY_FIELDS)
+    if unknown:
+        raise InputError(
+            f"{where} has unknown field '{clip(unknown[0])}'; fields are {', '.join(sorted(_REPLAY_FIELDS))}"
+        )
+    task_id, iteration, method = entry.get("task_id"), entry.get("iteration"), entry.get("method")
+    if not isinstance(task_id, str) or not task_id:
+        raise InputError(f"{where} needs a string 'task_id'")
+    if isinstance(iteration, bool) or not isinstance(iteration, int) or iteration < 0:
+        raise InputError(f"{where} needs an integer 'iteration' >= 0")
+    if method is not None and (not isinstance(method, str) or not method):
+        raise InputError(f"{where}: 'method' must be a non-empty string when given")
+    text = entry.get("text")
+    if text is not None and not isinstance(text, str):
+        raise InputError(f"{where}: 'text' must be a string or null")
+    ok = entry.get("ok")
+    if ok is not None and not isinstance(ok, bool):
+        raise InputError(f"{where}: 'ok' must be true or false")
+    reason = entry.get("reason") or ""
+    if not isinstance(reason, str):
+        raise InputError(f"{where}: 'reason' must be a string")
+    latency = entry.get("latency_ms", 0.0)
+    if isinstance(latency, bool) or not isinstance(latency, int | float) or latency < 0:
+        raise InputError(f"{where}: 'latency_ms' must be a number >= 0")
+    usage: dict[str, Any] = {
+        "prompt_tokens": _optional_int(entry, "prompt_tokens", where),
+        "completion_tokens": _optional_int(entry, "completion_tokens", where),
+        "latency_ms": float(latency),
+        "attempts": _optional_int(entry, "attempts", where) or 1,
+    }
+    problem = empty_reason(text)
+    if ok is True and problem is not None:
+        raise InputError(f"{where} says ok but {problem}")
+    if ok is False or problem is not None:
+        # A recorded failure replays as the same failure, so re-scoring is exact.
+        proposal = Proposal.failed(reason or problem or "recorded as failed", **usage)
+    else:
+        assert text is not None
+        proposal = Proposal.accepted(text, **usage)
+    return (task_id, iteration, method), proposal
+
+
+def load_replay(path: str | Path) -> dict[_ReplayKey, Proposal]:
+    """Read a replay JSONL file; every malformed line is a one-line input error."""
+    source = read_input_file(path, "replay")
+    entries: dict[_ReplayKey, Proposal] = {}
+    for lineno, line in enumerate(source.splitlines(), start=1):
+        if not line.strip():
+            continue
+        where = f"replay file {path} line {lineno}"
+        try:
+            raw = json.loads(line)
+        except json.JSONDecodeError as exc:
+            raise InputError(f"{where} is not JSON: {exc.msg}") from None
+        key, proposal = _replay_entry(raw, where)
+        if key in entries:
+            task_id, iteration, method = key
+            also = f" method {method}" if method else ""
+            raise InputError(f"{where} repeats task {task_id} iteration {iteration}{also}")
+        entries[key] = proposal
+    if not entries:
+        raise InputError(f"replay file {path} holds no proposals")
+    return entries
+
+
+class ReplayApprentice(Apprentice):
+    """Serves recorded proposals keyed by (task, iteration[, method])."""
+
+    def __init__(self, path: str | Path, *, run_log: RunLog | None = None) -> None:
+        super().__init__(run_log=run_log)
+        self.path = Path(path)
+        self._entries = load_replay(self.path)
+        self._uses_methods = any(method is not None for _, _, method in self._entries)
+
+    @property
+    def label(self) -> str:
+        return f"replay:{self.path}"
+
+    def _propose(self, request: ProposalRequest) -> Proposal:
+        found = self._entries.get((request.task_id, request.iteration, request.method))
+        if found is None:
+            found = self._entries.get((request.task_id, request.iteration, None))
+        if found is None:
+            also = f" method {request.method}" if self._uses_methods else ""
+            raise InputError(
+                f"replay file {self.path} has no proposal for task {request.task_id} "
+                f"iteration {request.iteration}{also}"
+            )
+        self._log_proposal(request, found, found.text)
+        return found
+
+
+def export_replay(run_log: RunLog, run_id: str, path: str | Path) -> int:
+    """Write the proposals of one logged run as a replay file; returns how many.
+
+    A re-asked proposal spans several logged calls; the last call carries the
+    outcome, and the usage of all of them is summed, as ``propose`` reported it.
+    """
+    grouped: dict[tuple[str, int, str], list[CallRecord]] = {}
+    order: list[tuple[str, int, str]] = []
+    for call in run_log.calls(run_id=run_id):
+        key = (call.task_id, call.iteration, call.method)
+        if call.ask == 1:
+            if key in grouped:
+                raise InputError(
+                    f"run {run_id} asked twice for task {call.task_id} iteration "
+                    f"{call.iteration} method {call.method}; a replay file keeps one proposal each"
+                )
+            grouped[key] = []
+            order.append(key)
+        elif key not in grouped:
+            raise InputError(f"run log call {call.id} is a re-ask without a first ask")
+        grouped[key].append(call)
+    if not order:
+        raise InputError(f"run log {run_log.path} has no calls for run '{run_id}'")
+    lines = []
+    for key in order:
+        calls = grouped[key]
+        last = calls[-1]
+        lines.append(
+            json.dumps(
+                {
+                    "task_id": key[0],
+                    "iteration": key[1],
+                    "method": key[2],
+                    "text": last.reply if last.ok else None,
+                    "ok": last.ok,
+                    "reason": last.reason,
+                    "prompt_tokens": sum_known(c.prompt_tokens for c in calls),
+                    "completion_tokens": sum_known(c.completion_tokens for c in calls),
+                    "latency_ms": round(sum(c.latency_ms for c in calls), 3),
+                    "attempts": sum(c.attempts for c in calls),
+                },
+                ensure_ascii=False,
+                sort_keys=True,
+            )
+        )
+    Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return len(lines)
+
+
+def sum_known(values: Iterable[int | None]) -> int | None:
+    """A total only when every part is known; a partial sum would understate usage."""
+    total = 0
+    for value in values:
+        if value is None:
+            return None
+        total += value
+    return total
+
+
+# ---------------------------------------------------------------------------
+# Scripted
+
+
+class ScriptedApprentice(Apprentice):
+    """Answers each ``propose`` with the next scripted reply, for tests.
+
+    A string reply is an ok proposal unless it is empty or whitespace (then it
+    fails like an empty server reply, without a re-ask: one reply per call); a
+    ``Proposal`` is returned as given.  ``requests`` records what was asked.
+    """
+
+    def __init__(self, replies: Iterable[str | Proposal], *, run_log: RunLog | None = None) -> None:
+        super().__init__(run_log=run_log)
+        self.replies = list(replies)
+        for n, reply in enumerate(self.replies, start=1):
+            if not isinstance(reply, str | Proposal):
+                raise InputError(f"scripted reply {n} must be a string or a Proposal")
+        self.requests: list[ProposalRequest] = []
+        self._served = 0
+
+    @property
+    def label(self) -> str:
+        return "scripted"
+
+    @property
+    def remaining(self) -> int:
+        return len(self.replies) - self._served
+
+    def _propose(self, request: ProposalRequest) -> Proposal:
+        if self._served >= len(self.replies):
+            raise InputError(
+                f"no more scripted replies: all {len(self.replies)} were used before "
+                f"task {request.task_id} iteration {request.iteration}"
+            )
+        reply = self.replies[self._served]
+        self._served += 1
+        self.requests.append(request)
+        if isinstance(reply, Proposal):
+            proposal = reply
+            raw = reply.text
+        else:
+            problem = empty_reason(reply)
+            proposal = Proposal.failed(problem) if problem else Proposal.accepted(reply)
+            raw = reply
+        self._log_proposal(request, proposal, raw)
+        return proposal

@@ -1,0 +1,56 @@
+"""Build an apprentice from the ``--planner`` spec the user typed."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from typing import Any, Final
+
+from virf.errors import InputError, clip
+from virf.planner.apprentices import Apprentice, ReplayApprentice, ScriptedApprentice
+from virf.planner.clients import ClientSettings, OpenAIApprentice
+from virf.planner.runlog import RunLog
+
+SPEC_FORMS: Final = "openai:MODEL, replay:FILE or scripted"
+_CLIENT_FIELDS: Final = frozenset(f.name for f in dataclasses.fields(ClientSettings)) - {"model"}
+
+
+def make_apprentice(
+    spec: str,
+    *,
+    run_log: RunLog | None = None,
+    environ: Mapping[str, str] | None = None,
+    **settings: Any,
+) -> Apprentice:
+    """``openai:MODEL``, ``replay:FILE`` or ``scripted`` -> an apprentice.
+
+    ``settings`` are ``ClientSettings`` fields (``base_url``, ``temperature``…);
+    a ``None`` value means "not given", so a command line can pass its options
+    through unchanged.  Offline apprentices ignore client settings, because a
+    replayed or scripted run must not depend on them.  ``scripted`` takes
+    ``replies=[...]``.
+    """
+    given = {k: v for k, v in settings.items() if v is not None}
+    unknown = sorted(set(given) - _CLIENT_FIELDS - {"replies"})
+    if unknown:
+        raise InputError(
+            f"unknown planner setting '{clip(unknown[0])}'; "
+            f"choose from {', '.join(sorted(_CLIENT_FIELDS))}"
+        )
+    kind, sep, rest = spec.strip().partition(":")
+    if kind == "openai" and sep:
+        if "replies" in given:
+            raise InputError("'replies' is a setting of the scripted planner only")
+        model = rest.strip()
+        if not model:
+            raise InputError("no model name: use openai:MODEL, e.g. openai:gpt-4o-mini")
+        return OpenAIApprentice(
+            ClientSettings(model=model, **given), run_log=run_log, environ=environ
+        )
+    if kind == "replay" and sep:
+        if not rest.strip():
+            raise InputError("no replay file: use replay:FILE, e.g. replay:runs/virf.jsonl")
+        return ReplayApprentice(rest.strip(), run_log=run_log)
+    if kind == "scripted" and not sep:
+        return ScriptedApprentice(given.get("replies", []), run_log=run_log)
+    raise InputError(f"unknown planner '{clip(spec)}'; choose {SPEC_FORMS}")

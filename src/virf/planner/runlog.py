@@ -1,0 +1,359 @@
+"""The SQLite run log: every model call an apprentice makes, for audit and replay.
+
+The schema evolves only by appending to ``MIGRATIONS``.  A migration that has
+shipped is never edited: databases in the field already ran it, and the hash
+stored in ``_migrations`` turns an edit into a loud error instead of a silently
+diverging schema.  Opening a database applies the migrations it lacks, in
+order, each in its own transaction.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import re
+import sqlite3
+import threading
+import uuid
+from collections.abc import Sequence
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from types import TracebackType
+from typing import Final, Self
+
+from virf.errors import EnvironmentProblem, InputError
+
+
+@dataclass(frozen=True)
+class Migration:
+    """One schema step: a stable id and the SQL it runs (several statements allowed)."""
+
+    id: str
+    sql: str
+
+    @property
+    def sha256(self) -> str:
+        return hashlib.sha256(self.sql.encode("utf-8")).hexdigest()
+
+
+# Append only.  Never edit or reorder an entry once it has been committed.
+MIGRATIONS: Final[tuple[Migration, ...]] = (
+    Migration(
+        "0001_model_calls",
+        """
+        CREATE TABLE model_calls (
+            id                INTEGER PRIMARY KEY AUTOINCREMENT,
+            run_id            TEXT    NOT NULL,
+            method            TEXT    NOT NULL,
+            task_id           TEXT    NOT NULL,
+            iteration         INTEGER NOT NULL,
+            ask               INTEGER NOT NULL,
+            apprentice        TEXT    NOT NULL,
+            model             TEXT,
+            prompt            TEXT    NOT NULL,
+            reply             TEXT,
+            ok                INTEGER NOT NULL CHECK (ok IN (0, 1)),
+            reason            TEXT    NOT NULL,
+            prompt_tokens     INTEGER,
+            completion_tokens INTEGER,
+            latency_ms        REAL    NOT NULL,
+            attempts          INTEGER NOT NULL,
+            created_at        TEXT    NOT NULL
+        );
+        CREATE INDEX model_calls_by_task ON model_calls (run_id, task_id, iteration, method);
+        """,
+    ),
+)
+
+_MIGRATION_ID: Final = re.compile(r"^[0-9]{4}_[a-z0-9_]+$")
+
+_BOOKKEEPING: Final = """
+CREATE TABLE IF NOT EXISTS _migrations (
+    id         TEXT PRIMARY KEY,
+    sha256     TEXT NOT NULL,
+    applied_at TEXT NOT NULL
+)
+"""
+
+
+@dataclass(frozen=True)
+class CallRecord:
+    """One logged model call, as stored."""
+
+    id: int
+    run_id: str
+    method: str
+    task_id: str
+    iteration: int
+    ask: int
+    apprentice: str
+    model: str | None
+    messages: list[dict[str, str]]
+    reply: str | None
+    ok: bool
+    reason: str
+    prompt_tokens: int | None
+    completion_tokens: int | None
+    latency_ms: float
+    attempts: int
+    created_at: str
+
+
+def _now() -> str:
+    return datetime.now(UTC).isoformat(timespec="milliseconds")
+
+
+def _statements(sql: str) -> list[str]:
+    """Split a migration into statements without breaking a trigger body.
+
+    ``sqlite3.Connection.execute`` runs one statement, and ``executescript``
+    commits on its own, which would let a half-applied migration escape its
+    transaction.  ``sqlite3.complete_statement`` knows where a statement ends.
+    """
+    out: list[str] = []
+    pending = ""
+    for piece in sql.split(";"):
+        pending += piece + ";"
+        if sqlite3.complete_statement(pending):
+            if pending.strip(" \t\r\n;"):
+                out.append(pending.strip())
+            pending = ""
+    if pending.strip(" \t\r\n;"):
+        raise ValueError("migration SQL ends with an incomplete statement")
+    return out
+
+
+def check_migrations(migrations: Sequence[Migration]) -> None:
+    """Reject a malformed migration list: a programming error, caught by tests."""
+    seen: set[str] = set()
+    for m in migrations:
+        if not _MIGRATION_ID.match(m.id):
+            raise ValueError(f"migration id {m.id!r} must look like 0001_name")
+        if m.id in seen:
+            raise ValueError(f"migration id {m.id} appears twice")
+        seen.add(m.id)
+        _statements(m.sql)
+
+
+class RunLog:
+    """An append-only SQLite log of model calls for one run (``run_id``).
+
+    Several runs may share one file; each row carries its run id.  Safe to
+    share between threads of one process: writes are serialised by a lock.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        run_id: str | None = None,
+        migrations: Sequence[Migration] = MIGRATIONS,
+    ) -> None:
+        check_migrations(migrations)
+        self.path = Path(path)
+        # A fresh id per run keeps two runs in one file apart; callers that
+        # resume a run pass its id explicitly.
+        self.run_id = run_id if run_id is not None else _new_run_id()
+        if not self.run_id:
+            raise InputError("run id must be a non-empty string")
+        if self.path.is_dir():
+            raise InputError(f"run log {self.path} is a directory; choose a file path")
+        if not self.path.parent.is_dir():
+            raise InputError(f"run log folder {self.path.parent} does not exist; create it first")
+        self._lock = threading.Lock()
+        try:
+            # Autocommit mode: transactions are opened explicitly where needed.
+            self._conn = sqlite3.connect(
+                self.path, timeout=30.0, isolation_level=None, check_same_thread=False
+            )
+        except sqlite3.Error as exc:
+            raise EnvironmentProblem(f"cannot open run log {self.path}: {exc}") from None
+        try:
+            self._migrate(migrations)
+        except BaseException:
+            self._conn.close()
+            raise
+
+    # -- schema ------------------------------------------------------------
+
+    def _migrate(self, migrations: Sequence[Migration]) -> None:
+        conn = self._conn
+        try:
+            conn.execute("BEGIN IMMEDIATE")
+            conn.execute(_BOOKKEEPING)
+            applied = {row[0]: row[1] for row in conn.execute("SELECT id, sha256 FROM _migrations")}
+            known = {m.id for m in migrations}
+            newer = sorted(set(applied) - known)
+            if newer:
+                raise EnvironmentProblem(
+                    f"run log {self.path} was written by a newer VIRF (migration {newer[0]}); "
+                    "upgrade VIRF or choose another run log file"
+                )
+            for m in migrations:
+                if m.id in applied:
+                    if applied[m.id] != m.sha256:
+                        raise EnvironmentProblem(
+                            f"run log {self.path}: migration {m.id} differs from the one applied; "
+                            "migrations are append-only, add a new one instead of editing"
+                        )
+                    continue
+                for statement in _statements(m.sql):
+                    conn.execute(statement)
+                conn.execute(
+                    "INSERT INTO _migrations (id, sha256, applied_at) VALUES (?, ?, ?)",
+                    (m.id, m.sha256, _now()),
+                )
+            conn.execute("COMMIT")
+        except sqlite3.Error as exc:
+            self._rollback()
+            if "not a database" in str(exc):
+                raise InputError(
+                    f"run log {self.path} is not a SQLite database; choose another file"
+                ) from None
+            raise EnvironmentProblem(f"cannot migrate run log {self.path}: {exc}") from None
+        except BaseException:
+            self._rollback()
+            raise
+
+    def _rollback(self) -> None:
+        # The failure may have ended the transaction already; the original
+        # error is the one worth reporting.
+        with contextlib.suppress(sqlite3.Error):
+            self._conn.execute("ROLLBACK")
+
+    def applied_migrations(self) -> list[str]:
+        """Ids of the migrations this database has run, oldest first."""
+        with self._lock:
+            rows = self._conn.execute("SELECT id FROM _migrations ORDER BY id").fetchall()
+        return [r[0] for r in rows]
+
+    # -- writing and reading ---------------------------------------------------
+
+    def log_call(
+        self,
+        *,
+        method: str,
+        task_id: str,
+        iteration: int,
+        ask: int,
+        apprentice: str,
+        model: str | None,
+        messages: Sequence[dict[str, str]],
+        reply: str | None,
+        ok: bool,
+        reason: str,
+        prompt_tokens: int | None,
+        completion_tokens: int | None,
+        latency_ms: float,
+        attempts: int,
+    ) -> int:
+        """Append one call and return its row id."""
+        prompt = json.dumps(list(messages), ensure_ascii=False)
+        with self._lock:
+            try:
+                cur = self._conn.execute(
+                    """
+                    INSERT INTO model_calls (
+                        run_id, method, task_id, iteration, ask, apprentice, model, prompt,
+                        reply, ok, reason, prompt_tokens, completion_tokens, latency_ms,
+                        attempts, created_at
+                    ) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)
+                    """,
+                    (
+                        self.run_id,
+                        method,
+                        task_id,
+                        iteration,
+                        ask,
+                        apprentice,
+                        model,
+                        prompt,
+                        reply,
+                        int(ok),
+                        reason,
+                        prompt_tokens,
+                        completion_tokens,
+                        float(latency_ms),
+                        attempts,
+                        _now(),
+                    ),
+                )
+            except sqlite3.Error as exc:
+                raise EnvironmentProblem(f"cannot write run log {self.path}: {exc}") from None
+        row_id = cur.lastrowid
+        assert row_id is not None
+        return row_id
+
+    def calls(self, *, run_id: str | None = None, task_id: str | None = None) -> list[CallRecord]:
+        """Logged calls in the order they were made, optionally filtered."""
+        where, params = [], []
+        if run_id is not None:
+            where.append("run_id = ?")
+            params.append(run_id)
+        if task_id is not None:
+            where.append("task_id = ?")
+            params.append(task_id)
+        sql = (
+            "SELECT id, run_id, method, task_id, iteration, ask, apprentice, model, prompt, "
+            "reply, ok, reason, prompt_tokens, completion_tokens, latency_ms, attempts, "
+            "created_at FROM model_calls"
+        )
+        if where:
+            sql += " WHERE " + " AND ".join(where)
+        sql += " ORDER BY id"
+        with self._lock:
+            rows = self._conn.execute(sql, params).fetchall()
+        return [
+            CallRecord(
+                id=r[0],
+                run_id=r[1],
+                method=r[2],
+                task_id=r[3],
+                iteration=r[4],
+                ask=r[5],
+                apprentice=r[6],
+                model=r[7],
+                messages=json.loads(r[8]),
+                reply=r[9],
+                ok=bool(r[10]),
+                reason=r[11],
+                prompt_tokens=r[12],
+                completion_tokens=r[13],
+                latency_ms=r[14],
+                attempts=r[15],
+                created_at=r[16],
+            )
+            for r in rows
+        ]
+
+    def run_ids(self) -> list[str]:
+        """Every run in this file, in the order each first logged a call."""
+        with self._lock:
+            rows = self._conn.execute(
+                "SELECT run_id FROM model_calls GROUP BY run_id ORDER BY MIN(id)"
+            ).fetchall()
+        return [r[0] for r in rows]
+
+    # -- lifetime ------------------------------------------------------------
+
+    def close(self) -> None:
+        with self._lock:
+            self._conn.close()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+def _new_run_id() -> str:
+    stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
+    return f"{stamp}-{uuid.uuid4().hex[:8]}"
