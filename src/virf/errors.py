@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import difflib
+import json
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 
 class VirfError(Exception):
@@ -49,3 +51,17 @@ def read_input_file(path: str | Path, what: str) -> str:
         raise InputError(f"{what} file {p} is not UTF-8 text") from None
     except OSError as exc:
         raise InputError(f"cannot read {what} file {p}: {exc.strerror}") from None
+
+
+def read_json_file(path: str | Path, what: str) -> Any:
+    """Read and parse a user's JSON file; every failure is a one-line input error."""
+    p = Path(path)
+    text = read_input_file(p, what)
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise InputError(
+            f"{what} {p} is not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}"
+        ) from None
+    except (RecursionError, ValueError):
+        raise InputError(f"{what} {p} is not valid JSON (nested too deeply or malformed)") from None

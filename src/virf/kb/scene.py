@@ -37,7 +37,7 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
-from virf.errors import InputError, closest, read_input_file
+from virf.errors import InputError, closest, read_json_file
 from virf.kb.tbox import Vocabulary
 from virf.schema import Fact, FactKind, Provenance
 
@@ -93,16 +93,17 @@ class Scene:
 
 def load_scene_file(path: str | Path, vocab: Vocabulary) -> Scene:
     p = Path(path)
-    text = read_input_file(p, "scene")
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise InputError(
-            f"scene {p} is not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}"
-        ) from None
-    except (RecursionError, ValueError):
-        raise InputError(f"scene {p} is not valid JSON (nested too deeply or malformed)") from None
-    return build_scene(data, vocab, name=p.stem if p.stem != "scene" else p.parent.name)
+    return build_scene(
+        load_scene_data(p), vocab, name=p.stem if p.stem != "scene" else p.parent.name
+    )
+
+
+def load_scene_data(path: str | Path) -> dict[str, Any]:
+    """A scene file's JSON object, unvalidated (``build_scene`` checks it)."""
+    data = read_json_file(path, "scene")
+    if not isinstance(data, dict):
+        raise InputError(f"scene {path} must be a JSON object with 'instances' and 'assertions'")
+    return data
 
 
 def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
@@ -172,11 +173,18 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
     closed = data.get("closed_world", [])
     if not isinstance(closed, list) or not all(isinstance(c, str) for c in closed):
         raise InputError("scene 'closed_world' must be a list of relation names")
-    for rel in closed:
+    for entry in closed:
+        # "contains" closes the relation for every receptacle; "contains:Fridge_1"
+        # for one (a user confirming what is inside one thing).
+        rel, _, owner = entry.partition(":")
         if rel not in CLOSABLE:
             raise InputError(
                 f"closed_world: '{rel}' cannot be closed; choose from {', '.join(CLOSABLE)}"
             )
+        if owner and owner not in classes:
+            near = closest(owner, classes)
+            hint = f"; closest known: {', '.join(near)}" if near else ""
+            raise InputError(f"closed_world: '{entry}' names an undeclared instance{hint}")
 
     def resolve_value(value: str, prop: str, where: str) -> str:
         if value in classes:

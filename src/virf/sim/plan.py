@@ -115,6 +115,8 @@ _ALIASES = {
     "drop": "drop",
     "throw": "throw",
 }
+# Words that can open an action line (for finding a plan inside prose).
+ACTION_WORDS = frozenset(_ALIASES) | {"turn", "toggle", "switch"}
 _NUMBERING = re.compile(r"^\s*(?:step\s*)?\d+\s*[.):]\s*", re.IGNORECASE)
 _CALL = re.compile(r"^([A-Za-z_]+)\s*\((.*)\)\s*$")
 _CONNECTORS = {"in", "into", "on", "onto", "to"}

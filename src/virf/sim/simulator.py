@@ -308,7 +308,9 @@ class Simulator:
             ):
                 if self.vocab.any_is_a(classes, cls):
                     members = state.objects_of(ind, rel)
-                    known = rel in state.closed_world and ind not in state.unknown_contents
+                    known = (
+                        rel in state.closed_world or f"{rel}:{ind}" in state.closed_world
+                    ) and ind not in state.unknown_contents
                     prov = Provenance.SCENE if known else Provenance.ASSUMED
                     out[Fact(ind, rel, ",".join(members), FactKind.CLOSURE)] = prov
         return out

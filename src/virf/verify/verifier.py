@@ -20,7 +20,7 @@ Protocol (the paper's Algorithm 2, extended):
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from queue import Queue
@@ -93,6 +93,7 @@ class Verifier:
         timeout_s: float = 120.0,
         explain: bool = True,
         workers: int = 1,
+        uscs: Collection[str] | None = None,
     ) -> None:
         """``explain=False`` skips the minimal explanations (batch runs that only
         need verdicts): findings then carry no triggering facts, and whether
@@ -102,7 +103,10 @@ class Verifier:
         ``workers > 1`` classifies the plan's snapshots in parallel, each on
         its own engine instance (the paper's parallel step checking).  The
         snapshots are still built in order and the results are read in
-        order, so reports do not depend on the worker count."""
+        order, so reports do not depend on the worker count.
+
+        ``uscs`` restricts the check to those Unsafe State Concepts (the
+        knowledge-source ablations); by default every one is checked."""
         if workers < 1:
             raise ValueError("workers must be at least 1")
         self.workers = workers
@@ -113,7 +117,14 @@ class Verifier:
         self.engine = engine
         self.sim = Simulator(self.vocab)
         self.timeout_s = timeout_s
-        ordered = sorted(self.vocab.uscs.values(), key=lambda u: u.name)
+        if uscs is not None:
+            unknown = sorted(set(uscs) - set(self.vocab.uscs))
+            if unknown:
+                raise ValueError(f"not an Unsafe State Concept: {unknown[0]}")
+        ordered = sorted(
+            (u for u in self.vocab.uscs.values() if uscs is None or u.name in uscs),
+            key=lambda u: u.name,
+        )
         self.always = [u.name for u in ordered if not u.final_only]
         self.final = [u.name for u in ordered if u.final_only]
 
@@ -627,7 +638,7 @@ class Verifier:
         trace = self._trace(plan, states, resolved, stop, findings)
         if primary is None:
             reason = (
-                f"every simulated state and action satisfies the {len(self.vocab.uscs)} safety rules "
+                f"every simulated state and action satisfies the {len(self.always) + len(self.final)} safety rules "
                 f"of scenario '{self.tbox.scenario}'"
             )
         elif status == "UNSAFE":
