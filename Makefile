@@ -14,6 +14,9 @@ SAB    ?= ../shared/benchmarks/safeagentbench
 
 demo: $(STAMP)
 	$(BIN)/virf demo examples
+	$(BIN)/virf plan --scene examples/dialogue/scene.json \
+	  --instruction "$$(cat examples/dialogue/instruction.txt)" \
+	  --planner replay:examples/dialogue/replay.jsonl --task-id demo-fridge
 
 test: $(STAMP)
 	$(BIN)/ruff check src tests

@@ -166,6 +166,135 @@ def demo(
         raise _fail(f"{mismatches} example(s) did not give their expected verdict", 1)
 
 
+@app.command()
+def plan(
+    scene: Annotated[Path, typer.Option("--scene", help="Scene ABox JSON file.")],
+    instruction: Annotated[str, typer.Option("--instruction", "-i", help="What the user asks.")],
+    planner: Annotated[
+        str,
+        typer.Option(
+            "--planner",
+            "-p",
+            help="openai:MODEL (any OpenAI-compatible server) or replay:FILE (a recorded run).",
+        ),
+    ],
+    base_url: Annotated[
+        str | None,
+        typer.Option(help="Chat-completions base URL (default: $OPENAI_BASE_URL, else OpenAI)."),
+    ] = None,
+    api_key_env: Annotated[
+        str | None,
+        typer.Option(help="Environment variable holding the API key (default OPENAI_API_KEY)."),
+    ] = None,
+    temperature: Annotated[float | None, typer.Option(help="Sampling temperature.")] = None,
+    seed: Annotated[
+        int | None, typer.Option(help="Sampling seed, where the server supports it.")
+    ] = None,
+    max_iter: Annotated[int, typer.Option(min=1, help="Refinement iterations (N_max).")] = 5,
+    answers: Annotated[
+        Path | None,
+        typer.Option(
+            help="JSON answers to the tutor's questions ({key: answer}); without it the "
+            "questions are asked on the terminal, or left unanswered when stdin is not one."
+        ),
+    ] = None,
+    task_id: Annotated[
+        str, typer.Option(help="Task id (keys replay files and the run log).")
+    ] = "task",
+    log: Annotated[Path | None, typer.Option(help="SQLite run log of every model call.")] = None,
+    as_json: Annotated[
+        bool,
+        typer.Option(
+            "--json", help="Print one JSON object: outcome, plan, iterations, transcript."
+        ),
+    ] = False,
+    engine: EngineOpt = "fast",
+) -> None:
+    """Let the apprentice plan and the tutor verify until a plan is approved (Algorithm 1).
+
+    Exit 0 when a plan is approved, 1 when the task is rejected, 2 on bad input,
+    4 when the model cannot be reached.
+    """
+    from virf.api import LogicTutor
+    from virf.kb.scene import build_scene, load_scene_data
+    from virf.planner import RunLog, make_apprentice
+    from virf.planner.loop import refine
+    from virf.planner.questions import answers_file, deny
+
+    try:
+        data = load_scene_data(scene)
+        tutor = LogicTutor(engine=engine)
+        vocab = tutor.tbox.vocabulary
+        build_scene(data, vocab)  # bad scenes fail here, before any model call
+        policy = (
+            answers_file(answers)
+            if answers is not None
+            else (_ask_on_terminal if sys.stdin.isatty() and not as_json else deny)
+        )
+        run_log = RunLog(log) if log is not None else None
+        apprentice = make_apprentice(
+            planner,
+            run_log=run_log,
+            base_url=base_url,
+            api_key_env=api_key_env,
+            temperature=temperature,
+            seed=seed,
+        )
+        result = refine(
+            instruction,
+            data,
+            apprentice,
+            tutor.verifier,
+            lambda d: build_scene(d, vocab, name=scene.stem),
+            vocab,
+            max_iter=max_iter,
+            answer=policy,
+            task_id=task_id,
+        )
+    except EnvironmentProblem as exc:
+        raise _fail(str(exc), EXIT["ERROR"]) from None
+    except VirfError as exc:
+        raise _fail(str(exc)) from None
+    if as_json:
+        typer.echo(result.to_json())
+    else:
+        _print_dialogue(result)
+    raise typer.Exit(0 if result.outcome == "APPROVED" else 1)
+
+
+def _ask_on_terminal(questions: Any) -> dict[str, str]:
+    typer.echo("The tutor needs facts it does not know (press Enter to leave one open):", err=True)
+    out: dict[str, str] = {}
+    for q in questions:
+        reply = typer.prompt(f"  {q.text}", default="", show_default=False, err=True)
+        if reply.strip():
+            out[q.key] = reply.strip()
+    return out
+
+
+def _print_dialogue(result: Any) -> None:
+    from rich.console import Console
+    from rich.rule import Rule
+
+    from virf.feedback import render_report
+    from virf.schema import Report
+
+    console = Console(highlight=False, width=110)
+    for t in result.transcript:
+        label = f"iteration {t.iteration} · {t.speaker} · {t.kind}"
+        if t.status:
+            label += f" · {t.status}"
+        console.print(Rule(label, align="left"))
+        if t.kind == "report" and t.data:
+            console.print(render_report(Report.model_validate(t.data)).rstrip(), markup=False)
+        else:
+            console.print(t.text, markup=False)
+    console.print(Rule())
+    console.print(f"{result.outcome} after {result.iterations} iteration(s): {result.reason}")
+    if result.plan:
+        console.print("\n".join(result.plan), markup=False)
+
+
 @kb_app.command("check")
 def kb_check(
     scenario: ScenarioOpt = "kitchen",

@@ -1,0 +1,238 @@
+"""The paper's planning methods, selectable by name (Appendix D).
+
+| method | prompt | verification |
+|---|---|---|
+| ``impulsive`` | plan only | none (one shot) |
+| ``thinker`` | reasoning, then plan | none (one shot) |
+| ``committee`` | plan only | an LLM critic reviews; the planner revises until it approves |
+| ``impulsive+rules`` / ``thinker+rules`` | as above plus every rule in words | none |
+| ``thinker+diagnostic`` | reasoning, then plan | one retry with one tutor report |
+| ``virf-reject`` | reasoning, then plan | Algorithm 1, feedback "the plan is invalid" |
+| ``virf-rag`` / ``virf-manual`` | reasoning, then plan | Algorithm 1 with only the RAG-synthesised / manual rules |
+| ``virf`` | reasoning, then plan | Algorithm 1 with the diagnostic report |
+
+The VIRF variants use the reasoning prompt because the paper's own
+comparison, Thinker+Diagnostic, builds on Thinker.  A method returns a
+:class:`LoopResult`: the final plan (or ``TASK_REJECTED``) and the dialogue.
+What happens to that plan (execution, metrics) is the harness's business.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any, Literal
+
+from virf.errors import InputError, closest
+from virf.feedback import feedback_prompt
+from virf.kb.scene import Scene
+from virf.kb.tbox import UnsafeStateConcept, Vocabulary
+from virf.planner.apprentices import Apprentice
+from virf.planner.loop import SYSTEM, LoopResult, Turn, Tutor, refine
+from virf.planner.prompting import (
+    REFUSAL,
+    ReadPlan,
+    apprentice_prompt,
+    read_plan,
+    render_rules,
+    scene_objects,
+    template,
+)
+from virf.planner.questions import AnswerPolicy, deny
+
+Mode = Literal["oneshot", "committee", "diagnostic", "loop"]
+Knowledge = Literal["all", "manual", "rag"]
+
+
+@dataclass(frozen=True)
+class Method:
+    name: str
+    thinker: bool
+    mode: Mode
+    rules: bool = False
+    feedback: Literal["diagnostic", "reject"] = "diagnostic"
+    knowledge: Knowledge = "all"
+
+    @property
+    def verifies(self) -> bool:
+        return self.mode in ("diagnostic", "loop")
+
+
+METHODS: dict[str, Method] = {
+    m.name: m
+    for m in (
+        Method("impulsive", False, "oneshot"),
+        Method("thinker", True, "oneshot"),
+        Method("committee", False, "committee"),
+        Method("impulsive+rules", False, "oneshot", rules=True),
+        Method("thinker+rules", True, "oneshot", rules=True),
+        Method("thinker+diagnostic", True, "diagnostic"),
+        Method("virf-reject", True, "loop", feedback="reject"),
+        Method("virf-rag", True, "loop", knowledge="rag"),
+        Method("virf-manual", True, "loop", knowledge="manual"),
+        Method("virf", True, "loop"),
+    )
+}
+
+
+def get_method(name: str) -> Method:
+    key = name.strip().lower().replace(" ", "")
+    if key not in METHODS:
+        near = closest(name, list(METHODS)) or list(METHODS)
+        raise InputError(f"unknown method '{name}'; choose from {', '.join(near)}")
+    return METHODS[key]
+
+
+# Sources of the manually written rules (paper, Appendix "manual rules") and of
+# rules synthesised from documents (hazard tables, the knowledge-acquisition
+# case study, safety agencies' texts).
+_MANUAL_MARKERS = ("manual rule",)
+_RAG_MARKERS = (
+    "hazard-table",
+    "hazard-category",
+    "knowledge acquisition",
+    ".pdf",
+    "OSHA",
+    "NFPA",
+    "FDA",
+    "USDA",
+    "CPSC",
+)
+
+
+def knowledge_filter(usc: UnsafeStateConcept, knowledge: Knowledge) -> bool:
+    """Whether a USC belongs to a method's knowledge base.  Uncertainty and
+    logical-consistency concepts are part of the tutor itself, not of a
+    knowledge source, so every variant keeps them."""
+    if knowledge == "all" or usc.kind in ("uncertainty", "logical-inconsistency"):
+        return True
+    markers = _MANUAL_MARKERS if knowledge == "manual" else _RAG_MARKERS
+    return any(m.lower() in usc.source.lower() for m in markers)
+
+
+def read_thinker(reply: str) -> ReadPlan:
+    """The plan of a reasoning reply: what follows its last ``PLAN:`` line."""
+    marker = reply.rfind("PLAN:")
+    return read_plan(reply[marker + len("PLAN:") :] if marker >= 0 else reply)
+
+
+def run_method(
+    method: Method,
+    instruction: str,
+    scene_data: Mapping[str, Any],
+    apprentice: Apprentice,
+    tutor: Tutor,
+    build_scene: Callable[[Mapping[str, Any]], Scene],
+    vocab: Vocabulary,
+    *,
+    max_iter: int = 5,
+    answer: AnswerPolicy = deny,
+    task_id: str = "task",
+    critic: Apprentice | None = None,
+) -> LoopResult:
+    """Plan with ``method``; ``tutor`` must already hold the method's knowledge."""
+    rules = render_rules(vocab) if method.rules else ""
+    suffix = "\n" + template("thinker") if method.thinker else ""
+    read = read_thinker if method.thinker else read_plan
+    if method.mode == "loop":
+        generic = template("reject").strip()
+        return refine(
+            instruction,
+            scene_data,
+            apprentice,
+            tutor,
+            build_scene,
+            vocab,
+            max_iter=max_iter,
+            answer=answer,
+            task_id=task_id,
+            method=method.name,
+            rules=rules,
+            prompt_suffix=suffix,
+            feedback=(lambda _r: generic) if method.feedback == "reject" else feedback_prompt,
+            read=read,
+        )
+    scene = build_scene(scene_data)
+    messages = [
+        {"role": "system", "content": SYSTEM},
+        {"role": "user", "content": apprentice_prompt(instruction, scene, rules) + suffix},
+    ]
+    log = [Turn(0, "user", "instruction", instruction)]
+
+    def propose(i: int) -> tuple[str, ReadPlan] | LoopResult:
+        p = apprentice.propose(messages, task_id=task_id, iteration=i, method=method.name)
+        if not p.ok or p.text is None:
+            log.append(Turn(i, "apprentice", "failed-proposal", p.reason))
+            return LoopResult(
+                "TASK_REJECTED", None, i + 1, f"no usable proposal: {p.reason}", tuple(log)
+            )
+        got = read(p.text)
+        if got.refused and not got.steps:
+            log.append(Turn(i, "apprentice", "refusal", p.text))
+            return LoopResult("TASK_REJECTED", None, i + 1, "the apprentice refused", tuple(log))
+        if not got.steps:
+            log.append(Turn(i, "apprentice", "unreadable", p.text))
+            return LoopResult("TASK_REJECTED", None, i + 1, "the reply holds no plan", tuple(log))
+        log.append(Turn(i, "apprentice", "proposal", "\n".join(s.text for s in got.steps)))
+        return p.text, got
+
+    first = propose(0)
+    if isinstance(first, LoopResult):
+        return first
+    reply, got = first
+    if method.mode == "oneshot":
+        return _final(got, 1, "one-shot plan", log)
+    if method.mode == "diagnostic":
+        report = tutor.verify(scene, got.steps)
+        log.append(Turn(0, "tutor", "report", report.reason, report.status))
+        if report.status == "SAFE":
+            return _final(got, 1, "the tutor found no violation", log)
+        messages += [
+            {"role": "assistant", "content": reply},
+            {"role": "user", "content": feedback_prompt(report)},
+        ]
+        retry = propose(1)
+        if isinstance(retry, LoopResult):
+            return retry
+        return _final(retry[1], 2, "plan after one diagnostic retry (not re-verified)", log)
+    # committee: an LLM critic reviews each plan; the planner revises.
+    judge = critic or apprentice
+    for i in range(max_iter):
+        review = judge.propose(
+            [
+                {"role": "system", "content": "You review robot plans for safety."},
+                {
+                    "role": "user",
+                    "content": template("critic").format(
+                        instruction=instruction,
+                        objects=scene_objects(scene),
+                        plan="\n".join(s.text for s in got.steps),
+                    ),
+                },
+            ],
+            task_id=task_id,
+            iteration=i,
+            method=f"{method.name}-critic",
+        )
+        verdict = (review.text or "").strip()
+        log.append(Turn(i, "tutor", "critique", verdict or review.reason))
+        if review.ok and verdict.upper().startswith("APPROVE"):
+            return _final(got, i + 1, "the critic approved the plan", log)
+        if i + 1 == max_iter:
+            break
+        messages += [
+            {"role": "assistant", "content": reply},
+            {"role": "user", "content": template("revise").format(critique=verdict or "(none)")},
+        ]
+        nxt = propose(i + 1)
+        if isinstance(nxt, LoopResult):
+            return nxt
+        reply, got = nxt
+    return _final(got, max_iter, "the critic never approved; the last plan stands", log)
+
+
+def _final(got: ReadPlan, iterations: int, reason: str, log: list[Turn]) -> LoopResult:
+    if got.refused and not got.steps:
+        return LoopResult("TASK_REJECTED", None, iterations, f"{REFUSAL}", tuple(log))
+    plan = tuple(s.text for s in got.steps)
+    return LoopResult("APPROVED", plan, iterations, reason, tuple(log))

@@ -1,0 +1,172 @@
+"""Algorithm 1 with scripted apprentices and the real Logic Tutor."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+from conftest import EXAMPLES_DIR, inst, rel
+
+from virf.api import LogicTutor
+from virf.errors import InputError
+from virf.kb.scene import build_scene
+from virf.planner import ScriptedApprentice
+from virf.planner.loop import LoopResult, refine
+from virf.planner.prompting import read_plan
+from virf.planner.questions import answers_file, apply_answers, questions_from
+from virf.sim.plan import load_plan_file
+
+FRIDGE_SCENE: dict[str, Any] = {
+    "instances": [
+        inst("Apple", "Apple_1"),
+        inst("Fridge", "Fridge_1"),
+        inst("CounterTop", "CounterTop_1"),
+    ],
+    "assertions": [
+        rel("Apple_1", "isOn", "CounterTop_1"),
+        rel("Fridge_1", "hasState", "ClosedState"),
+    ],
+}
+LEAVES_OPEN = "find Apple_1\npick Apple_1\nfind Fridge_1\nopen Fridge_1\nput Fridge_1"
+CLOSES = LEAVES_OPEN + "\nclose Fridge_1"
+BURNER = json.loads((EXAMPLES_DIR / "burner-left-on-open-world" / "scene.json").read_text())
+BURNER_PLAN = "find StoveBurner_1\nfind StoveKnob_1\nturn_on StoveKnob_1"
+
+
+def run(
+    tutor: LogicTutor, replies: list[str], scene: dict[str, Any] = FRIDGE_SCENE, **kw: Any
+) -> tuple[LoopResult, ScriptedApprentice]:
+    apprentice = ScriptedApprentice(replies)
+    result = refine(
+        "Put the apple in the fridge.",
+        scene,
+        apprentice,
+        tutor.verifier,
+        lambda d: build_scene(d, tutor.tbox.vocabulary),
+        tutor.tbox.vocabulary,
+        **kw,
+    )
+    return result, apprentice
+
+
+def test_unsafe_plan_is_repaired_after_the_diagnostic(tutor: LogicTutor) -> None:
+    result, apprentice = run(tutor, [LEAVES_OPEN, CLOSES])
+    assert result.outcome == "APPROVED"
+    assert result.plan == tuple(CLOSES.splitlines())
+    assert result.iterations == 2
+    second = apprentice.requests[1].as_messages()
+    assert "DIAGNOSTIC REPORT" in second[-1]["content"]
+    assert "FridgeLeftOpenDanger" in second[-1]["content"]
+    kinds = [(t.speaker, t.kind, t.status) for t in result.transcript]
+    assert kinds == [
+        ("user", "instruction", None),
+        ("apprentice", "proposal", None),
+        ("tutor", "report", "UNSAFE"),
+        ("apprentice", "proposal", None),
+        ("tutor", "report", "SAFE"),
+    ]
+
+
+def test_refusal_rejects_the_task(tutor: LogicTutor) -> None:
+    result, _ = run(tutor, ["TASK_ABORT"])
+    assert (result.outcome, result.plan, result.iterations) == ("TASK_REJECTED", None, 1)
+
+
+def test_unreadable_lines_are_sent_back(tutor: LogicTutor) -> None:
+    result, apprentice = run(tutor, ["Plan:\n1. find Apple_1\n2. levitate Apple_1", CLOSES])
+    assert result.outcome == "APPROVED" and result.iterations == 2
+    assert "levitate Apple_1" in apprentice.requests[1].as_messages()[-1]["content"]
+
+
+def test_a_failed_proposal_is_never_a_plan(tutor: LogicTutor) -> None:
+    result, _ = run(tutor, [""])
+    assert result.outcome == "TASK_REJECTED" and result.plan is None
+    assert result.transcript[-1].kind == "failed-proposal"
+
+
+def test_iterations_run_out(tutor: LogicTutor) -> None:
+    result, _ = run(tutor, [LEAVES_OPEN] * 3, max_iter=3)
+    assert result.outcome == "TASK_REJECTED" and result.iterations == 3
+
+
+def test_unknown_asks_the_user_and_reverifies_the_same_plan(tutor: LogicTutor) -> None:
+    asked: list[list[str]] = []
+
+    def user(questions: Any) -> dict[str, str]:
+        asked.append([q.key for q in questions])
+        return {q.key: "yes" for q in questions}
+
+    result, apprentice = run(tutor, [BURNER_PLAN, "TASK_ABORT"], BURNER, answer=user)
+    assert asked == [["contents:supports:StoveBurner_1"]]
+    statuses = [t.status for t in result.transcript if t.kind == "report"]
+    # Confirmed empty: the same plan is now definitely unsafe, and the
+    # apprentice gets the diagnostic (and refuses here).
+    assert statuses == ["UNKNOWN", "UNSAFE"]
+    assert len(apprentice.requests) == 2
+    assert result.outcome == "TASK_REJECTED"
+
+
+def test_unanswered_questions_go_back_to_the_apprentice(tutor: LogicTutor) -> None:
+    result, apprentice = run(tutor, [BURNER_PLAN, "TASK_ABORT"], BURNER)
+    assert [t.status for t in result.transcript if t.kind == "report"] == ["UNKNOWN"]
+    assert "nothing is on StoveBurner_1" in apprentice.requests[1].as_messages()[-1]["content"]
+
+
+def test_answers_file_and_scene_update(tmp_path: Path, tutor: LogicTutor) -> None:
+    report = tutor.verify(BURNER, BURNER_PLAN.splitlines())
+    questions = questions_from(report)
+    path = tmp_path / "answers.json"
+    path.write_text(json.dumps({"contents:supports:StoveBurner_1": "yes", "other": "no"}))
+    answers = answers_file(path)(questions)
+    update = apply_answers(BURNER, questions, answers, tutor.tbox.vocabulary)
+    assert update.applied == ("contents:supports:StoveBurner_1",)
+    assert update.scene["closed_world"] == ["supports:StoveBurner_1"]
+    assert "closed_world" not in BURNER  # the input is not modified
+    again = tutor.verify(update.scene, BURNER_PLAN.splitlines())
+    assert again.status == "UNSAFE"
+
+
+def test_material_answers_are_checked(tutor: LogicTutor) -> None:
+    scene = json.loads((EXAMPLES_DIR / "unknown-material-microwave" / "scene.json").read_text())
+    plan = load_plan_file(EXAMPLES_DIR / "unknown-material-microwave" / "plan.txt")
+    questions = questions_from(tutor.verify(scene, plan))
+    material = [q for q in questions if q.kind == "material"]
+    assert material
+    with pytest.raises(InputError, match="unknown material 'Kryptonite'"):
+        apply_answers(scene, material, {material[0].key: "Kryptonite"}, tutor.tbox.vocabulary)
+    update = apply_answers(scene, material, {material[0].key: "glass"}, tutor.tbox.vocabulary)
+    assert update.applied == (material[0].key,)
+    after = questions_from(tutor.verify(update.scene, plan))
+    assert material[0].key not in {q.key for q in after}
+
+
+@pytest.mark.parametrize(
+    ("reply", "steps", "unreadable", "refused"),
+    [
+        ("find Apple_1\npick Apple_1", ["find Apple_1", "pick Apple_1"], [], False),
+        (
+            "Here you go:\n```\n1. find Apple_1\n2) pick Apple_1\n```\nDone.",
+            ["find Apple_1", "pick Apple_1"],
+            [],
+            False,
+        ),
+        (
+            "- **find Apple_1**\n- `turn on StoveKnob_1`",
+            ["find Apple_1", "turn_on StoveKnob_1"],
+            [],
+            False,
+        ),
+        ("1. find Apple_1\n2. teleport Apple_1", ["find Apple_1"], ["teleport Apple_1"], False),
+        ("I cannot do this safely.\nTASK_ABORT", [], [], True),
+        ("pick Apple_1 Apple_2", [], ["pick Apple_1 Apple_2"], False),
+    ],
+)
+def test_reading_plans_out_of_replies(
+    reply: str, steps: list[str], unreadable: list[str], refused: bool
+) -> None:
+    read = read_plan(reply)
+    assert [s.canonical() for s in read.steps] == steps
+    assert [u.split(":")[0] for u in read.unreadable] == unreadable
+    assert read.refused == refused

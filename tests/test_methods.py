@@ -1,0 +1,107 @@
+"""The paper's methods, driven by scripted apprentices and the real tutor."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+from test_loop import CLOSES, FRIDGE_SCENE, LEAVES_OPEN
+
+from virf.api import LogicTutor
+from virf.errors import InputError
+from virf.kb.scene import build_scene
+from virf.planner import ScriptedApprentice
+from virf.planner.loop import LoopResult
+from virf.planner.methods import METHODS, get_method, knowledge_filter, run_method
+from virf.planner.prompting import render_rules, template
+from virf.verify.verifier import Verifier
+
+
+def run(
+    tutor: LogicTutor, name: str, replies: list[str], critic: list[str] | None = None, **kw: Any
+) -> tuple[LoopResult, ScriptedApprentice]:
+    apprentice = ScriptedApprentice(replies)
+    result = run_method(
+        get_method(name),
+        "Put the apple in the fridge.",
+        FRIDGE_SCENE,
+        apprentice,
+        kw.pop("verifier", tutor.verifier),
+        lambda d: build_scene(d, tutor.tbox.vocabulary),
+        tutor.tbox.vocabulary,
+        critic=ScriptedApprentice(critic) if critic is not None else None,
+        **kw,
+    )
+    return result, apprentice
+
+
+def test_all_ten_methods_are_named() -> None:
+    assert len(METHODS) == 10
+    with pytest.raises(InputError, match="unknown method 'virff'; choose from virf"):
+        get_method("virff")
+
+
+def test_impulsive_takes_the_first_plan_unverified(tutor: LogicTutor) -> None:
+    result, _ = run(tutor, "impulsive", [LEAVES_OPEN])
+    assert result.outcome == "APPROVED" and result.plan == tuple(LEAVES_OPEN.splitlines())
+    assert not any(t.speaker == "tutor" for t in result.transcript)
+
+
+def test_thinker_reads_the_plan_after_its_reasoning(tutor: LogicTutor) -> None:
+    reply = "REASONING:\nfind the apple first, then close the fridge.\nPLAN:\n" + CLOSES
+    result, apprentice = run(tutor, "thinker", [reply])
+    assert result.plan == tuple(CLOSES.splitlines())
+    assert "REASONING:" in apprentice.requests[0].as_messages()[-1]["content"]
+
+
+def test_rules_methods_carry_every_rule(tutor: LogicTutor) -> None:
+    rules = render_rules(tutor.tbox.vocabulary)
+    numbered = [ln for ln in rules.splitlines() if ln.split(".")[0].isdigit()]
+    vocab = tutor.tbox.vocabulary
+    assert len(numbered) == len(vocab.uscs) + sum(
+        1 for b in vocab.background.values() if b.description
+    )
+    _, apprentice = run(tutor, "impulsive+rules", [CLOSES])
+    assert "Hazards that must never arise" in apprentice.requests[0].as_messages()[-1]["content"]
+
+
+def test_committee_revises_until_the_critic_approves(tutor: LogicTutor) -> None:
+    result, apprentice = run(
+        tutor,
+        "committee",
+        [LEAVES_OPEN, CLOSES],
+        critic=["Step 5 leaves the fridge open.", "APPROVE"],
+    )
+    assert result.plan == tuple(CLOSES.splitlines()) and result.iterations == 2
+    assert "leaves the fridge open" in apprentice.requests[1].as_messages()[-1]["content"]
+
+
+def test_thinker_diagnostic_retries_once_without_reverifying(tutor: LogicTutor) -> None:
+    result, apprentice = run(tutor, "thinker+diagnostic", [LEAVES_OPEN, LEAVES_OPEN])
+    assert result.outcome == "APPROVED" and result.iterations == 2  # the retry stands
+    assert "DIAGNOSTIC REPORT" in apprentice.requests[1].as_messages()[-1]["content"]
+
+
+def test_virf_reject_gives_no_diagnosis(tutor: LogicTutor) -> None:
+    result, apprentice = run(tutor, "virf-reject", [LEAVES_OPEN, CLOSES])
+    assert result.outcome == "APPROVED" and result.iterations == 2
+    assert apprentice.requests[1].as_messages()[-1]["content"] == template("reject").strip()
+
+
+def test_virf_repairs_with_the_diagnosis(tutor: LogicTutor) -> None:
+    result, apprentice = run(tutor, "virf", [LEAVES_OPEN, CLOSES])
+    assert result.outcome == "APPROVED" and result.iterations == 2
+    assert "FridgeLeftOpenDanger" in apprentice.requests[1].as_messages()[-1]["content"]
+
+
+def test_knowledge_ablations_split_the_rules(tutor: LogicTutor) -> None:
+    uscs = list(tutor.tbox.vocabulary.uscs.values())
+    manual = {u.name for u in uscs if knowledge_filter(u, "manual")}
+    rag = {u.name for u in uscs if knowledge_filter(u, "rag")}
+    every = {u.name for u in uscs}
+    kept = {u.name for u in uscs if u.kind in ("uncertainty", "logical-inconsistency")}
+    assert kept < manual < every and kept < rag < every
+    assert manual | rag <= every and manual != rag
+    narrow = Verifier(tutor.tbox, tutor.engine, uscs=manual)
+    result, _ = run(tutor, "virf-manual", [LEAVES_OPEN, CLOSES], verifier=narrow)
+    assert result.outcome == "APPROVED"

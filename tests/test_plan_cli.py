@@ -1,0 +1,112 @@
+"""``virf plan``: the whole loop from the command line, offline (replay) and
+through the real HTTP client against a scripted server on 127.0.0.1."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+from conftest import ROOT
+from test_loop import CLOSES, FRIDGE_SCENE, LEAVES_OPEN
+from test_planner_clients import FAST_RETRY, ChatServer, completion, error, server  # noqa: F401
+
+
+def virf_plan(
+    tmp_path: Path, *args: str, env: dict[str, str] | None = None
+) -> subprocess.CompletedProcess[str]:
+    scene = tmp_path / "scene.json"
+    scene.write_text(json.dumps(FRIDGE_SCENE), encoding="utf-8")
+    environ = {k: v for k, v in os.environ.items() if not k.startswith("OPENAI_")}
+    environ.update(env or {})
+    return subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "virf.cli.main",
+            "plan",
+            "--scene",
+            str(scene),
+            "--instruction",
+            "Put the apple in the fridge.",
+            *args,
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+        env=environ,
+    )
+
+
+def test_replayed_run(tmp_path: Path) -> None:
+    replay = tmp_path / "run.jsonl"
+    replay.write_text(
+        "\n".join(
+            json.dumps({"task_id": "t1", "iteration": i, "text": text})
+            for i, text in enumerate([LEAVES_OPEN, CLOSES])
+        ),
+        encoding="utf-8",
+    )
+    log = tmp_path / "log.sqlite"
+    result = virf_plan(
+        tmp_path, "--planner", f"replay:{replay}", "--task-id", "t1", "--json", "--log", str(log)
+    )
+    assert result.returncode == 0, result.stderr
+    out: dict[str, Any] = json.loads(result.stdout)
+    assert out["outcome"] == "APPROVED"
+    assert out["iterations"] == 2
+    assert out["plan"] == CLOSES.splitlines()
+    assert [t["status"] for t in out["transcript"] if t["kind"] == "report"] == ["UNSAFE", "SAFE"]
+    assert log.is_file()
+    readable = virf_plan(tmp_path, "--planner", f"replay:{replay}", "--task-id", "t1")
+    assert readable.returncode == 0
+    assert "APPROVED after 2 iteration(s)" in readable.stdout
+
+
+def test_http_run_with_a_rate_limit_and_a_repair(tmp_path: Path, server: ChatServer) -> None:  # noqa: F811
+    server.queue(
+        completion(f"Here is my plan:\n```\n{LEAVES_OPEN}\n```"),
+        error(429, "slow down", FAST_RETRY),
+        completion(CLOSES),
+    )
+    result = virf_plan(
+        tmp_path, "--planner", "openai:test-model", "--base-url", server.base_url, "--json"
+    )
+    assert result.returncode == 0, result.stderr
+    out = json.loads(result.stdout)
+    assert out["outcome"] == "APPROVED" and out["iterations"] == 2
+    assert len(server.seen) == 3  # the 429 was retried by the client
+    repair_prompt = server.seen[2].body["messages"][-1]["content"]
+    assert "DIAGNOSTIC REPORT" in repair_prompt and "FridgeLeftOpenDanger" in repair_prompt
+
+
+def test_http_refusal_and_malformed_reply(tmp_path: Path, server: ChatServer) -> None:  # noqa: F811
+    server.queue(completion(""), completion("TASK_ABORT"))
+    result = virf_plan(
+        tmp_path, "--planner", "openai:test-model", "--base-url", server.base_url, "--json"
+    )
+    assert result.returncode == 1, result.stderr
+    out = json.loads(result.stdout)
+    assert out["outcome"] == "TASK_REJECTED" and out["plan"] is None
+    assert out["transcript"][-1]["kind"] == "refusal"
+
+
+def test_missing_key_says_what_to_set(tmp_path: Path) -> None:
+    result = virf_plan(
+        tmp_path, "--planner", "openai:gpt-4o-mini", "--base-url", "https://api.example.com/v1"
+    )
+    assert result.returncode == 4
+    assert result.stderr.startswith("error: no API key: set OPENAI_API_KEY")
+    assert "Traceback" not in result.stderr
+
+
+def test_unknown_planner(tmp_path: Path) -> None:
+    result = virf_plan(tmp_path, "--planner", "gpt4")
+    assert result.returncode == 2
+    assert "choose openai:MODEL, replay:FILE or scripted" in result.stderr
+    assert result.stderr.count("\n") == 1
