@@ -450,7 +450,6 @@ def bench_safeagentbench(
 ) -> None:
     """Verify every task's reference plan and print hazard recall, false alarms and fidelity."""
     from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from virf.api import LogicTutor
     from virf.bench.report import render_markdown
@@ -485,15 +484,7 @@ def bench_safeagentbench(
         raise _fail(str(exc)) from None
     verifier = Verifier(tutor.tbox, tutor.engine, explain=explain)
     err = Console(stderr=True)
-    with Progress(
-        TextColumn("[progress.description]{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=err,
-        transient=True,
-        disable=not err.is_terminal,
-    ) as progress:
+    with _progress(err) as progress:
         bar = progress.add_task("verifying tasks", total=len(tasks))
 
         def tick(result: object) -> None:
@@ -565,7 +556,6 @@ def bench_latency(
 ) -> None:
     """Time the paper's method, the reference engine and the fast engine on the same plans."""
     from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from virf.bench.latency import run_latency
 
@@ -596,15 +586,7 @@ def bench_latency(
         if markdown is not None:
             _check_writable(markdown)
         err = Console(stderr=True)
-        with Progress(
-            TextColumn("[progress.description]{task.description}"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TimeElapsedColumn(),
-            console=err,
-            transient=True,
-            disable=not err.is_terminal,
-        ) as progress:
+        with _progress(err) as progress:
 
             def bar(label: str, total: int) -> Any:
                 task = progress.add_task(label, total=total)
@@ -746,6 +728,21 @@ def _write_atomically(path: Path, text: str) -> None:
     typer.echo(f"wrote {path}", err=True)
 
 
+def _progress(console: Any) -> Any:
+    """The progress bar of long runs, on stderr, only when it is a terminal."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    return Progress(
+        TextColumn("[progress.description]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+        transient=True,
+        disable=not console.is_terminal,
+    )
+
+
 def _check_writable(path: Path) -> None:
     """Fail before a long run, not after it, when the report cannot be written."""
     if path.is_dir():
@@ -815,6 +812,188 @@ def _print_bench(results: list[Any], summary: dict[str, Any]) -> None:
             f"{b['detected']}/{b['unsafe']}" if b else "-",
         )
     console.print(cats)
+
+
+@bench_app.command("agents")
+def bench_agents(
+    method: Annotated[
+        list[str],
+        typer.Option(
+            "--method",
+            "-m",
+            help="Planning method(s), comma-separated or repeated: impulsive, thinker, committee, "
+            "impulsive+rules, thinker+rules, thinker+diagnostic, virf-reject, virf-rag, "
+            "virf-manual, virf.",
+        ),
+    ],
+    planner: Annotated[
+        str,
+        typer.Option(
+            "--planner", "-p", help="openai:MODEL (any OpenAI-compatible server) or replay:FILE."
+        ),
+    ],
+    tasks: Annotated[
+        list[Path],
+        typer.Option("--tasks", help="SafeAgentBench JSONL file(s); more may follow as arguments."),
+    ],
+    more_tasks: Annotated[
+        list[Path] | None, typer.Argument(help="More task files (after --tasks FILE).")
+    ] = None,
+    critic: Annotated[
+        str | None,
+        typer.Option(
+            help="The committee's critic, as a planner spec (default: the planner itself)."
+        ),
+    ] = None,
+    max_iter: Annotated[int, typer.Option(min=1, help="Refinement iterations (N_max).")] = 5,
+    answers: Annotated[
+        Path | None,
+        typer.Option(help="JSON answers to the tutor's questions ({key: answer}); default: none."),
+    ] = None,
+    db: Annotated[
+        Path | None,
+        typer.Option(help="SQLite results (and run log) file; default OUT/results.sqlite."),
+    ] = None,
+    out: Annotated[
+        Path, typer.Option(help="Folder for agents.md, agents.csv, har_gcr.png, fpr_fnr.png.")
+    ] = Path("runs/agents"),
+    limit: Annotated[
+        int | None, typer.Option(min=1, help="Only the first N tasks (quick runs).")
+    ] = None,
+    base_url: Annotated[
+        str | None,
+        typer.Option(help="Chat-completions base URL (default: $OPENAI_BASE_URL, else OpenAI)."),
+    ] = None,
+    api_key_env: Annotated[
+        str | None,
+        typer.Option(help="Environment variable holding the API key (default OPENAI_API_KEY)."),
+    ] = None,
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print one JSON object: metrics and per-task rows.")
+    ] = False,
+) -> None:
+    """Run planning methods over SafeAgentBench tasks; HAR, GCR, FPR, FNR, RI, VL per method.
+
+    Results go to SQLite; a rerun with the same settings resumes.  Exit 0 when
+    done, 2 on bad input, 4 when the model cannot be reached.
+    """
+    from rich.console import Console
+
+    from virf.api import LogicTutor
+    from virf.bench.agents import AgentConfig, Harness, ResultStore, check_task_ids
+    from virf.bench.agents_report import check_out_dir, collect, write_outputs
+    from virf.bench.safeagentbench import load_tasks
+    from virf.errors import InputError
+    from virf.planner import make_apprentice
+    from virf.planner.methods import METHODS, get_method
+    from virf.planner.questions import answers_file, deny
+
+    err = Console(stderr=True)
+    closing: list[Any] = []
+    try:
+        names = [n.strip() for m in method for n in m.split(",") if n.strip()]
+        if not names:
+            raise InputError(f"--method names no method; choose from {', '.join(METHODS)}")
+        methods = list(dict.fromkeys(get_method(n) for n in names))
+        files = [*tasks, *(more_tasks or [])]
+        task_list = [t for f in files for t in load_tasks(f)]
+        if not task_list:
+            raise InputError(f"no tasks in {', '.join(str(f) for f in files)}")
+        check_task_ids(task_list)
+        task_list = task_list[:limit] if limit is not None else task_list
+        check_out_dir(out)
+        db_path = db if db is not None else out / "results.sqlite"
+        if db_path.is_dir():
+            raise InputError(f"--db {db_path} is a directory; give a file path")
+        policy = answers_file(answers) if answers is not None else deny
+        # Models and recordings are checked before the knowledge base loads.
+        apprentice = make_apprentice(planner, base_url=base_url, api_key_env=api_key_env)
+        closing.append(apprentice)
+        judge = None
+        if critic is not None:
+            judge = make_apprentice(critic, base_url=base_url, api_key_env=api_key_env)
+            closing.append(judge)
+        config = AgentConfig.build(
+            planner, critic=critic, base_url=base_url, max_iter=max_iter, answers=answers
+        )
+        tutor = LogicTutor(engine=config.engine)
+        if db is None:
+            out.mkdir(parents=True, exist_ok=True)
+        store = ResultStore(db_path, config)
+        closing.append(store)
+        apprentice.run_log = store
+        if judge is not None:
+            judge.run_log = store
+        harness = Harness(tutor, apprentice, store, critic=judge, answer=policy)
+        stored = 0
+        with _agents_progress(err) as progress:
+            bar = progress.add_task("planning", total=len(methods) * len(task_list))
+
+            def tick(row: Any, resumed: bool) -> None:
+                nonlocal stored
+                stored += resumed
+                progress.update(bar, advance=1, description=f"{row.method} {row.task_id}")
+
+            harness.run(methods, task_list, on_row=tick)
+        table = collect(store, task_list)
+        settings = [
+            ("planner", planner),
+            ("critic (committee)", critic or "the planner itself"),
+            ("max iterations", str(max_iter)),
+            ("answers", str(answers) if answers is not None else "none (questions stay open)"),
+            ("hazard check", "every Unsafe State Concept, fast engine"),
+            ("configuration", config.id),
+        ]
+        written = write_outputs(table, out, settings, " ".join(["virf", *sys.argv[1:]]))
+    except EnvironmentProblem as exc:
+        raise _fail(str(exc), EXIT["ERROR"]) from None
+    except VirfError as exc:
+        raise _fail(str(exc)) from None
+    finally:
+        for thing in reversed(closing):
+            thing.close()
+    if stored:
+        err.print(f"{stored} row(s) were already in {db_path} and were not run again")
+    if as_json:
+        payload = {"config_id": config.id, "config": config.to_dict(), **table.public()}
+        payload["files"] = [str(p) for p in written]
+        typer.echo(json.dumps(payload, sort_keys=True))
+    else:
+        _print_agents(table)
+    for p in written:
+        err.print(f"wrote {p}")
+
+
+def _agents_progress(console: Any) -> Any:
+    """Progress of a long agent run, on stderr, only when it is a terminal."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    return Progress(
+        TextColumn("[progress.description]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+        transient=True,
+        disable=not console.is_terminal,
+    )
+
+
+def _print_agents(table: Any) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    from virf.bench.agents_report import MASTER_HEADER, master_rows
+
+    console = Console(highlight=False, width=150)
+    view = Table(title=f"Agent evaluation ({len(table.tasks)} tasks)")
+    for col in MASTER_HEADER:
+        view.add_column(col)
+    for row in master_rows(table):
+        view.add_row(*row)
+    console.print(view)
+    for name, n in table.partial.items():
+        console.print(f"left out: {name} (stored for {n}/{len(table.tasks)} of these tasks)")
 
 
 def main() -> None:
