@@ -23,6 +23,7 @@ engine.  Every fallback is counted in :attr:`FastEngine.stats`.
 from __future__ import annotations
 
 import threading
+import weakref
 from collections import Counter
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -34,17 +35,20 @@ from virf.reasoning.fragment import NOTHING, THING, Axiom, Expr, Fragment, Role,
 from virf.reasoning.program import ChaseLimit, Model, Program, compile_program
 from virf.schema import Fact, FactKind
 
-_FRAGMENTS: dict[int, Fragment] = {}
+_FRAGMENTS: weakref.WeakKeyDictionary[TBox, Fragment] = weakref.WeakKeyDictionary()
 _LOCK = threading.Lock()
+# Names the engine uses for itself; an input name starting like one of these
+# could be confused with them, so such an input goes to the reference engine.
+_INTERNAL = ("owl:", "aux:", "{", "undefined:", "_:")
 
 
 def fragment_of(tbox: TBox) -> Fragment:
     """The TBox converted once per loaded TBox."""
     with _LOCK:
-        frag = _FRAGMENTS.get(id(tbox))
+        frag = _FRAGMENTS.get(tbox)
         if frag is None:
             frag = load_fragment(tbox.logical_axioms(), tbox.render)
-            _FRAGMENTS[id(tbox)] = frag
+            _FRAGMENTS[tbox] = frag
         return frag
 
 
@@ -423,6 +427,14 @@ class FastEngine(Engine):
         prog, disabled = self.program(without)
         m = prog.base(disabled)
         for f in facts:
+            names = (
+                f.subject,
+                f.predicate,
+                *(f.members() if f.kind is FactKind.CLOSURE else (f.object,)),
+            )
+            if any(n.startswith(_INTERNAL) for n in names):
+                raise Fallback(f"the input name in '{f.render()}' looks like an internal name")
+        for f in facts:
             if f.kind is FactKind.CLOSURE:
                 key = (f.subject, f.predicate)
                 members = frozenset(f.members())
@@ -536,14 +548,16 @@ class FastEngine(Engine):
     ) -> bool:
         def exact() -> bool:
             m, ev = self._model(facts, without)
+            if individual.startswith(_INTERNAL):
+                raise Fallback(f"the individual '{individual}' looks like an internal name")
+            if individual not in m.types:  # before the model check: it is part of the model
+                m.element(individual)
+                m.run()
             if m.clash is not None:
                 return True
             bad = ev.violations(self._checks(m))
             if bad is not None:
                 raise Fallback(f"candidate model violates: {bad}")
-            if individual not in m.types:
-                m.element(individual)
-                m.run()
             return self._decide(ev, concept, individual)
 
         result: bool = self._answer(

@@ -275,8 +275,11 @@ def _partition(frag: Fragment) -> None:
     every_class: set[str] = set()
     for ax in frag.axioms:
         every_class |= _axiom_classes(ax)
-    queries = {q for q, ds in defs.items() if len(ds) == 1}
-    sinks = set(every_class) - set(defs)
+    # The built-in classes mean something on their own (Nothing in particular
+    # makes axioms inconsistent), so they are never queries or sinks.
+    builtin = {THING, NOTHING}
+    queries = {q for q, ds in defs.items() if len(ds) == 1} - builtin
+    sinks = set(every_class) - set(defs) - builtin
     while True:
         before = (len(queries), len(sinks))
         for ax in frag.axioms:

@@ -578,15 +578,17 @@ class Model:
                     self.clash = f"{x} has two values for the functional property {d}"
 
     # ------------------------------------------------------------------ journal
-    def begin(self) -> tuple[int, int, str | None]:
-        """Start recording; the token returned by :meth:`rollback` restores
-        this exact state (including its version, so caches stay valid)."""
+    def begin(self) -> tuple[int, int, str | None, bool]:
+        """Start recording; :meth:`rollback` with the token restores this exact
+        state (including its version, so caches stay valid).  Calls nest: only
+        the outermost rollback stops the recording."""
+        created = self.journal is None
         if self.journal is None:
             self.journal = []
-        return (len(self.journal), self.version, self.clash)
+        return (len(self.journal), self.version, self.clash, created)
 
-    def rollback(self, token: tuple[int, int, str | None]) -> None:
-        mark, version, clash = token
+    def rollback(self, token: tuple[int, int, str | None, bool]) -> None:
+        mark, version, clash, created = token
         assert self.journal is not None
         self.queue.clear()
         while len(self.journal) > mark:
@@ -608,7 +610,7 @@ class Model:
                 del self.types[entry[1]]
         self.clash = clash
         self.version = version
-        if mark == 0:
+        if created:
             self.journal = None
 
     # ------------------------------------------------------------------ checks
