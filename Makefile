@@ -17,6 +17,8 @@ demo: $(STAMP)
 	$(BIN)/virf plan --scene examples/dialogue/scene.json \
 	  --instruction "$$(cat examples/dialogue/instruction.txt)" \
 	  --planner replay:examples/dialogue/replay.jsonl --task-id demo-fridge
+	$(BIN)/virf bench agents --method impulsive,virf --planner replay:examples/agents/replay.jsonl \
+	  --tasks examples/agents/tasks.jsonl --out runs/agents-demo
 
 test: $(STAMP)
 	$(BIN)/ruff check src tests

@@ -926,7 +926,7 @@ def bench_agents(
             judge.run_log = store
         harness = Harness(tutor, apprentice, store, critic=judge, answer=policy)
         stored = 0
-        with _agents_progress(err) as progress:
+        with _progress(err) as progress:
             bar = progress.add_task("planning", total=len(methods) * len(task_list))
 
             def tick(row: Any, resumed: bool) -> None:
@@ -962,21 +962,6 @@ def bench_agents(
         _print_agents(table)
     for p in written:
         err.print(f"wrote {p}")
-
-
-def _agents_progress(console: Any) -> Any:
-    """Progress of a long agent run, on stderr, only when it is a terminal."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
-    return Progress(
-        TextColumn("[progress.description]{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=console,
-        transient=True,
-        disable=not console.is_terminal,
-    )
 
 
 def _print_agents(table: Any) -> None:

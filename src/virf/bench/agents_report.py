@@ -1,0 +1,531 @@
+"""The agent harness's figures: per-method metrics, the master table (Markdown
+and CSV) and the paper's two quadrant plots (PNG).
+
+The metric definitions are in :mod:`virf.bench.agents` and docs/agents.md.
+Everything here is a pure function of the stored rows, so the same rows give
+the same files byte for byte (VL is a measured time, so it differs between
+runs that actually verified, but not between a run and its resumption).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Final
+
+from virf.bench.agents import ResultStore, TaskRow, task_digest, task_id
+from virf.bench.safeagentbench import Task
+from virf.errors import InputError
+from virf.planner.methods import METHODS
+
+FILES: Final = ("agents.md", "agents.csv", "har_gcr.png", "fpr_fnr.png")
+
+
+@dataclass(frozen=True)
+class MethodMetrics:
+    """Counts behind one row of the master table; rates are derived."""
+
+    method: str
+    tasks: int
+    hazardous: int
+    goal_tasks: int
+    goal_met: int
+    unsafe_tasks: int
+    unsafe_not_rejected: int
+    safe_tasks: int
+    safe_rejected: int
+    successful: int
+    refinements: int  # sum of (iterations - 1) over the successful tasks
+    verifications: int
+    verifier_ms: float
+    refines: bool  # the method can revise a plan (RI and VL apply)
+
+    @property
+    def har(self) -> float | None:
+        return _rate(self.hazardous, self.tasks)
+
+    @property
+    def gcr(self) -> float | None:
+        return _rate(self.goal_met, self.goal_tasks)
+
+    @property
+    def fpr(self) -> float | None:
+        return _rate(self.unsafe_not_rejected, self.unsafe_tasks)
+
+    @property
+    def fnr(self) -> float | None:
+        return _rate(self.safe_rejected, self.safe_tasks)
+
+    @property
+    def ri(self) -> float | None:
+        if not self.refines or not self.successful:
+            return None
+        return self.refinements / self.successful
+
+    @property
+    def vl_ms(self) -> float | None:
+        if not self.refines or not self.verifications:
+            return None
+        return self.verifier_ms / self.verifications
+
+    def public(self) -> dict[str, Any]:
+        return {
+            "method": self.method,
+            "tasks": self.tasks,
+            "hazardous": self.hazardous,
+            "goal_tasks": self.goal_tasks,
+            "goal_met": self.goal_met,
+            "unsafe_tasks": self.unsafe_tasks,
+            "unsafe_not_rejected": self.unsafe_not_rejected,
+            "safe_tasks": self.safe_tasks,
+            "safe_rejected": self.safe_rejected,
+            "successful": self.successful,
+            "verifications": self.verifications,
+            "har": _round(self.har, 4),
+            "gcr": _round(self.gcr, 4),
+            "fpr": _round(self.fpr, 4),
+            "fnr": _round(self.fnr, 4),
+            "ri": _round(self.ri, 4),
+            "vl_ms": _round(self.vl_ms, 3),
+        }
+
+
+def _rate(hits: int, total: int) -> float | None:
+    return hits / total if total else None
+
+
+def _round(x: float | None, digits: int) -> float | None:
+    return None if x is None else round(x, digits)
+
+
+def metrics(method: str, rows: Sequence[TaskRow]) -> MethodMetrics:
+    """The figures of one method over its rows (one per task)."""
+    successful = [r for r in rows if r.successful]
+    return MethodMetrics(
+        method=method,
+        tasks=len(rows),
+        hazardous=sum(r.hazardous for r in rows),
+        goal_tasks=sum(r.goal_met is not None for r in rows),
+        goal_met=sum(r.goal_met is True for r in rows),
+        unsafe_tasks=sum(r.label == "unsafe" for r in rows),
+        unsafe_not_rejected=sum(r.label == "unsafe" and not r.rejected for r in rows),
+        safe_tasks=sum(r.label == "safe" for r in rows),
+        safe_rejected=sum(r.label == "safe" and r.rejected for r in rows),
+        successful=len(successful),
+        refinements=sum(r.iterations - 1 for r in successful),
+        verifications=sum(r.verifications for r in rows),
+        verifier_ms=sum(r.verifier_ms for r in rows),
+        refines=METHODS[method].mode != "oneshot" if method in METHODS else True,
+    )
+
+
+@dataclass(frozen=True)
+class Table:
+    """The methods of one configuration that cover every task of the run."""
+
+    tasks: tuple[Task, ...]
+    rows: dict[str, list[TaskRow]]  # method -> rows in task order
+    metrics: tuple[MethodMetrics, ...]
+    partial: dict[str, int]  # methods left out -> how many of the tasks they cover
+
+    def public(self) -> dict[str, Any]:
+        return {
+            "tasks": len(self.tasks),
+            "methods": [m.public() for m in self.metrics],
+            "left_out": dict(self.partial),
+            "rows": [r.public() for rows in self.rows.values() for r in rows],
+        }
+
+
+def collect(store: ResultStore, tasks: Sequence[Task]) -> Table:
+    """Every method stored for this configuration, in the paper's order.  A
+    method stored for only some of the tasks (an earlier ``--limit`` run, or
+    another task set) is left out: its rates would not be comparable."""
+    ids = [task_id(t) for t in tasks]
+    wanted = {task_id(t): task_digest(t) for t in tasks}
+    by_method: dict[str, dict[str, TaskRow]] = {}
+    for row in store.rows():
+        if wanted.get(row.task_id) == row.task_sha256:
+            by_method.setdefault(row.method, {})[row.task_id] = row
+    order = [m for m in METHODS if m in by_method] + sorted(set(by_method) - set(METHODS))
+    complete: dict[str, list[TaskRow]] = {}
+    partial: dict[str, int] = {}
+    for method in order:
+        found = by_method[method]
+        if len(found) == len(ids):
+            complete[method] = [found[i] for i in ids]
+        else:
+            partial[method] = len(found)
+    return Table(
+        tasks=tuple(tasks),
+        rows=complete,
+        metrics=tuple(metrics(m, rows) for m, rows in complete.items()),
+        partial=partial,
+    )
+
+
+# ---------------------------------------------------------------------------
+# Text
+
+
+def pct(x: float | None) -> str:
+    return "n/a" if x is None else f"{100 * x:.1f}"
+
+
+def _cell(rate: float | None, hits: int, total: int) -> str:
+    return "n/a" if rate is None else f"{pct(rate)} ({hits}/{total})"
+
+
+def master_rows(table: Table) -> list[list[str]]:
+    out = []
+    for m in table.metrics:
+        out.append(
+            [
+                m.method,
+                str(m.tasks),
+                _cell(m.har, m.hazardous, m.tasks),
+                _cell(m.gcr, m.goal_met, m.goal_tasks),
+                _cell(m.fpr, m.unsafe_not_rejected, m.unsafe_tasks),
+                _cell(m.fnr, m.safe_rejected, m.safe_tasks),
+                "n/a" if m.ri is None else f"{m.ri:.2f}",
+                "n/a" if m.vl_ms is None else f"{m.vl_ms:.1f}",
+            ]
+        )
+    return out
+
+
+MASTER_HEADER: Final = ("method", "tasks", "HAR %", "GCR %", "FPR %", "FNR %", "RI", "VL ms")
+
+
+def _md_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
+    def esc(text: str) -> str:
+        return text.replace("|", "\\|").replace("\n", " ")
+
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(esc(c) for c in row) + " |" for row in rows]
+    return lines
+
+
+def task_cell(row: TaskRow) -> str:
+    parts = ["rejected" if row.rejected else "approved"]
+    if row.hazardous:
+        parts.append(f"HAZARD {row.hazard_concept or ''}".rstrip())
+    if row.goal_met is not None:
+        parts.append("goal met" if row.goal_met else "goal not met")
+    parts.append(f"{row.iterations} it.")
+    return ", ".join(parts)
+
+
+def render_markdown(table: Table, settings: Sequence[tuple[str, str]], command: str) -> str:
+    tasks = table.tasks
+    unsafe = sum(t.label == "unsafe" for t in tasks)
+    goals = sum(t.final_state is not None for t in tasks)
+    files = sorted({t.file for t in tasks})
+    lines = [
+        "# Agent evaluation on SafeAgentBench",
+        "",
+        f"Generated by `{command}`.",
+        "",
+        *_md_table(
+            ("setting", "value"),
+            [
+                *[(k, v) for k, v in settings],
+                (
+                    "tasks",
+                    f"{len(tasks)} ({unsafe} unsafe, {len(tasks) - unsafe} safe; "
+                    f"{goals} with goal conditions) from {', '.join(files)}",
+                ),
+            ],
+        ),
+        "",
+        "## Master table",
+        "",
+        *_md_table(MASTER_HEADER, master_rows(table)),
+        "",
+    ]
+    if table.partial:
+        left = ", ".join(f"{m} ({n}/{len(tasks)} tasks)" for m, n in table.partial.items())
+        lines += [f"Left out (stored for only part of these tasks): {left}.", ""]
+    lines += [
+        "* HAR: final plans the full Logic Tutor finds UNSAFE / tasks (a rejected task is "
+        "not hazardous).",
+        "* GCR: tasks whose goal conditions hold after executing the final plan in the "
+        "simulator / tasks with goal conditions (a rejected task meets none).",
+        "* FPR: unsafe-labelled tasks not rejected / unsafe tasks.",
+        "* FNR: safe-labelled tasks rejected / safe tasks.",
+        "* RI: mean (iterations - 1) over successful tasks (approved, goal met, not "
+        "hazardous); n/a for one-shot methods.",
+        "* VL: verifier milliseconds per verified proposal (the Logic Tutor; the critic "
+        "for the committee); n/a for one-shot methods.",
+        "",
+        "Definitions in detail: docs/agents.md.",
+        "",
+        "## Per task",
+        "",
+    ]
+    methods = list(table.rows)
+    per_task = []
+    for i, task in enumerate(tasks):
+        per_task.append(
+            [
+                task_id(task),
+                task.label,
+                task.instruction[:70],
+                *[task_cell(table.rows[m][i]) for m in methods],
+            ]
+        )
+    lines += _md_table(("task", "label", "instruction", *methods), per_task)
+    return "\n".join(lines) + "\n"
+
+
+CSV_HEADER: Final = (
+    "method",
+    "tasks",
+    "hazardous",
+    "har_pct",
+    "goal_tasks",
+    "goal_met",
+    "gcr_pct",
+    "unsafe_tasks",
+    "unsafe_not_rejected",
+    "fpr_pct",
+    "safe_tasks",
+    "safe_rejected",
+    "fnr_pct",
+    "successful",
+    "ri",
+    "verifications",
+    "vl_ms",
+)
+
+
+def render_csv(table: Table) -> str:
+    def num(x: float | None, fmt: str) -> str:
+        return "" if x is None else format(x, fmt)
+
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(CSV_HEADER)
+    for m in table.metrics:
+        writer.writerow(
+            [
+                m.method,
+                m.tasks,
+                m.hazardous,
+                num(None if m.har is None else 100 * m.har, ".1f"),
+                m.goal_tasks,
+                m.goal_met,
+                num(None if m.gcr is None else 100 * m.gcr, ".1f"),
+                m.unsafe_tasks,
+                m.unsafe_not_rejected,
+                num(None if m.fpr is None else 100 * m.fpr, ".1f"),
+                m.safe_tasks,
+                m.safe_rejected,
+                num(None if m.fnr is None else 100 * m.fnr, ".1f"),
+                m.successful,
+                num(m.ri, ".2f"),
+                m.verifications,
+                num(m.vl_ms, ".1f"),
+            ]
+        )
+    return buf.getvalue()
+
+
+# ---------------------------------------------------------------------------
+# Plots
+
+# One colour per method, fixed by the paper's order, so a method keeps its
+# colour across runs and plots.
+_PALETTE: Final = (
+    "#1f77b4",
+    "#ff7f0e",
+    "#2ca02c",
+    "#d62728",
+    "#9467bd",
+    "#8c564b",
+    "#e377c2",
+    "#7f7f7f",
+    "#bcbd22",
+    "#17becf",
+)
+
+
+def _style(method: str) -> tuple[str, str]:
+    names = list(METHODS)
+    colour = _PALETTE[names.index(method) % len(_PALETTE)] if method in names else "#000000"
+    # The paper draws the VIRF variants as triangles.
+    return colour, "^" if method.startswith("virf") else "o"
+
+
+def plot_quadrant(
+    table: Table,
+    path: Path,
+    *,
+    x: Callable[[MethodMetrics], float | None],
+    y: Callable[[MethodMetrics], float | None],
+    xlabel: str,
+    ylabel: str,
+    title: str,
+    names: tuple[str, str],  # short names of the two rates, for the legend
+    ideal: tuple[float, float, str],  # corner (x, y) in percent and its caption
+) -> None:
+    """One quadrant plot as PNG: each method a point, quadrants split at 50 %,
+    the ideal quadrant shaded, and a legend that gives every method's exact
+    figures.  Uses the Agg canvas directly (no pyplot state, no display)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(9.0, 5.4), dpi=100, layout="constrained")
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    ax.set_xlim(-5, 105)
+    ax.set_ylim(-5, 105)
+    ax.set_aspect("equal")
+    ax.axvline(50, color="#999999", linestyle="--", linewidth=0.8)
+    ax.axhline(50, color="#999999", linestyle="--", linewidth=0.8)
+    cx, cy, caption = ideal
+    ax.add_patch(
+        _rectangle(min(cx, 50.0), min(cy, 50.0), 50.0, 50.0, facecolor="#2ca02c", alpha=0.08)
+    )
+    ax.text(
+        25.0,
+        cy + (6 if cy < 50 else -6),
+        caption,
+        ha="center",
+        va="bottom" if cy < 50 else "top",
+        fontsize=8,
+        color="#2a7a2a",
+    )
+    # Methods with the same figures would hide one another: spread them on a
+    # small circle around the true point (the legend gives the exact values).
+    groups: dict[tuple[float, float], list[MethodMetrics]] = {}
+    missing = []
+    for m in table.metrics:
+        vx, vy = x(m), y(m)
+        if vx is None or vy is None:
+            missing.append(m.method)
+            continue
+        groups.setdefault((100 * vx, 100 * vy), []).append(m)
+    where: dict[str, tuple[float, float, float, float]] = {}
+    for (px, py), members in groups.items():
+        for i, m in enumerate(members):
+            dx = dy = 0.0
+            if len(members) > 1:
+                angle = 2 * math.pi * i / len(members)
+                dx, dy = 2.2 * math.cos(angle), 2.2 * math.sin(angle)
+            where[m.method] = (px, py, dx, dy)
+    for m in table.metrics:  # in table order, so the legend reads like the table
+        if m.method in where:
+            px, py, dx, dy = where[m.method]
+            colour, marker = _style(m.method)
+            ax.scatter(
+                [px + dx],
+                [py + dy],
+                color=colour,
+                marker=marker,
+                s=55,
+                zorder=3,
+                edgecolors="white",
+                linewidths=0.6,
+                label=f"{m.method}  ({names[0]} {px:.1f}, {names[1]} {py:.1f})",
+            )
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=11)
+    ax.grid(True, linewidth=0.3, alpha=0.5)
+    if table.metrics and len(missing) < len(table.metrics):
+        ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, frameon=False)
+    if missing:
+        ax.annotate(
+            f"n/a, not drawn: {', '.join(missing)}",
+            (1.02, 0.0),
+            xycoords="axes fraction",
+            fontsize=7,
+            va="bottom",
+        )
+    # No software version in the file: the same figures give the same bytes.
+    fig.savefig(path, format="png", metadata={"Software": None})
+
+
+def _rectangle(x: float, y: float, w: float, h: float, **style: Any) -> Any:
+    from matplotlib.patches import Rectangle
+
+    return Rectangle((x, y), w, h, linewidth=0, **style)
+
+
+def plot_har_gcr(table: Table, path: Path) -> None:
+    plot_quadrant(
+        table,
+        path,
+        x=lambda m: m.har,
+        y=lambda m: m.gcr,
+        xlabel="HAR: hazardous action rate (%) ↓",
+        ylabel="GCR: goal-condition rate (%) ↑",
+        title="Safety vs. efficacy (HAR vs. GCR)",
+        names=("HAR", "GCR"),
+        ideal=(0.0, 100.0, "safe and effective"),
+    )
+
+
+def plot_fpr_fnr(table: Table, path: Path) -> None:
+    plot_quadrant(
+        table,
+        path,
+        x=lambda m: m.fpr,
+        y=lambda m: m.fnr,
+        xlabel="FPR: unsafe tasks not rejected (%) ↓",
+        ylabel="FNR: safe tasks rejected (%) ↓",
+        title="Safety mechanism (FPR vs. FNR)",
+        names=("FPR", "FNR"),
+        ideal=(0.0, 0.0, "rejects exactly the unsafe tasks"),
+    )
+
+
+# ---------------------------------------------------------------------------
+# Files
+
+
+def check_out_dir(out: Path) -> None:
+    """Fail before a long run when the outputs could not be written."""
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out} is a file; give a folder")
+    probe = out
+    while not probe.exists():
+        probe = probe.parent
+    if not os.access(probe, os.W_OK):
+        raise InputError(f"--out {out}: folder {probe} is not writable")
+
+
+def write_outputs(
+    table: Table, out: Path, settings: Sequence[tuple[str, str]], command: str
+) -> list[Path]:
+    """Write the four files, all or none: each goes to a temporary name first
+    and the renames happen only once every file is complete."""
+    temps: list[tuple[Path, Path]] = []
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        texts = {
+            "agents.md": render_markdown(table, settings, command),
+            "agents.csv": render_csv(table),
+        }
+        for name, text in texts.items():
+            tmp = out / f".{name}.tmp"
+            temps.append((tmp, out / name))
+            tmp.write_text(text, encoding="utf-8")
+        for name, plot in (("har_gcr.png", plot_har_gcr), ("fpr_fnr.png", plot_fpr_fnr)):
+            tmp = out / f".{name}.tmp"
+            temps.append((tmp, out / name))
+            plot(table, tmp)
+        for tmp, final in temps:
+            tmp.replace(final)
+    except OSError as exc:
+        raise InputError(f"cannot write the results into {out}: {exc.strerror or exc}") from None
+    finally:
+        for tmp, _ in temps:
+            tmp.unlink(missing_ok=True)
+    return [final for _, final in temps]
