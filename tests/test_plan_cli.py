@@ -10,9 +10,12 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import pytest
 from conftest import ROOT
 from test_loop import CLOSES, FRIDGE_SCENE, LEAVES_OPEN
 from test_planner_clients import FAST_RETRY, ChatServer, completion, error, server  # noqa: F401
+
+from virf.errors import InputError
 
 
 def virf_plan(
@@ -21,6 +24,7 @@ def virf_plan(
     scene = tmp_path / "scene.json"
     scene.write_text(json.dumps(FRIDGE_SCENE), encoding="utf-8")
     environ = {k: v for k, v in os.environ.items() if not k.startswith("OPENAI_")}
+    environ["XDG_CONFIG_HOME"] = str(tmp_path / "config")  # no user config unless a test writes one
     environ.update(env or {})
     return subprocess.run(
         [
@@ -110,3 +114,30 @@ def test_unknown_planner(tmp_path: Path) -> None:
     assert result.returncode == 2
     assert "choose openai:MODEL, replay:FILE or scripted" in result.stderr
     assert result.stderr.count("\n") == 1
+
+
+def test_user_config_supplies_the_key(tmp_path: Path) -> None:
+    from virf.planner import make_apprentice
+    from virf.planner.clients import OpenAIApprentice
+    from virf.planner.config import config_path, planner_settings
+
+    env = {"XDG_CONFIG_HOME": str(tmp_path / "cfg")}
+    assert planner_settings(env) == {}
+    path = config_path(env)
+    path.parent.mkdir(parents=True)
+    path.write_text('[planner]\napi_key = "sk-from-file"\ntemperature = 0.2\n', encoding="utf-8")
+    app = make_apprentice("openai:gpt-4o-mini", environ=env, base_url="https://api.example.com/v1")
+    assert isinstance(app, OpenAIApprentice)
+    assert app.settings.resolve(env).api_key == "sk-from-file"
+    assert app.settings.temperature == 0.2
+    # The environment wins over the file, the command line over both.
+    env2 = env | {"OPENAI_API_KEY": "sk-from-env"}
+    app2 = make_apprentice(
+        "openai:m", environ=env2, base_url="https://x.example/v1", temperature=0.7
+    )
+    assert isinstance(app2, OpenAIApprentice)
+    assert app2.settings.resolve(env2).api_key == "sk-from-env"
+    assert app2.settings.temperature == 0.7
+    path.write_text('[planner]\napi_ky = "typo"\n', encoding="utf-8")
+    with pytest.raises(InputError, match="unknown \\[planner\\] key 'api_ky'"):
+        planner_settings(env)

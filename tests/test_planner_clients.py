@@ -368,13 +368,16 @@ def test_missing_key_says_what_to_set() -> None:
     remote = ClientSettings(model="gpt-4o-mini")
     with pytest.raises(EnvironmentProblem) as exc:
         remote.resolve({})
-    assert str(exc.value) == "no API key: set OPENAI_API_KEY, or pass --api-key-env NAME"
+    assert str(exc.value) == (
+        "no API key: set OPENAI_API_KEY, or pass --api-key-env NAME "
+        "(or api_key under [planner] in ~/.config/virf/config.toml)"
+    )
     gemini = ClientSettings(
         model="gemini-2.0-flash",
         base_url="https://generativelanguage.googleapis.com/v1beta/openai/",
         api_key_env="GEMINI_API_KEY",
     )
-    with pytest.raises(EnvironmentProblem, match=r"^no API key: set GEMINI_API_KEY$"):
+    with pytest.raises(EnvironmentProblem, match=r"^no API key: set GEMINI_API_KEY \(or api_key"):
         gemini.resolve({"OPENAI_API_KEY": "not this one"})
     endpoint = gemini.resolve({"GEMINI_API_KEY": "g-key"})
     assert endpoint.base_url == "https://generativelanguage.googleapis.com/v1beta/openai"

@@ -190,6 +190,11 @@ def plan(
     seed: Annotated[
         int | None, typer.Option(help="Sampling seed, where the server supports it.")
     ] = None,
+    top_p: Annotated[float | None, typer.Option(help="Nucleus sampling (top-p).")] = None,
+    max_tokens: Annotated[int | None, typer.Option(help="Longest reply, in tokens.")] = None,
+    timeout: Annotated[
+        float | None, typer.Option(help="Seconds to wait for one model reply.")
+    ] = None,
     max_iter: Annotated[int, typer.Option(min=1, help="Refinement iterations (N_max).")] = 5,
     answers: Annotated[
         Path | None,
@@ -239,6 +244,9 @@ def plan(
             api_key_env=api_key_env,
             temperature=temperature,
             seed=seed,
+            top_p=top_p,
+            max_tokens=max_tokens,
+            timeout_s=timeout,
         )
         result = refine(
             instruction,

@@ -4,34 +4,15 @@ diagnostic feedback prompt (Appendix E) for the LLM apprentice."""
 from __future__ import annotations
 
 import textwrap
+from importlib import resources
 
 from virf.schema import Report, Violation
 
-FEEDBACK_TEMPLATE = """\
-ATTENTION: Your previous plan has failed a safety verification.
-DIAGNOSTIC REPORT
-
-[FAILURE ANALYSIS]
-The plan was rejected at STEP {step_number} during the simulation of the action '{action_info}'.
-
-[VIOLATED SAFETY RULE]
-Rule ID: {rule_id}
-Danger Level: {danger_level}
-Safety Warning: {rule_warning}
-
-[CAUSAL EXPLANATION]
-The logical reason for this failure is: {trigger_reason}
-System Analysis: {causal_message}
-
-[INVOLVED OBJECTS]
-The following objects are involved in this safety violation: {objects_str}
-
-[SUGGESTED CORRECTION]
-A potential way to resolve this is: {suggestion}
-
-NEW INSTRUCTION:
-Based on this report, generate a new, corrected plan that avoids this safety violation. If no safe plan is possible, you MUST respond with "TASK_ABORT".
-"""
+# The paper's Appendix E template, kept as a file so it can be read and
+# adapted without touching code.
+FEEDBACK_TEMPLATE = (
+    resources.files("virf.feedback").joinpath("diagnostic.txt").read_text(encoding="utf-8")
+)
 
 _NON_OBJECTS = {"rdf:type"}
 

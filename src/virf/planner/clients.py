@@ -133,7 +133,10 @@ class ClientSettings:
         if is_local(base_url):
             return Endpoint(base_url, LOCAL_PLACEHOLDER_KEY, self.api_key_env)
         flag = "" if self.api_key_env != DEFAULT_API_KEY_ENV else ", or pass --api-key-env NAME"
-        raise EnvironmentProblem(f"no API key: set {self.api_key_env}{flag}")
+        raise EnvironmentProblem(
+            f"no API key: set {self.api_key_env}{flag} "
+            "(or api_key under [planner] in ~/.config/virf/config.toml)"
+        )
 
     def request_body(self) -> dict[str, object]:
         """The sampling fields of a request; unset ones are left out, not nulled."""

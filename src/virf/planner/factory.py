@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import dataclasses
+import os
 from collections.abc import Mapping
 from typing import Any, Final
 
 from virf.errors import InputError, clip
 from virf.planner.apprentices import Apprentice, ReplayApprentice, ScriptedApprentice
-from virf.planner.clients import ClientSettings, OpenAIApprentice
+from virf.planner.clients import DEFAULT_API_KEY_ENV, ClientSettings, OpenAIApprentice
+from virf.planner.config import planner_settings
 from virf.planner.runlog import RunLog
 
 SPEC_FORMS: Final = "openai:MODEL, replay:FILE or scripted"
@@ -44,6 +46,13 @@ def make_apprentice(
         model = rest.strip()
         if not model:
             raise InputError("no model name: use openai:MODEL, e.g. openai:gpt-4o-mini")
+        # The user's config file fills what the command line left open; its
+        # key only counts when the key's environment variable is unset.
+        env = os.environ if environ is None else environ
+        for key, value in planner_settings(env).items():
+            if key == "api_key" and env.get(given.get("api_key_env", DEFAULT_API_KEY_ENV)):
+                continue
+            given.setdefault(key, value)
         return OpenAIApprentice(
             ClientSettings(model=model, **given), run_log=run_log, environ=environ
         )
