@@ -134,7 +134,7 @@ def test_replay_figures(tutor: LogicTutor, tasks: list[Task], tmp_path: Path) ->
     assert (virf["unsafe_not_rejected"], virf["fpr"]) == (1, 0.5)
     assert (virf["safe_rejected"], virf["fnr"]) == (0, 0.0)
     # Successful: the apple task (2 iterations) and the bread task (1).
-    assert virf["successful"] == 2 and virf["ri"] == 0.5
+    assert virf["successful"] == 2 and virf["ri"] == 1.5
     # Verified proposals: egg 1, sliced apple 2, apple 2, bread 1.
     assert virf["verifications"] == 6 and virf["vl_ms"] > 0
 
@@ -241,7 +241,7 @@ def test_http_run(tutor: LogicTutor, tasks: list[Task], tmp_path: Path, server: 
     assert (virf["goal_met"], virf["goal_tasks"]) == (2, 4)
     assert (virf["unsafe_not_rejected"], virf["fpr"]) == (0, 0.0)  # both unsafe tasks rejected
     assert (virf["safe_rejected"], virf["fnr"]) == (0, 0.0)
-    assert virf["successful"] == 2 and virf["ri"] == 0.5  # apple 1 refinement, bread 0
+    assert virf["successful"] == 2 and virf["ri"] == 1.5  # apple 2 iterations, bread 1
     assert virf["verifications"] == 4  # egg 1, sliced apple 0, apple 2, bread 1
     assert row(table, "virf", "tasks:1").reason == "the apprentice refused"
     malformed = row(table, "virf", "tasks:2")
@@ -276,11 +276,11 @@ def test_outputs_are_complete_and_deterministic(
     assert sorted(p.name for p in out.iterdir()) == sorted(FILES)
     md = (out / "agents.md").read_text(encoding="utf-8")
     assert "| impulsive | 4 | 75.0 (3/4) | 75.0 (3/4) | 100.0 (2/2) | 0.0 (0/2) | n/a | n/a |" in md
-    assert "| virf | 4 | 0.0 (0/4) | 50.0 (2/4) | 50.0 (1/2) | 0.0 (0/2) | 0.50 |" in md
+    assert "| virf | 4 | 0.0 (0/4) | 50.0 (2/4) | 50.0 (1/2) | 0.0 (0/2) | 1.50 |" in md
     assert "| tasks:1 | unsafe |" in md
     rows = list(csv.DictReader((out / "agents.csv").open(encoding="utf-8")))
     assert [r["method"] for r in rows] == ["impulsive", "virf"]
-    assert rows[0]["har_pct"] == "75.0" and rows[0]["ri"] == "" and rows[1]["ri"] == "0.50"
+    assert rows[0]["har_pct"] == "75.0" and rows[0]["ri"] == "" and rows[1]["ri"] == "1.50"
     for png in ("har_gcr.png", "fpr_fnr.png"):
         assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     before = {p.name: p.read_bytes() for p in out.iterdir()}
@@ -366,7 +366,7 @@ def test_cli_runs_and_resumes(tmp_path: Path) -> None:
     rows = list(csv.DictReader((out / "agents.csv").open(encoding="utf-8")))
     assert [(r["method"], r["gcr_pct"], r["fpr_pct"], r["ri"]) for r in rows] == [
         ("impulsive", "75.0", "100.0", ""),
-        ("virf", "50.0", "50.0", "0.50"),
+        ("virf", "50.0", "50.0", "1.50"),
     ]
     for png in ("har_gcr.png", "fpr_fnr.png"):
         assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

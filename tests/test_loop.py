@@ -161,6 +161,9 @@ def test_material_answers_are_checked(tutor: LogicTutor) -> None:
         ("1. find Apple_1\n2. teleport Apple_1", ["find Apple_1"], ["teleport Apple_1"], False),
         ("I cannot do this safely.\nTASK_ABORT", [], [], True),
         ("pick Apple_1 Apple_2", [], ["pick Apple_1 Apple_2"], False),
+        ("Put simply, here is the plan:\nfind Apple_1", ["find Apple_1"], [], False),
+        ('["find Apple_1", "pick Apple_1"]', ["find Apple_1", "pick Apple_1"], [], False),
+        ("find Apple_1\nTASK_ABORT", ["find Apple_1"], [], True),
     ],
 )
 def test_reading_plans_out_of_replies(
@@ -170,3 +173,46 @@ def test_reading_plans_out_of_replies(
     assert [s.canonical() for s in read.steps] == steps
     assert [u.split(":")[0] for u in read.unreadable] == unreadable
     assert read.refused == refused
+
+
+def test_answers_in_the_last_iteration_still_count(tutor: LogicTutor, tmp_path: Path) -> None:
+    scene = json.loads((EXAMPLES_DIR / "unknown-material-microwave" / "scene.json").read_text())
+    plan = "\n".join(
+        s.text for s in load_plan_file(EXAMPLES_DIR / "unknown-material-microwave" / "plan.txt")
+    )
+    answers = {
+        "material:Bowl_1": "Glass",
+        "fill:Bowl_1": "yes",
+        "contents:contains:Microwave_1": "yes",
+    }
+    result, _ = run(tutor, [plan], scene, answer=lambda qs: answers, max_iter=1)
+    assert result.outcome == "APPROVED" and result.iterations == 1
+    assert [t.status for t in result.transcript if t.kind == "report"][-1] == "SAFE"
+
+
+def test_the_planner_never_imports_the_reasoner() -> None:
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, virf.planner, virf.planner.loop, virf.planner.methods; "
+        "print(any(m.startswith('virf.reasoning') for m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+
+
+def test_the_demo_dialogue_replays(tutor: LogicTutor) -> None:
+    from virf.planner import ReplayApprentice
+
+    folder = EXAMPLES_DIR / "dialogue"
+    result = refine(
+        (folder / "instruction.txt").read_text().strip(),
+        json.loads((folder / "scene.json").read_text()),
+        ReplayApprentice(folder / "replay.jsonl"),
+        tutor.verifier,
+        lambda d: build_scene(d, tutor.tbox.vocabulary),
+        tutor.tbox.vocabulary,
+        task_id="demo-fridge",
+    )
+    assert result.outcome == "APPROVED" and result.iterations == 2

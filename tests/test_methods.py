@@ -65,12 +65,23 @@ def test_rules_methods_carry_every_rule(tutor: LogicTutor) -> None:
     assert "Hazards that must never arise" in apprentice.requests[0].as_messages()[-1]["content"]
 
 
+def test_committee_rejects_what_the_critic_never_approves(tutor: LogicTutor) -> None:
+    result, _ = run(
+        tutor,
+        "committee",
+        [LEAVES_OPEN, LEAVES_OPEN],
+        critic=["Unsafe.", "APPROVED? No."],
+        max_iter=2,
+    )
+    assert result.outcome == "TASK_REJECTED" and result.plan is None
+
+
 def test_committee_revises_until_the_critic_approves(tutor: LogicTutor) -> None:
     result, apprentice = run(
         tutor,
         "committee",
         [LEAVES_OPEN, CLOSES],
-        critic=["Step 5 leaves the fridge open.", "APPROVE"],
+        critic=["Step 5 leaves the fridge open.", "**APPROVE**"],
     )
     assert result.plan == tuple(CLOSES.splitlines()) and result.iterations == 2
     assert "leaves the fridge open" in apprentice.requests[1].as_messages()[-1]["content"]
@@ -100,8 +111,14 @@ def test_knowledge_ablations_split_the_rules(tutor: LogicTutor) -> None:
     rag = {u.name for u in uscs if knowledge_filter(u, "rag")}
     every = {u.name for u in uscs}
     kept = {u.name for u in uscs if u.kind in ("uncertainty", "logical-inconsistency")}
-    assert kept < manual < every and kept < rag < every
-    assert manual | rag <= every and manual != rag
-    narrow = Verifier(tutor.tbox, tutor.engine, uscs=manual)
-    result, _ = run(tutor, "virf-manual", [LEAVES_OPEN, CLOSES], verifier=narrow)
-    assert result.outcome == "APPROVED"
+    # A partition of the hazard rules by primary source; the tutor's own
+    # uncertainty and consistency concepts belong to both.
+    assert manual | rag == every and manual & rag == kept
+    assert {"FridgeLeftOpenDanger", "FaucetLeftRunningDanger", "BreadOnHotStoveDanger"} <= manual
+    assert {"WetElectricalDeviceOnDanger", "ToxicInFoodContainerDanger"} <= rag - manual
+    only_manual = Verifier(tutor.tbox, tutor.engine, uscs=manual)
+    result, _ = run(tutor, "virf-manual", [LEAVES_OPEN, CLOSES], verifier=only_manual)
+    assert result.outcome == "APPROVED" and result.iterations == 2  # the fridge rule is manual
+    only_rag = Verifier(tutor.tbox, tutor.engine, uscs=rag)
+    result, _ = run(tutor, "virf-rag", [LEAVES_OPEN], verifier=only_rag)
+    assert result.outcome == "APPROVED" and result.iterations == 1  # RAG's rules miss it

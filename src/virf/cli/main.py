@@ -196,6 +196,15 @@ def plan(
         float | None, typer.Option(help="Seconds to wait for one model reply.")
     ] = None,
     max_iter: Annotated[int, typer.Option(min=1, help="Refinement iterations (N_max).")] = 5,
+    method: Annotated[
+        str,
+        typer.Option(
+            "--method",
+            "-m",
+            help="virf (default), virf-reject, virf-rag, virf-manual, thinker+diagnostic, "
+            "committee, impulsive, thinker, impulsive+rules or thinker+rules.",
+        ),
+    ] = "virf",
     answers: Annotated[
         Path | None,
         typer.Option(
@@ -223,9 +232,11 @@ def plan(
     from virf.api import LogicTutor
     from virf.kb.scene import build_scene, load_scene_data
     from virf.planner import RunLog, make_apprentice
-    from virf.planner.loop import refine
+    from virf.planner.methods import get_method, knowledge_filter, run_method
     from virf.planner.questions import answers_file, deny
+    from virf.verify.verifier import Verifier
 
+    run_log: Any = None
     try:
         data = load_scene_data(scene)
         tutor = LogicTutor(engine=engine)
@@ -248,21 +259,36 @@ def plan(
             max_tokens=max_tokens,
             timeout_s=timeout,
         )
-        result = refine(
-            instruction,
-            data,
-            apprentice,
-            tutor.verifier,
-            lambda d: build_scene(d, vocab, name=scene.stem),
-            vocab,
-            max_iter=max_iter,
-            answer=policy,
-            task_id=task_id,
-        )
+        if not instruction.strip():
+            raise VirfError("--instruction is empty; say what the robot should do")
+        chosen = get_method(method)
+        verifier = tutor.verifier
+        if chosen.knowledge != "all":
+            verifier = Verifier(
+                tutor.tbox,
+                tutor.engine,
+                uscs={u.name for u in vocab.uscs.values() if knowledge_filter(u, chosen.knowledge)},
+            )
+        with apprentice:
+            result = run_method(
+                chosen,
+                instruction,
+                data,
+                apprentice,
+                verifier,
+                lambda d: build_scene(d, vocab, name=scene.stem),
+                vocab,
+                max_iter=max_iter,
+                answer=policy,
+                task_id=task_id,
+            )
     except EnvironmentProblem as exc:
         raise _fail(str(exc), EXIT["ERROR"]) from None
     except VirfError as exc:
         raise _fail(str(exc)) from None
+    finally:
+        if run_log is not None:
+            run_log.close()
     if as_json:
         typer.echo(result.to_json())
     else:

@@ -9,7 +9,12 @@ from typing import Any, Final
 
 from virf.errors import InputError, clip
 from virf.planner.apprentices import Apprentice, ReplayApprentice, ScriptedApprentice
-from virf.planner.clients import DEFAULT_API_KEY_ENV, ClientSettings, OpenAIApprentice
+from virf.planner.clients import (
+    BASE_URL_ENV,
+    DEFAULT_API_KEY_ENV,
+    ClientSettings,
+    OpenAIApprentice,
+)
 from virf.planner.config import planner_settings
 from virf.planner.runlog import RunLog
 
@@ -51,6 +56,8 @@ def make_apprentice(
         env = os.environ if environ is None else environ
         for key, value in planner_settings(env).items():
             if key == "api_key" and env.get(given.get("api_key_env", DEFAULT_API_KEY_ENV)):
+                continue
+            if key == "base_url" and env.get(BASE_URL_ENV):
                 continue
             given.setdefault(key, value)
         return OpenAIApprentice(

@@ -8,11 +8,11 @@ The apprentice proposes a plan and the tutor verifies it:
 * **A refusal** (``TASK_ABORT``): ``TASK_REJECTED``.
 * **UNKNOWN**: the questions go to the user (:mod:`virf.planner.questions`).
   When the answers settle something, the scene is updated and the same plan
-  is verified again. When nothing is settled, the report goes to the
-  apprentice like an unsafe one: the plan cannot be approved on
-  assumptions.
+  is verified again, within the same iteration. When nothing is settled, the
+  report goes to the apprentice like an unsafe one: the plan cannot be
+  approved on assumptions.
 
-Every pass counts as one of ``max_iter`` iterations. When they run out, the
+Each proposal uses one of ``max_iter`` iterations. When they run out, the
 outcome is ``TASK_REJECTED``.
 
 This module does not import the reasoner. The tutor comes in as any object
@@ -129,7 +129,7 @@ def refine(
                 )
             reply = proposal.text
             got = read(reply)
-            if got.refused and not got.steps:
+            if got.refused:
                 log.append(Turn(i, "apprentice", "refusal", reply))
                 return LoopResult(
                     "TASK_REJECTED", None, i + 1, "the apprentice refused", tuple(log)
@@ -147,28 +147,38 @@ def refine(
         log.append(
             Turn(i, "tutor", "report", report.reason, report.status, json.loads(report.to_json()))
         )
+        # UNKNOWN: ask, update the scene, verify the same plan again. This is
+        # part of the same iteration, so answers given in the last one count;
+        # it ends because every round settles at least one question.
+        while report.status == "UNKNOWN":
+            questions = questions_from(report)
+            if not questions:
+                break
+            log.append(
+                Turn(
+                    i,
+                    "tutor",
+                    "questions",
+                    "\n".join(q.text for q in questions),
+                    data={q.key: q.text for q in questions},
+                )
+            )
+            answers = answer(questions)
+            update = apply_answers(data, questions, answers, vocab)
+            log.append(Turn(i, "user", "answers", json.dumps(dict(answers), sort_keys=True)))
+            if not update.applied:
+                break
+            data = update.scene
+            scene = build_scene(data)
+            report = tutor.verify(scene, plan)
+            log.append(
+                Turn(
+                    i, "tutor", "report", report.reason, report.status, json.loads(report.to_json())
+                )
+            )
         if report.status == "SAFE":
             steps = tuple(s.text for s in plan)
             return LoopResult("APPROVED", steps, i + 1, "the tutor approved the plan", tuple(log))
-        if report.status == "UNKNOWN":
-            questions = questions_from(report)
-            if questions:
-                log.append(
-                    Turn(
-                        i,
-                        "tutor",
-                        "questions",
-                        "\n".join(q.text for q in questions),
-                        data={q.key: q.text for q in questions},
-                    )
-                )
-                answers = answer(questions)
-                update = apply_answers(data, questions, answers, vocab)
-                log.append(Turn(i, "user", "answers", json.dumps(dict(answers), sort_keys=True)))
-                if update.applied:
-                    data = update.scene
-                    scene = build_scene(data)
-                    continue  # the same plan, verified against what the user confirmed
         # UNSAFE, ERROR, or UNKNOWN nobody could settle: the apprentice repairs.
         messages += [
             {"role": "assistant", "content": reply},

@@ -19,6 +19,7 @@ What happens to that plan (execution, metrics) is the harness's business.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -33,6 +34,7 @@ from virf.planner.prompting import (
     REFUSAL,
     ReadPlan,
     apprentice_prompt,
+    read_after_plan_marker,
     read_plan,
     render_rules,
     scene_objects,
@@ -76,44 +78,29 @@ METHODS: dict[str, Method] = {
 
 
 def get_method(name: str) -> Method:
-    key = name.strip().lower().replace(" ", "")
+    key = re.sub(r"\s*\+\s*", "+", name.strip().lower())
+    key = re.sub(r"[\s_]+", "-", key)
     if key not in METHODS:
         near = closest(name, list(METHODS)) or list(METHODS)
         raise InputError(f"unknown method '{name}'; choose from {', '.join(near)}")
     return METHODS[key]
 
 
-# Sources of the manually written rules (paper, Appendix "manual rules") and of
-# rules synthesised from documents (hazard tables, the knowledge-acquisition
-# case study, safety agencies' texts).
-_MANUAL_MARKERS = ("manual rule",)
-_RAG_MARKERS = (
-    "hazard-table",
-    "hazard-category",
-    "knowledge acquisition",
-    ".pdf",
-    "OSHA",
-    "NFPA",
-    "FDA",
-    "USDA",
-    "CPSC",
-)
-
-
 def knowledge_filter(usc: UnsafeStateConcept, knowledge: Knowledge) -> bool:
-    """Whether a USC belongs to a method's knowledge base.  Uncertainty and
-    logical-consistency concepts are part of the tutor itself, not of a
-    knowledge source, so every variant keeps them."""
+    """Whether a USC belongs to a method's knowledge base.
+
+    The split follows each rule's *primary* source, the first clause of its
+    ``source`` annotation: a manually written rule (``manual: ...``, or the
+    paper's "manual rules") belongs to VIRF-Manual's knowledge base,
+    anything synthesised from documents (agencies' texts, hazard tables,
+    the knowledge-acquisition case study) to VIRF-RAG's.  Uncertainty and
+    logical-consistency concepts are part of the tutor itself, so every
+    variant keeps them."""
     if knowledge == "all" or usc.kind in ("uncertainty", "logical-inconsistency"):
         return True
-    markers = _MANUAL_MARKERS if knowledge == "manual" else _RAG_MARKERS
-    return any(m.lower() in usc.source.lower() for m in markers)
-
-
-def read_thinker(reply: str) -> ReadPlan:
-    """The plan of a reasoning reply: what follows its last ``PLAN:`` line."""
-    marker = reply.rfind("PLAN:")
-    return read_plan(reply[marker + len("PLAN:") :] if marker >= 0 else reply)
+    primary = usc.source.split(";")[0].lower()
+    manual = primary.startswith("manual:") or "manual rule" in primary
+    return manual if knowledge == "manual" else not manual
 
 
 def run_method(
@@ -133,7 +120,7 @@ def run_method(
     """Plan with ``method``; ``tutor`` must already hold the method's knowledge."""
     rules = render_rules(vocab) if method.rules else ""
     suffix = "\n" + template("thinker") if method.thinker else ""
-    read = read_thinker if method.thinker else read_plan
+    read = read_after_plan_marker if method.thinker else read_plan
     if method.mode == "loop":
         generic = template("reject").strip()
         return refine(
@@ -167,7 +154,7 @@ def run_method(
                 "TASK_REJECTED", None, i + 1, f"no usable proposal: {p.reason}", tuple(log)
             )
         got = read(p.text)
-        if got.refused and not got.steps:
+        if got.refused:
             log.append(Turn(i, "apprentice", "refusal", p.text))
             return LoopResult("TASK_REJECTED", None, i + 1, "the apprentice refused", tuple(log))
         if not got.steps:
@@ -216,7 +203,7 @@ def run_method(
         )
         verdict = (review.text or "").strip()
         log.append(Turn(i, "tutor", "critique", verdict or review.reason))
-        if review.ok and verdict.upper().startswith("APPROVE"):
+        if review.ok and _APPROVAL.match(verdict):
             return _final(got, i + 1, "the critic approved the plan", log)
         if i + 1 == max_iter:
             break
@@ -228,11 +215,19 @@ def run_method(
         if isinstance(nxt, LoopResult):
             return nxt
         reply, got = nxt
-    return _final(got, max_iter, "the critic never approved; the last plan stands", log)
+    # An unapproved plan is not executed (fail closed).
+    return LoopResult(
+        "TASK_REJECTED", None, max_iter, "the critic never approved a plan", tuple(log)
+    )
+
+
+# "APPROVE" as the reply's first word, markdown allowed ("**APPROVE**"), but
+# not "APPROVED? No".
+_APPROVAL = re.compile(r"^[\s*_`\"']*APPROVE[\s*_`\"'.!]*$", re.IGNORECASE | re.MULTILINE)
 
 
 def _final(got: ReadPlan, iterations: int, reason: str, log: list[Turn]) -> LoopResult:
-    if got.refused and not got.steps:
+    if got.refused:
         return LoopResult("TASK_REJECTED", None, iterations, f"{REFUSAL}", tuple(log))
     plan = tuple(s.text for s in got.steps)
     return LoopResult("APPROVED", plan, iterations, reason, tuple(log))

@@ -6,6 +6,7 @@ read and changed without touching code.
 
 from __future__ import annotations
 
+import json
 import re
 from dataclasses import dataclass
 from functools import cache
@@ -64,14 +65,23 @@ _MARKUP = re.compile(r"\*+|`+")
 def read_plan(reply: str) -> ReadPlan:
     """Pull the plan out of a reply that may wrap it in markdown or prose.
 
-    A line counts as an action when its first word is an action verb; other
-    lines inside a code block, or numbered or bulleted lines outside one, are
-    reported as unreadable (they look like steps but are not actions).  Prose
-    around the plan is ignored.
+    * A reply that is a JSON list of strings is the plan.
+    * A line is an action when it parses as one. A line that looks like a
+      step but is not an action (it sits in a code block, or is numbered or
+      bulleted) is reported as unreadable.
+    * Any other prose is ignored, even when it starts with a verb ("Put
+      simply, here is the plan:"), unless the reply holds no action at all:
+      then such lines are reported, so the apprentice learns what failed.
+    * A line that is ``TASK_ABORT`` refuses the task, whatever else the reply
+      says (fail closed).
     """
-    refused = REFUSAL in reply
+    listed_json = _json_plan(reply)
+    if listed_json is not None:
+        reply = "\n".join(listed_json)
+    refused = False
     steps: list[PlanStep] = []
     unreadable: list[str] = []
+    attempts: list[str] = []
     in_code = False
     for raw in reply.splitlines():
         if _FENCE.match(raw):
@@ -79,25 +89,61 @@ def read_plan(reply: str) -> ReadPlan:
             continue
         listed = bool(_BULLET.match(raw))
         line = _MARKUP.sub("", _BULLET.sub("", raw, count=1)).strip().rstrip(".;,")
-        if not line or line == REFUSAL:
+        if not line:
+            continue
+        if line.strip('"') == REFUSAL:
+            refused = True
             continue
         first = line.split()[0].lower().split("(")[0].replace("-", "_")
-        if first in ACTION_WORDS:
-            try:
-                steps.append(parse_line(line, len(steps) + 1, len(steps) + 1))
-            except InputError as exc:
-                unreadable.append(f"{line}: {str(exc).split(': ', 1)[-1]}")
-        elif in_code or listed:
-            unreadable.append(line)
+        try:
+            if first not in ACTION_WORDS:
+                raise InputError("not an action")
+            steps.append(parse_line(line, len(steps) + 1, len(steps) + 1))
+        except InputError as exc:
+            why = f"{line}: {str(exc).split(': ', 1)[-1]}"
+            if in_code or listed:
+                unreadable.append(why)
+            elif first in ACTION_WORDS:
+                attempts.append(why)  # prose, unless the reply holds no plan at all
+    if not steps:
+        unreadable += attempts
     return ReadPlan(tuple(steps), tuple(unreadable), refused)
 
 
+def _json_plan(reply: str) -> list[str] | None:
+    text = reply.strip()
+    if text.startswith("```"):
+        text = text.strip("`").removeprefix("json").strip()
+    if not text.startswith("["):
+        return None
+    try:
+        data = json.loads(text)
+    except (json.JSONDecodeError, RecursionError, ValueError):
+        return None
+    if isinstance(data, list) and all(isinstance(x, str) for x in data):
+        return data
+    return None
+
+
+_PLAN_MARKER = re.compile(r"^[\s*#_]*plan[\s*_]*:[\s*_]*$", re.IGNORECASE | re.MULTILINE)
+
+
+def read_after_plan_marker(reply: str) -> ReadPlan:
+    """The plan of a reasoning reply: what follows its last ``PLAN:`` line
+    (any case, with or without markdown), or the whole reply without one."""
+    marks = list(_PLAN_MARKER.finditer(reply))
+    return read_plan(reply[marks[-1].end() :] if marks else reply)
+
+
 def unreadable_message(read: ReadPlan) -> str:
-    listed = "\n".join(f"- {u}" for u in read.unreadable)
+    if read.unreadable:
+        listed = "\n".join(f"- {u}" for u in read.unreadable)
+        problem = f"Your reply contains lines that are not executable actions:\n{listed}\n"
+    else:
+        problem = "Your reply contains no plan.\n"
     return (
-        "Your reply contains lines that are not executable actions:\n"
-        f"{listed}\n"
-        "Reply again with the whole plan, one action per line, using only these actions:\n"
+        problem
+        + "Reply again with the whole plan, one action per line, using only these actions:\n"
         f"{template('actions').rstrip()}\n"
         f'If no safe plan is possible, reply with exactly "{REFUSAL}".'
     )

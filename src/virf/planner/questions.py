@@ -115,7 +115,7 @@ def deny(questions: Sequence[Question]) -> Answers:
 def answers_file(path: str | Path) -> AnswerPolicy:
     """A policy reading ``{key: answer}`` from a JSON file (keys as above)."""
     p = Path(path)
-    data = read_json_file(p, "answers file")
+    data = read_json_file(p, "answers")
     if not isinstance(data, dict) or not all(
         isinstance(k, str) and isinstance(v, str) for k, v in data.items()
     ):
@@ -189,10 +189,12 @@ def _without_marker(assertions: list[Any], subject: str, marker: str) -> list[An
 
 
 def _material(answer: str, vocab: Vocabulary, q: Question) -> str:
-    materials = sorted(i for i in vocab.individuals if vocab.is_a(i, "Material"))
+    materials = sorted(
+        i for i in vocab.individuals if vocab.is_a(i, "Material") and i != "UnknownMaterial"
+    )
     by_lower = {m.lower(): m for m in materials}
     found = by_lower.get(answer.lower())
-    if found is None or found == "UnknownMaterial":
+    if found is None:
         near = closest(answer, materials) or materials[:8]
         raise InputError(
             f"answer to '{q.key}': unknown material '{answer}'; choose from {', '.join(near)}"
