@@ -141,3 +141,19 @@ def test_user_config_supplies_the_key(tmp_path: Path) -> None:
     path.write_text('[planner]\napi_ky = "typo"\n', encoding="utf-8")
     with pytest.raises(InputError, match="unknown \\[planner\\] key 'api_ky'"):
         planner_settings(env)
+
+
+def test_terminal_answers_that_cannot_be_used_are_asked_again(
+    monkeypatch: pytest.MonkeyPatch, tutor: Any
+) -> None:
+    from virf.cli.main import _terminal_policy
+    from virf.planner.questions import Question
+    from virf.schema import Triple
+
+    replies = iter(["Kryptonite", "glass", ""])
+    monkeypatch.setattr("typer.prompt", lambda *a, **k: next(replies))
+    marker = Triple(subject="Bowl_1", predicate="hasMaterial", object="UnknownMaterial")
+    material = Question("material:Bowl_1", "material", "What material?", "Bowl_1", marker)
+    fill = Question("fill:Bowl_1", "fill", "Liquid?", "Bowl_1", marker)
+    ask = _terminal_policy(tutor.tbox.vocabulary)
+    assert ask([material, fill]) == {"material:Bowl_1": "glass"}  # Enter leaves one open

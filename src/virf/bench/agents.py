@@ -202,6 +202,7 @@ class AgentConfig:
         max_iter: int = 5,
         answers: str | Path | None = None,
         environ: Mapping[str, str] | None = None,
+        sampling: Mapping[str, Any] | None = None,
     ) -> AgentConfig:
         env = os.environ if environ is None else environ
         online = any(s is not None and s.strip().startswith("openai:") for s in (planner, critic))
@@ -209,7 +210,10 @@ class AgentConfig:
         # Resolved as the client resolves it: option, environment, user config.
         user = planner_settings(env) if online else {}
         url = (base_url or env.get("OPENAI_BASE_URL") or user.get("base_url")) if online else None
-        sampling = {k: v for k, v in user.items() if k not in ("api_key", "base_url")}
+        # The sampling settings the client will use: the command line's over the file's.
+        chosen = {k: v for k, v in user.items() if k not in ("api_key", "base_url")}
+        if online:
+            chosen.update(sampling or {})
         planner_key = canonical_planner(planner)
         assert planner_key is not None
         return cls(
@@ -218,7 +222,7 @@ class AgentConfig:
             base_url=url,
             max_iter=max_iter,
             answers=source_digest(answers) if answers is not None else None,
-            sampling=json.dumps(sampling, sort_keys=True) if sampling else None,
+            sampling=json.dumps(chosen, sort_keys=True) if chosen else None,
         )
 
     def to_dict(self) -> dict[str, Any]:

@@ -245,7 +245,7 @@ def plan(
         policy = (
             answers_file(answers)
             if answers is not None
-            else (_ask_on_terminal if sys.stdin.isatty() and not as_json else deny)
+            else (_terminal_policy(vocab) if sys.stdin.isatty() and not as_json else deny)
         )
         run_log = RunLog(log) if log is not None else None
         apprentice = make_apprentice(
@@ -296,14 +296,30 @@ def plan(
     raise typer.Exit(0 if result.outcome == "APPROVED" else 1)
 
 
-def _ask_on_terminal(questions: Any) -> dict[str, str]:
-    typer.echo("The tutor needs facts it does not know (press Enter to leave one open):", err=True)
-    out: dict[str, str] = {}
-    for q in questions:
-        reply = typer.prompt(f"  {q.text}", default="", show_default=False, err=True)
-        if reply.strip():
-            out[q.key] = reply.strip()
-    return out
+def _terminal_policy(vocab: Any) -> Any:
+    """Ask each question on the terminal; an answer that cannot be used is asked again."""
+    from virf.planner.questions import apply_answers
+
+    def ask(questions: Any) -> dict[str, str]:
+        typer.echo(
+            "The tutor needs facts it does not know (press Enter to leave one open):", err=True
+        )
+        out: dict[str, str] = {}
+        for q in questions:
+            while True:
+                reply = typer.prompt(f"  {q.text}", default="", show_default=False, err=True)
+                if not reply.strip():
+                    break
+                try:
+                    apply_answers({}, [q], {q.key: reply.strip()}, vocab)
+                except VirfError as exc:
+                    typer.echo(f"  {exc}", err=True)
+                    continue
+                out[q.key] = reply.strip()
+                break
+        return out
+
+    return ask
 
 
 def _print_dialogue(result: Any) -> None:
@@ -902,6 +918,15 @@ def bench_agents(
         str | None,
         typer.Option(help="Environment variable holding the API key (default OPENAI_API_KEY)."),
     ] = None,
+    temperature: Annotated[float | None, typer.Option(help="Sampling temperature.")] = None,
+    top_p: Annotated[float | None, typer.Option(help="Nucleus sampling (top-p).")] = None,
+    max_tokens: Annotated[int | None, typer.Option(help="Longest reply, in tokens.")] = None,
+    timeout: Annotated[
+        float | None, typer.Option(help="Seconds to wait for one model reply.")
+    ] = None,
+    seed: Annotated[
+        int | None, typer.Option(help="Sampling seed, where the server supports it.")
+    ] = None,
     as_json: Annotated[
         bool, typer.Option("--json", help="Print one JSON object: metrics and per-task rows.")
     ] = False,
@@ -941,14 +966,32 @@ def bench_agents(
             raise InputError(f"--db {db_path} is a directory; give a file path")
         policy = answers_file(answers) if answers is not None else deny
         # Models and recordings are checked before the knowledge base loads.
-        apprentice = make_apprentice(planner, base_url=base_url, api_key_env=api_key_env)
+        sampling: dict[str, Any] = {
+            k: v
+            for k, v in {
+                "temperature": temperature,
+                "top_p": top_p,
+                "max_tokens": max_tokens,
+                "timeout_s": timeout,
+                "seed": seed,
+            }.items()
+            if v is not None
+        }
+        apprentice = make_apprentice(
+            planner, base_url=base_url, api_key_env=api_key_env, **sampling
+        )
         closing.append(apprentice)
         judge = None
         if critic is not None:
-            judge = make_apprentice(critic, base_url=base_url, api_key_env=api_key_env)
+            judge = make_apprentice(critic, base_url=base_url, api_key_env=api_key_env, **sampling)
             closing.append(judge)
         config = AgentConfig.build(
-            planner, critic=critic, base_url=base_url, max_iter=max_iter, answers=answers
+            planner,
+            critic=critic,
+            base_url=base_url,
+            max_iter=max_iter,
+            answers=answers,
+            sampling=sampling,
         )
         tutor = LogicTutor(engine=config.engine)
         if db is None:
