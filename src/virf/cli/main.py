@@ -51,6 +51,22 @@ EngineOpt = Annotated[
 ]
 
 
+# Model settings shared by `virf plan` and `virf bench agents`.
+BaseUrlOpt = Annotated[
+    str | None,
+    typer.Option(help="Chat-completions base URL (default: $OPENAI_BASE_URL, else OpenAI)."),
+]
+ApiKeyEnvOpt = Annotated[
+    str | None,
+    typer.Option(help="Environment variable holding the API key (default OPENAI_API_KEY)."),
+]
+TemperatureOpt = Annotated[float | None, typer.Option(help="Sampling temperature.")]
+TopPOpt = Annotated[float | None, typer.Option(help="Nucleus sampling (top-p).")]
+MaxTokensOpt = Annotated[int | None, typer.Option(help="Longest reply, in tokens.")]
+ModelTimeoutOpt = Annotated[float | None, typer.Option(help="Seconds to wait for one model reply.")]
+SeedOpt = Annotated[int | None, typer.Option(help="Sampling seed, where the server supports it.")]
+
+
 def _fail(message: str, code: int = EXIT_BAD_INPUT) -> typer.Exit:
     typer.echo(f"error: {message}", err=True)
     return typer.Exit(code)
@@ -178,23 +194,13 @@ def plan(
             help="openai:MODEL (any OpenAI-compatible server) or replay:FILE (a recorded run).",
         ),
     ],
-    base_url: Annotated[
-        str | None,
-        typer.Option(help="Chat-completions base URL (default: $OPENAI_BASE_URL, else OpenAI)."),
-    ] = None,
-    api_key_env: Annotated[
-        str | None,
-        typer.Option(help="Environment variable holding the API key (default OPENAI_API_KEY)."),
-    ] = None,
-    temperature: Annotated[float | None, typer.Option(help="Sampling temperature.")] = None,
-    seed: Annotated[
-        int | None, typer.Option(help="Sampling seed, where the server supports it.")
-    ] = None,
-    top_p: Annotated[float | None, typer.Option(help="Nucleus sampling (top-p).")] = None,
-    max_tokens: Annotated[int | None, typer.Option(help="Longest reply, in tokens.")] = None,
-    timeout: Annotated[
-        float | None, typer.Option(help="Seconds to wait for one model reply.")
-    ] = None,
+    base_url: BaseUrlOpt = None,
+    api_key_env: ApiKeyEnvOpt = None,
+    temperature: TemperatureOpt = None,
+    seed: SeedOpt = None,
+    top_p: TopPOpt = None,
+    max_tokens: MaxTokensOpt = None,
+    timeout: ModelTimeoutOpt = None,
     max_iter: Annotated[int, typer.Option(min=1, help="Refinement iterations (N_max).")] = 5,
     method: Annotated[
         str,
@@ -910,23 +916,13 @@ def bench_agents(
     limit: Annotated[
         int | None, typer.Option(min=1, help="Only the first N tasks (quick runs).")
     ] = None,
-    base_url: Annotated[
-        str | None,
-        typer.Option(help="Chat-completions base URL (default: $OPENAI_BASE_URL, else OpenAI)."),
-    ] = None,
-    api_key_env: Annotated[
-        str | None,
-        typer.Option(help="Environment variable holding the API key (default OPENAI_API_KEY)."),
-    ] = None,
-    temperature: Annotated[float | None, typer.Option(help="Sampling temperature.")] = None,
-    top_p: Annotated[float | None, typer.Option(help="Nucleus sampling (top-p).")] = None,
-    max_tokens: Annotated[int | None, typer.Option(help="Longest reply, in tokens.")] = None,
-    timeout: Annotated[
-        float | None, typer.Option(help="Seconds to wait for one model reply.")
-    ] = None,
-    seed: Annotated[
-        int | None, typer.Option(help="Sampling seed, where the server supports it.")
-    ] = None,
+    base_url: BaseUrlOpt = None,
+    api_key_env: ApiKeyEnvOpt = None,
+    temperature: TemperatureOpt = None,
+    top_p: TopPOpt = None,
+    max_tokens: MaxTokensOpt = None,
+    timeout: ModelTimeoutOpt = None,
+    seed: SeedOpt = None,
     as_json: Annotated[
         bool, typer.Option("--json", help="Print one JSON object: metrics and per-task rows.")
     ] = False,
