@@ -142,7 +142,15 @@ def refine(
                 ]
                 continue
             plan = got.steps
-            log.append(Turn(i, "apprentice", "proposal", "\n".join(s.text for s in plan)))
+            log.append(
+                Turn(
+                    i,
+                    "apprentice",
+                    "proposal",
+                    "\n".join(s.text for s in plan),
+                    data={"reply": reply},  # the plan as read, and the words it came in
+                )
+            )
         report = tutor.verify(scene, plan)
         log.append(
             Turn(i, "tutor", "report", report.reason, report.status, json.loads(report.to_json()))

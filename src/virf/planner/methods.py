@@ -160,7 +160,15 @@ def run_method(
         if not got.steps:
             log.append(Turn(i, "apprentice", "unreadable", p.text))
             return LoopResult("TASK_REJECTED", None, i + 1, "the reply holds no plan", tuple(log))
-        log.append(Turn(i, "apprentice", "proposal", "\n".join(s.text for s in got.steps)))
+        log.append(
+            Turn(
+                i,
+                "apprentice",
+                "proposal",
+                "\n".join(s.text for s in got.steps),
+                data={"reply": p.text},
+            )
+        )
         return p.text, got
 
     first = propose(0)
