@@ -1007,7 +1007,14 @@ def bench_agents(
                 stored += resumed
                 progress.update(bar, advance=1, description=f"{row.method} {row.task_id}")
 
-            harness.run(methods, task_list, on_row=tick)
+            try:
+                harness.run(methods, task_list, on_row=tick)
+            except KeyboardInterrupt:
+                err.print(
+                    f"interrupted: finished rows are stored in {db_path}; "
+                    "run the same command again to resume"
+                )
+                raise typer.Exit(130) from None
         table = collect(store, task_list)
         settings = [
             ("planner", planner),
