@@ -157,3 +157,17 @@ def test_terminal_answers_that_cannot_be_used_are_asked_again(
     fill = Question("fill:Bowl_1", "fill", "Liquid?", "Bowl_1", marker)
     ask = _terminal_policy(tutor.tbox.vocabulary)
     assert ask([material, fill]) == {"material:Bowl_1": "glass"}  # Enter leaves one open
+
+
+def test_usage_errors_are_one_line() -> None:
+    for args in (["plan", "--scene", "x"], ["nosuch"], ["bench", "agents", "--limit", "0"]):
+        result = subprocess.run(
+            [sys.executable, "-m", "virf.cli.main", *args],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            timeout=120,
+            check=False,
+        )
+        assert result.returncode == 2, args
+        assert result.stderr.startswith("error: ") and result.stderr.count("\n") == 1, result.stderr

@@ -1063,10 +1063,25 @@ def _print_agents(table: Any) -> None:
 
 def main() -> None:
     try:
-        app()
+        code = app(standalone_mode=False)
     except KeyboardInterrupt:
         typer.echo("interrupted", err=True)
         sys.exit(130)
+    except Exception as exc:
+        # click's usage errors (vendored inside newer typer versions, so
+        # matched by name): one line naming the problem, like every other
+        # bad input.  Anything else is a bug and keeps its traceback.
+        names = {c.__name__ for c in type(exc).__mro__}
+        if "Abort" in names:
+            typer.echo("interrupted", err=True)
+            sys.exit(130)
+        if "ClickException" not in names:
+            raise
+        ctx = getattr(exc, "ctx", None)
+        hint = f" (see '{ctx.command_path} --help')" if "UsageError" in names and ctx else ""
+        typer.echo(f"error: {exc.format_message()}{hint}", err=True)  # type: ignore[attr-defined]
+        sys.exit(int(getattr(exc, "exit_code", EXIT_BAD_INPUT)))
+    sys.exit(code if isinstance(code, int) else 0)
 
 
 if __name__ == "__main__":
