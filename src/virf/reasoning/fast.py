@@ -426,21 +426,13 @@ class FastEngine(Engine):
         guarded = self.fragment.sinks | self.fragment.query_defs.keys()
         prog, disabled = self.program(without)
         m = prog.base(disabled)
+        # One pass: facts are only queued here; the rules (and the closure
+        # checks) run afterwards, over all of them.
         for f in facts:
-            names = (
-                f.subject,
-                f.predicate,
-                *(f.members() if f.kind is FactKind.CLOSURE else (f.object,)),
-            )
+            members = f.members() if f.kind is FactKind.CLOSURE else ()
+            names = (f.subject, f.predicate, *(members or (f.object,)))
             if any(n.startswith(_INTERNAL) for n in names):
                 raise Fallback(f"the input name in '{f.render()}' looks like an internal name")
-        for f in facts:
-            if f.kind is FactKind.CLOSURE:
-                key = (f.subject, f.predicate)
-                members = frozenset(f.members())
-                old = m.closures.get(key)
-                m.closures[key] = members if old is None else old & members
-        for f in facts:
             if f.kind is FactKind.TYPE:
                 if f.object in guarded:
                     raise Fallback(f"the input asserts the defined class {f.object}")
@@ -450,8 +442,11 @@ class FastEngine(Engine):
             elif f.kind is FactKind.DATA:
                 m.datum(f.subject, f.predicate, f.object == "true")
             else:
+                key = (f.subject, f.predicate)
+                old = m.closures.get(key)
+                m.closures[key] = frozenset(members) if old is None else old & frozenset(members)
                 m.element(f.subject)
-                for member in f.members():
+                for member in members:
                     m.element(member)
         m.run()
         return m, _Eval(m, self._definitions(without), self.fragment.sinks)
@@ -504,7 +499,7 @@ class FastEngine(Engine):
         finally:
             m.rollback(token)
 
-    def _answer(self, name: str, exact: Callable[[], Any], fallback: Callable[[], Any]) -> Any:
+    def _answer(self, exact: Callable[[], Any], fallback: Callable[[], Any]) -> Any:
         with self._lock:
             self.stats["calls"] += 1
             try:
@@ -539,7 +534,7 @@ class FastEngine(Engine):
             return Classification(True, found)
 
         result: Classification = self._answer(
-            "classify", exact, lambda: self.reference._classify(facts, concepts)
+            exact, lambda: self.reference._classify(facts, concepts)
         )
         return result
 
@@ -561,7 +556,6 @@ class FastEngine(Engine):
             return self._decide(ev, concept, individual)
 
         result: bool = self._answer(
-            "entails",
             exact,
             lambda: self.reference._entails(facts, concept, individual, without),
         )
@@ -577,9 +571,7 @@ class FastEngine(Engine):
                 raise Fallback(f"candidate model violates: {bad}")
             return True
 
-        result: bool = self._answer(
-            "consistent", exact, lambda: self.reference._consistent(facts, without)
-        )
+        result: bool = self._answer(exact, lambda: self.reference._consistent(facts, without))
         return result
 
     @contextmanager

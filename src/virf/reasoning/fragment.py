@@ -212,6 +212,9 @@ def classes_in(e: Expr) -> Iterable[str]:
         yield from classes_in(e[3])
 
 
+_TAGS = {"C", "and", "or", "not", "some", "all", "value", "min", "max", "oneof", "dvalue"}
+
+
 def _axiom_classes(ax: Axiom) -> set[str]:
     out: set[str] = set()
     for a in ax.args:
@@ -222,9 +225,6 @@ def _axiom_classes(ax: Axiom) -> set[str]:
                 if isinstance(b, tuple) and b and isinstance(b[0], str) and b[0] in _TAGS:
                     out.update(classes_in(b))
     return out
-
-
-_TAGS = {"C", "and", "or", "not", "some", "all", "value", "min", "max", "oneof", "dvalue"}
 
 
 @dataclass
@@ -244,14 +244,12 @@ class Fragment:
 
 
 def load_fragment(owl_axioms: Iterable[Any], render: Any) -> Fragment:
-    from virf.kb.tbox import NS as _NS
-
     axioms: list[Axiom] = []
     problems: list[str] = []
     for ax in owl_axioms:
         ident = None
         for ann in ax.getAnnotations():
-            if str(ann.getProperty().getIRI().toString()) == _NS + "id":
+            if str(ann.getProperty().getIRI().toString()) == NS + "id":
                 ident = str(ann.getValue().asLiteral().get().getLiteral())
         text = render(ax)
         try:

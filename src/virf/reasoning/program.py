@@ -232,7 +232,7 @@ class Program:
             self.checks.append(ax)
         self._tag = None
 
-    def roles(self, axioms: Iterable[Axiom], properties: Iterable[str]) -> None:
+    def roles(self, axioms: Iterable[Axiom]) -> None:
         edges: dict[Role, set[Role]] = defaultdict(set)
 
         def sub(r: Role, s: Role) -> None:
@@ -257,9 +257,7 @@ class Program:
                 self._chain(a[0], a[0], a[0])
             elif k == "chain":
                 self._chain(a[0][0], a[0][1], a[1])
-        names = set(properties)
-        for r in list(edges):
-            names.add(r[0])
+        names = {r[0] for r in edges}
         for p in sorted(names):
             seen: set[Role] = set()
             todo = [(p, False)]
@@ -349,7 +347,7 @@ def compile_program(frag: Fragment, without: frozenset[str]) -> Program:
     axioms = [a for a in frag.kb if a.id is None or a.id not in without]
     for ax in axioms:
         prog.add(ax)
-    prog.roles(axioms, ())
+    prog.roles(axioms)
     prog.checks.sort(key=lambda a: a.text)
     prog.finish()
     return prog

@@ -166,15 +166,20 @@ class Verifier:
         self._checked = -1  # last snapshot the reasoner answered for
         seen: set[tuple[str, str]] = set()
         first_definite: int | None = None
-        snapshots = [self._snapshot(states, resolved, k) for k in range(len(states))]
         concept_lists = [
             self.always + (self.final if complete and k == n else []) for k in range(len(states))
         ]
-        ahead = self._classify_ahead(snapshots, concept_lists)
+        # In order, one at a time, unless they are classified in parallel: a
+        # definite finding usually ends the loop long before the last step.
+        parallel = self.workers > 1 and len(states) > 1
+        built = (
+            [self._snapshot(states, resolved, k) for k in range(len(states))] if parallel else []
+        )
+        ahead = self._classify_ahead(built, concept_lists) if parallel else []
         for k in range(len(states)):
             if time.monotonic() > deadline:
                 raise VerificationTimeout(f"more than {self.timeout_s:.0f}s at step {k}")
-            snapshot = snapshots[k]
+            snapshot = built[k] if parallel else self._snapshot(states, resolved, k)
             action_ind = None
             if k < len(resolved):
                 action_ind = Simulator.action_individual(resolved[k].step)
@@ -258,9 +263,7 @@ class Verifier:
     def _classify_ahead(
         self, snapshots: list[dict[Fact, Provenance]], concepts: list[list[str]]
     ) -> list[Future[Classification]]:
-        """Start classifying every snapshot in parallel (empty when workers is 1)."""
-        if self.workers == 1 or len(snapshots) < 2:
-            return []
+        """Start classifying every snapshot, each on a free engine of the pool."""
         if self._engines is None:
             self._engines = Queue()
             self._engines.put(self.engine)
