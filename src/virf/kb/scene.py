@@ -40,6 +40,7 @@ from typing import Any
 from virf.errors import InputError, closest, read_json_file
 from virf.kb.tbox import Vocabulary
 from virf.schema import Fact, FactKind, Provenance
+from virf.sim.plan import term_key
 
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
 INVERSES = {
@@ -89,6 +90,9 @@ class Scene:
     name: str = "scene"
     unknown_contents: frozenset[str] = frozenset()
     unlocated_by_default: bool = False
+    # What a plan's type word means when several instances fit equally well
+    # (a user's answer to an ambiguity question): term_key(word) -> instance.
+    referents: Mapping[str, str] = MappingProxyType({})
 
 
 def load_scene_file(path: str | Path, vocab: Vocabulary) -> Scene:
@@ -119,6 +123,7 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
             "name",
             "unlocated_by_default",
             "unknown_contents",
+            "referents",
         }
     )
     if unknown_keys:
@@ -242,6 +247,14 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
     unknown_contents = data.get("unknown_contents", [])
     if not isinstance(unknown_contents, list) or any(u not in classes for u in unknown_contents):
         raise InputError("scene 'unknown_contents' must list declared instances")
+    referents = data.get("referents", {})
+    if not isinstance(referents, dict) or not all(
+        isinstance(k, str) and isinstance(v, str) and v in classes for k, v in referents.items()
+    ):
+        raise InputError(
+            "scene 'referents' must map plan words to declared instances, "
+            'e.g. {"bowl": "Bowl_2"}'
+        )
     objects = {ind: frozenset(cs) for ind, cs in classes.items() if kind_of(ind) == "Object"}
     object_order = tuple(ind for ind in order if ind in objects)
 
@@ -268,6 +281,7 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
         name=str(data.get("name", name)),
         unlocated_by_default=bool(data.get("unlocated_by_default", False)),
         unknown_contents=frozenset(unknown_contents),
+        referents=MappingProxyType({term_key(k): v for k, v in sorted(referents.items())}),
     )
 
 

@@ -123,6 +123,12 @@ _CONNECTORS = {"in", "into", "on", "onto", "to"}
 _ARTICLES = {"the", "a", "an"}
 
 
+def term_key(term: str) -> str:
+    """How a plan's object name is compared with types and instances: case,
+    spaces, underscores and hyphens do not matter ('stove knob 2', 'StoveKnob_2')."""
+    return re.sub(r"[\s_\-]+", "", term).lower()
+
+
 @dataclass(frozen=True)
 class PlanStep:
     index: int  # 1-based
