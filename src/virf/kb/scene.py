@@ -32,7 +32,7 @@ from __future__ import annotations
 import json
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
@@ -92,7 +92,7 @@ class Scene:
     unlocated_by_default: bool = False
     # What a plan's type word means when several instances fit equally well
     # (a user's answer to an ambiguity question): term_key(word) -> instance.
-    referents: Mapping[str, str] = MappingProxyType({})
+    referents: Mapping[str, str] = field(default_factory=lambda: MappingProxyType({}))
 
 
 def load_scene_file(path: str | Path, vocab: Vocabulary) -> Scene:
@@ -128,7 +128,8 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
     )
     if unknown_keys:
         raise InputError(
-            f"unknown scene key '{unknown_keys[0]}'; expected instances, assertions, closed_world, unlocated_by_default, description"
+            f"unknown scene key '{unknown_keys[0]}'; expected instances, assertions, closed_world, "
+            "unlocated_by_default, unknown_contents, referents, description"
         )
     instances = data.get("instances")
     if not isinstance(instances, list):
