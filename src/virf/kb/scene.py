@@ -37,18 +37,19 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
-from virf.errors import InputError, closest, read_json_file
+from virf.errors import InputError, clip, closest, read_json_file
 from virf.kb.tbox import Vocabulary
 from virf.schema import Fact, FactKind, Provenance
 from virf.sim.plan import term_key
 
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
-INVERSES = {
-    "isInside": "contains",
-    "isOn": "supports",
-    "isHeldBy": "isHolding",
-    "isControlledBy": "controls",
-}
+# The direction in which the simulator reads each relation; a scene may write
+# either direction of any inverse pair the ontology declares.
+CANONICAL_DIRECTION = ("contains", "supports", "isHolding", "controls")
+INVERSES = {"isInside": "contains", "isOn": "supports", "isHeldBy": "isHolding"}
+TYPE_PROPERTIES = frozenset({"rdf:type", "type", "a", "isA", "is_a", "instanceOf"})
+# The property that carries each kind of value individual.
+VALUE_PROPERTY = {"State": "hasState", "Material": "hasMaterial", "Attribute": "hasProperty"}
 CLOSABLE = ("contains", "supports")
 # Words a scene may use as data values of hasState/hasMaterial.
 VALUE_WORDS = {
@@ -93,6 +94,10 @@ class Scene:
     # What a plan's type word means when several instances fit equally well
     # (a user's answer to an ambiguity question): term_key(word) -> instance.
     referents: Mapping[str, str] = field(default_factory=lambda: MappingProxyType({}))
+    # canonical fact -> the fact as the scene wrote it, where the two differ
+    # ('Toaster_1 hasState OnState_1' for 'Toaster_1 hasState OnState'), so
+    # that reports can speak the user's words
+    spelling: Mapping[Fact, Fact] = field(default_factory=lambda: MappingProxyType({}))
 
 
 def load_scene_file(path: str | Path, vocab: Vocabulary) -> Scene:
@@ -140,36 +145,67 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
 
     classes: dict[str, set[str]] = {}
     order: list[str] = []
-    for i, inst in enumerate(instances):
-        if not isinstance(inst, dict) or not {"class_name", "instance_name"} <= set(inst):
-            raise InputError(f"instances[{i}] needs 'class_name' and 'instance_name'")
-        iname, cname = str(inst["instance_name"]), str(inst["class_name"])
+
+    def declare(iname: str, cname: str, where: str) -> None:
         if not NAME_RE.match(iname):
             raise InputError(
-                f"instances[{i}]: instance name '{iname}' must start with a letter or '_' "
+                f"{where}: instance name '{clip(iname)}' must start with a letter or '_' "
                 "and use only letters, digits, '_', '.', '-'"
             )
         if iname in vocab.individuals or iname in vocab.classes:
-            raise InputError(
-                f"instances[{i}]: '{iname}' is already an ontology term; choose another name"
-            )
+            raise InputError(f"{where}: '{iname}' is already an ontology term; choose another name")
         cls = vocab.require_class(cname)
         if iname not in classes:
             classes[iname] = set()
             order.append(iname)
         classes[iname].add(cls)
 
-    def kind_of(ind: str) -> str:
-        cs = classes[ind]
-        for root in ("Material", "State", "Attribute", "Action"):
-            if vocab.any_is_a(cs, root):
-                return root
-        return "Object"
+    for i, inst in enumerate(instances):
+        if not isinstance(inst, dict) or not {"class_name", "instance_name"} <= set(inst):
+            raise InputError(f"instances[{i}] needs 'class_name' and 'instance_name'")
+        declare(str(inst["instance_name"]), str(inst["class_name"]), f"instances[{i}]")
+    # rdf:type assertions declare and type individuals like 'instances' entries;
+    # they are read first because an individual's kind depends on its types.
+    for i, a in enumerate(assertions):
+        if isinstance(a, dict) and str(a.get("property", "")) in TYPE_PROPERTIES:
+            if not {"subject", "object"} <= set(a):
+                raise InputError(f"assertions[{i}] needs 'subject', 'property' and 'object'")
+            declare(str(a["subject"]), str(a["object"]), f"assertions[{i}]")
 
+    values = _value_individuals(classes, vocab)
     facts: dict[Fact, Provenance] = {}
+    spelling: dict[Fact, Fact] = {}
+
+    def state_fact(subject: str, value: str, written: Fact) -> None:
+        """A state, material or attribute of ``subject``, whatever property named it."""
+        kind = _value_kind(value, classes, vocab)
+        assert kind is not None  # callers pass only value individuals
+        fact = Fact(subject, VALUE_PROPERTY[kind], value)
+        facts[fact] = Provenance.SCENE
+        if written != fact:
+            spelling.setdefault(fact, written)
+
     for ind in order:
+        if ind in values:
+            # A user's individual of a state or material class stands for the
+            # class's canonical individual; one without one is kept as written.
+            if not values[ind]:
+                for cls in sorted(classes[ind]):
+                    facts[Fact(ind, "type", cls, FactKind.TYPE)] = Provenance.SCENE
+            continue
+        kept: set[str] = set()
         for cls in sorted(classes[ind]):
+            written = Fact(ind, "type", cls, FactKind.TYPE)
+            if _value_kind(cls, classes, vocab) is not None and cls in vocab.individuals:
+                state_fact(ind, cls, written)  # an object typed OpenState is open
+            elif cls in vocab.material_classes:
+                state_fact(ind, vocab.material_classes[cls], written)
+                kept.add("PhysicalObject")
+            else:
+                kept.add(cls)
+        for cls in sorted(_most_specific(kept, vocab)):
             facts[Fact(ind, "type", cls, FactKind.TYPE)] = Provenance.SCENE
+        classes[ind] = _most_specific(kept, vocab)
 
     for key in ("unlocated_by_default",):
         if key in data and not isinstance(data[key], bool):
@@ -192,32 +228,36 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
             hint = f"; closest known: {', '.join(near)}" if near else ""
             raise InputError(f"closed_world: '{entry}' names an undeclared instance{hint}")
 
-    def resolve_value(value: str, prop: str, where: str) -> str:
+    def resolve_value(value: str, prop: str, where: str) -> list[str]:
         if value in classes:
-            return value
+            return list(values.get(value) or [value])
         if value in vocab.individuals:
-            return value
+            return [value]
         alias = vocab.class_synonyms.get(value)
         if alias and alias in vocab.individuals:
-            return alias
+            return [alias]
         lowered = value.lower().replace("_", "").replace(" ", "")
         if lowered.startswith("is") and lowered[2:] in VALUE_WORDS:
             lowered = lowered[2:]
+        if lowered == "unknown":
+            return ["UnknownFillState" if prop == "hasState" else "UnknownMaterial"]
         if lowered in VALUE_WORDS:
-            return VALUE_WORDS[lowered]
-        for ind in vocab.individuals:
+            return [VALUE_WORDS[lowered]]
+        for ind in sorted(vocab.individuals):
             if ind.lower() == lowered or ind.lower() == lowered + "state":
-                return ind
+                return [ind]
         pool = list(classes) + sorted(vocab.individuals)
         near = closest(value, pool)
         hint = f"; closest known: {', '.join(near)}" if near else ""
-        raise InputError(f"{where}: unknown individual or value '{value}' for {prop}{hint}")
+        raise InputError(f"{where}: unknown individual or value '{clip(value)}' for {prop}{hint}")
 
     for i, a in enumerate(assertions):
         where = f"assertions[{i}]"
         if not isinstance(a, dict) or not {"subject", "property", "object"} <= set(a):
             raise InputError(f"{where} needs 'subject', 'property' and 'object'")
         subj, prop_name, obj = str(a["subject"]), str(a["property"]), a["object"]
+        if prop_name in TYPE_PROPERTIES:
+            continue
         kind = str(a.get("type", "object_property"))
         if kind not in ("object_property", "data_property"):
             raise InputError(f"{where}: type '{kind}' must be object_property or data_property")
@@ -225,25 +265,40 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
             near = closest(subj, classes)
             hint = f"; closest known: {', '.join(near)}" if near else ""
             raise InputError(
-                f"{where}: unknown individual '{subj}' (declare it in instances){hint}"
+                f"{where}: unknown individual '{clip(subj)}' (declare it in instances){hint}"
             )
         prop = vocab.canonical_property(prop_name)
         if prop is None:
             near = closest(prop_name, list(vocab.object_properties | vocab.data_properties))
             hint = f"; closest known: {', '.join(near)}" if near else ""
-            raise InputError(f"{where}: unknown property '{prop_name}'{hint}")
+            raise InputError(f"{where}: unknown property '{clip(prop_name)}'{hint}")
         if prop in vocab.data_properties:
             if not isinstance(obj, bool) and str(obj).lower() not in ("true", "false"):
-                raise InputError(f"{where}: {prop} takes true or false, not '{obj}'")
+                raise InputError(f"{where}: {prop} takes true or false, not '{clip(str(obj))}'")
             value = str(obj).lower()
             facts[Fact(subj, prop, value, FactKind.DATA)] = Provenance.SCENE
             continue
-        target = resolve_value(str(obj), prop, where)
-        if prop in INVERSES:
-            subj, prop, target = target, INVERSES[prop], subj
-            if subj not in classes:
-                raise InputError(f"{where}: '{subj}' must be a declared instance for {prop_name}")
-        facts[Fact(subj, prop, target)] = Provenance.SCENE
+        written_obj = str(obj)
+        for target in resolve_value(written_obj, prop, where):
+            written = Fact(subj, prop_name, written_obj)
+            if prop in VALUE_PROPERTY.values():
+                if subj in values:
+                    raise InputError(f"{where}: '{subj}' is a {prop} value, not an object")
+                if _value_kind(target, classes, vocab) is None:
+                    raise InputError(
+                        f"{where}: {prop} needs a state, material or attribute, "
+                        f"not '{clip(written_obj)}'"
+                    )
+                state_fact(subj, target, written)
+                continue
+            fact = _canonical_direction(subj, prop, target, vocab)
+            if fact.subject not in classes or (
+                fact.object not in classes and fact.object not in vocab.individuals
+            ):
+                raise InputError(f"{where}: '{target}' must be a declared instance for {prop_name}")
+            facts[fact] = Provenance.SCENE
+            if fact != written:
+                spelling.setdefault(fact, written)
 
     unknown_contents = data.get("unknown_contents", [])
     if not isinstance(unknown_contents, list) or any(u not in classes for u in unknown_contents):
@@ -253,10 +308,13 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
         isinstance(k, str) and isinstance(v, str) and v in classes for k, v in referents.items()
     ):
         raise InputError(
-            "scene 'referents' must map plan words to declared instances, "
-            'e.g. {"bowl": "Bowl_2"}'
+            'scene \'referents\' must map plan words to declared instances, e.g. {"bowl": "Bowl_2"}'
         )
-    objects = {ind: frozenset(cs) for ind, cs in classes.items() if kind_of(ind) == "Object"}
+    objects = {
+        ind: frozenset(cs)
+        for ind, cs in classes.items()
+        if ind not in values and not vocab.any_is_a(cs, "Action")
+    }
     object_order = tuple(ind for ind in order if ind in objects)
 
     agents = [ind for ind in object_order if vocab.any_is_a(objects[ind], "Robot")]
@@ -283,15 +341,54 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
         unlocated_by_default=bool(data.get("unlocated_by_default", False)),
         unknown_contents=frozenset(unknown_contents),
         referents=MappingProxyType({term_key(k): v for k, v in sorted(referents.items())}),
+        spelling=MappingProxyType(dict(sorted(spelling.items()))),
     )
 
 
-_EXCLUSIVE = (
-    {"OnState", "OffState"},
-    {"OpenState", "ClosedState"},
-    {"DirtyState", "CleanState"},
-    {"FilledWithLiquidState", "EmptyState", "UnknownFillState"},
-)
+def _value_kind(term: str, classes: Mapping[str, set[str]], vocab: Vocabulary) -> str | None:
+    """'State', 'Material' or 'Attribute' for a value individual or class."""
+    types = classes.get(term) or {term}
+    for root in VALUE_PROPERTY:
+        if types and all(vocab.is_a(c, root) for c in types):
+            return root
+    return None
+
+
+def _value_individuals(classes: Mapping[str, set[str]], vocab: Vocabulary) -> dict[str, list[str]]:
+    """User individuals of state, material or attribute classes, each with the
+    canonical individuals it stands for (empty: keep the user's individual,
+    because some class of it has no canonical individual)."""
+    out: dict[str, list[str]] = {}
+    for ind, cs in classes.items():
+        if _value_kind(ind, classes, vocab) is None:
+            continue
+        specific = _most_specific(cs, vocab)
+        out[ind] = sorted(specific) if specific <= vocab.individuals else []
+    return out
+
+
+def _most_specific(classes: set[str], vocab: Vocabulary) -> set[str]:
+    """The classes without a strict subclass among them: the others are implied."""
+    return {
+        c
+        for c in classes
+        if not any(d != c and vocab.is_a(d, c) and not vocab.is_a(c, d) for d in classes)
+    }
+
+
+def _canonical_direction(subject: str, prop: str, obj: str, vocab: Vocabulary) -> Fact:
+    """One spelling of a relation and its inverse: the simulator's direction
+    where it reads the relation, else the 'has...' side of the pair."""
+    inverse = vocab.inverses.get(prop)
+    if inverse is None or prop in CANONICAL_DIRECTION:
+        return Fact(subject, prop, obj)
+    if (
+        inverse in CANONICAL_DIRECTION
+        or (prop.startswith("is") and not inverse.startswith("is"))
+        or (prop.startswith("is") == inverse.startswith("is") and inverse < prop)
+    ):
+        return Fact(obj, inverse, subject)
+    return Fact(subject, prop, obj)
 
 
 def _apply_default_states(
@@ -307,8 +404,7 @@ def _apply_default_states(
         have = stated.get(ind, set())
         for cls in sorted(cs):
             for default in vocab.annotation(cls, "defaultState"):
-                group = next((g for g in _EXCLUSIVE if default in g), {default})
-                if not have & group:
+                if not have & (vocab.excluded_by(default) | {default}):
                     facts[Fact(ind, "hasState", default)] = Provenance.DEFAULT
                     have = have | {default}
 

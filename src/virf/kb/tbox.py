@@ -119,6 +119,14 @@ class Vocabulary:
     class_synonyms: Mapping[str, str]
     class_materials: Mapping[str, frozenset[str]]
     _lower: Mapping[str, str] = field(default_factory=dict)
+    # property -> its declared inverse (both directions listed)
+    inverses: Mapping[str, str] = field(default_factory=dict)
+    # C -> M for a class defined exactly as "PhysicalObject and hasMaterial some M"
+    # that says nothing else: typing an object C says no more than hasMaterial M.
+    material_classes: Mapping[str, str] = field(default_factory=dict)
+    # state -> the states it excludes (declared disjoint), plus the epistemic
+    # markers it settles (UnknownFillState is settled by a known fill state)
+    exclusive_states: Mapping[str, frozenset[str]] = field(default_factory=dict)
 
     def is_a(self, cls: str, ancestor: str) -> bool:
         return cls == ancestor or ancestor in self.ancestors.get(cls, frozenset())
@@ -158,6 +166,10 @@ class Vocabulary:
             if found:
                 return found
         return ()
+
+    def excluded_by(self, state: str) -> frozenset[str]:
+        """The states an object leaves when it enters ``state``."""
+        return self.exclusive_states.get(state, frozenset())
 
     def canonical_property(self, name: str) -> str | None:
         if name in self.property_synonyms:
@@ -260,6 +272,10 @@ class TBox:
         background: dict[str, BackgroundAxiom] = {}
         definitions: dict[str, tuple[str, str]] = {}
         direct_materials: dict[str, set[str]] = defaultdict(set)
+        inverses: dict[str, str] = {}
+        defined_by_material: dict[str, str] = {}
+        told_elsewhere: set[str] = set()  # classes with axioms beyond a material definition
+        disjoint_pairs: set[tuple[str, str]] = set()
         for ont in self.closure:
             module = self.module_name(ont)
             for c in ont.getClassesInSignature():
@@ -294,6 +310,31 @@ class TBox:
                         direct_materials[_short(sub.asOWLClass().getIRI())].add(
                             _short(value.asOWLNamedIndividual().getIRI())
                         )
+            for ax in ont.axioms(_axiom_type("INVERSE_OBJECT_PROPERTIES")).toArray():
+                first, second = ax.getFirstProperty(), ax.getSecondProperty()
+                if first.isNamed() and second.isNamed():
+                    a = _short(first.asOWLObjectProperty().getIRI())
+                    b = _short(second.asOWLObjectProperty().getIRI())
+                    inverses[a], inverses[b] = b, a
+            for ax in ont.axioms(_axiom_type("EQUIVALENT_CLASSES")).toArray():
+                named = [c for c in ax.getClassExpressionsAsList() if not c.isAnonymous()]
+                other = [c for c in ax.getClassExpressionsAsList() if c.isAnonymous()]
+                if len(named) == 1 and len(other) == 1:
+                    material = _material_definition(other[0])
+                    if material is not None:
+                        defined_by_material[_short(named[0].asOWLClass().getIRI())] = material
+                        continue
+                told_elsewhere.update(_short(c.asOWLClass().getIRI()) for c in named)
+            for ax in ont.axioms(_axiom_type("SUBCLASS_OF")).toArray():
+                if not ax.getSubClass().isAnonymous():
+                    told_elsewhere.add(_short(ax.getSubClass().asOWLClass().getIRI()))
+            for ax in ont.axioms(_axiom_type("DISJOINT_CLASSES")).toArray():
+                named_ops = [
+                    _short(c.asOWLClass().getIRI())
+                    for c in ax.getClassExpressionsAsList()
+                    if not c.isAnonymous()
+                ]
+                disjoint_pairs.update((a, b) for a in named_ops for b in named_ops if a != b)
             for ax in ont.getLogicalAxioms():
                 notes: dict[str, str] = {}
                 for ann in ax.getAnnotations():
@@ -392,6 +433,22 @@ class TBox:
             ancestors[alias] = ancestors.get(target, frozenset()) | {target}
         lower = {c.lower(): c for c in sorted(classes)}
 
+        def is_state(c: str) -> bool:
+            return "State" in ancestors.get(c, frozenset()) and c in individuals
+
+        exclusive: dict[str, set[str]] = defaultdict(set)
+        for a, b in disjoint_pairs:
+            if is_state(a) and is_state(b):
+                exclusive[a].add(b)
+        for marker, props in frozen_ann.items():
+            for settled_by in props.get("settledBy", ()):
+                exclusive[settled_by].add(marker)
+        material_classes = {
+            c: m
+            for c, m in defined_by_material.items()
+            if c not in told_elsewhere and m in individuals
+        }
+
         vocab = Vocabulary(
             classes=frozenset(classes),
             object_properties=frozenset(oprops),
@@ -408,6 +465,11 @@ class TBox:
                 {k: frozenset(v) for k, v in sorted(direct_materials.items())}
             ),
             _lower=MappingProxyType(lower),
+            inverses=MappingProxyType(dict(sorted(inverses.items()))),
+            material_classes=MappingProxyType(dict(sorted(material_classes.items()))),
+            exclusive_states=MappingProxyType(
+                {k: frozenset(v) for k, v in sorted(exclusive.items())}
+            ),
         )
         return vocab, self._stats(uscs, usc_module)
 
@@ -477,6 +539,29 @@ def _iri(name: str) -> Any:
     from org.semanticweb.owlapi.model import IRI
 
     return IRI.create(NS + name)
+
+
+def _material_definition(expr: Any) -> str | None:
+    """M when ``expr`` is exactly ``PhysicalObject and (hasMaterial some M)``."""
+    if str(expr.getClassExpressionType().toString()) != "ObjectIntersectionOf":
+        return None
+    ops = list(expr.getOperandsAsList())
+    if len(ops) != 2:
+        return None
+    named = [o for o in ops if not o.isAnonymous()]
+    some = [o for o in ops if str(o.getClassExpressionType().toString()) == "ObjectSomeValuesFrom"]
+    if (
+        len(named) != 1
+        or len(some) != 1
+        or _short(named[0].asOWLClass().getIRI()) != "PhysicalObject"
+    ):
+        return None
+    prop, filler = some[0].getProperty(), some[0].getFiller()
+    if prop.isAnonymous() or filler.isAnonymous():
+        return None
+    if _short(prop.asOWLObjectProperty().getIRI()) != "hasMaterial":
+        return None
+    return _short(filler.asOWLClass().getIRI())
 
 
 def _axiom_type(name: str) -> Any:

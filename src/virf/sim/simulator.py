@@ -18,18 +18,6 @@ from virf.kb.tbox import Vocabulary
 from virf.schema import Fact, FactKind, Provenance
 from virf.sim.plan import PlanStep
 
-STATE_PAIRS = {
-    "OnState": "OffState",
-    "OffState": "OnState",
-    "OpenState": "ClosedState",
-    "ClosedState": "OpenState",
-    "DirtyState": "CleanState",
-    "CleanState": "DirtyState",
-    "FilledWithLiquidState": "EmptyState",
-    "EmptyState": "FilledWithLiquidState",
-    "HotState": "ColdState",
-    "WetState": "DryState",
-}
 # Actions whose only effect is one state of their target.
 RESULT_STATE = {
     "open": "OpenState",
@@ -335,11 +323,11 @@ class Simulator:
                 facts.pop(f, None)
 
         def set_state(obj: str, new: str) -> None:
-            opposite = STATE_PAIRS.get(new)
-            if opposite:
-                facts.pop(Fact(obj, "hasState", opposite), None)
-            if new in ("FilledWithLiquidState", "EmptyState"):
-                facts.pop(Fact(obj, "hasState", "UnknownFillState"), None)
+            # The ontology's disjoint states (and the markers a known state
+            # settles) leave the object: the scene reader made every state
+            # canonical, so the exclusive ones are found by name.
+            for old in self.vocab.excluded_by(new):
+                facts.pop(Fact(obj, "hasState", old), None)
             add(Fact(obj, "hasState", new))
 
         def located(obj: str) -> None:
