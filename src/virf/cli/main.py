@@ -29,7 +29,9 @@ app = typer.Typer(
 )
 kb_app = typer.Typer(help="Inspect the safety knowledge base (TBox).", no_args_is_help=True)
 app.add_typer(kb_app, name="kb")
-scene_app = typer.Typer(help="Build scenes for benchmark tasks.", no_args_is_help=True)
+scene_app = typer.Typer(
+    help="Show how a scene is understood; build scenes for benchmark tasks.", no_args_is_help=True
+)
 app.add_typer(scene_app, name="scene")
 bench_app = typer.Typer(help="Evaluate the Logic Tutor on benchmarks.", no_args_is_help=True)
 app.add_typer(bench_app, name="bench")
@@ -476,6 +478,81 @@ def scene_safeagentbench(
         typer.echo(json.dumps(build_scene(task, vocab), indent=2))
     except VirfError as exc:
         raise _fail(str(exc)) from None
+
+
+@scene_app.command("show")
+def scene_show(
+    scene: Annotated[Path, typer.Argument(help="Scene ABox JSON file.")],
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print the canonical world as one JSON object.")
+    ] = False,
+    scenario: ScenarioOpt = "kitchen",
+) -> None:
+    """Show how VIRF understood SCENE: the one canonical world it verifies against.
+
+    Every object with its types, states, materials and relations; what came from
+    the scene, from a catalogue default or from an open-world assumption; and how
+    the scene wrote what was rewritten (a state individual, an inverse relation,
+    a material class)."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from virf.kb.scene import describe_scene, load_scene_file
+    from virf.kb.tbox import load_tbox
+
+    try:
+        world = describe_scene(load_scene_file(scene, load_tbox(scenario).vocabulary))
+    except EnvironmentProblem as exc:
+        raise _fail(str(exc), EXIT["ERROR"]) from None
+    except VirfError as exc:
+        raise _fail(str(exc)) from None
+    if as_json:
+        typer.echo(json.dumps(world, indent=2, sort_keys=True))
+        return
+
+    def cell(entries: list[dict[str, str]], relation: bool = False) -> str:
+        out = []
+        for e in entries:
+            text = f"{e['relation']} {e['value']}" if relation else e["value"]
+            if e["from"] != "scene":
+                text += f" ({e['from']})"
+            out.append(text)
+        return "\n".join(out)
+
+    console = Console(highlight=False, width=150)
+    table = Table(title=f"Scene {world['name']}: the canonical world")
+    for col in ("object", "types", "states", "materials", "relations"):
+        table.add_column(col)
+    rewritten: list[str] = []
+    for name, obj in world["objects"].items():
+        label = name + (" (agent)" if name == world["agent"] else "")
+        table.add_row(
+            label,
+            ", ".join(obj["types"]),
+            cell(obj["states"]),
+            cell(obj["materials"] + obj["properties"]),
+            cell(obj["relations"], relation=True),
+        )
+        for e in obj["states"] + obj["materials"] + obj["properties"] + obj["relations"]:
+            if "written" in e:
+                rewritten.append(f"{e['written']}  ->  {e['canonical']}")
+    console.print(table)
+    lines = [
+        "closed world: " + (", ".join(world["closed_world"]) or "none (contents are open)"),
+        f"objects start located: {'no' if world['unlocated_by_default'] else 'yes'}",
+    ]
+    if world["unknown_contents"]:
+        lines.append("contents unknown: " + ", ".join(world["unknown_contents"]))
+    if world["referents"]:
+        lines.append(
+            "referents: " + ", ".join(f"{k} -> {v}" for k, v in world["referents"].items())
+        )
+    if world["open_world_markers"]:
+        lines.append("open-world markers: " + "; ".join(world["open_world_markers"]))
+    if rewritten:
+        lines.append("rewritten as the canonical form:")
+        lines += [f"  {r}" for r in rewritten]
+    console.print("\n".join(lines), markup=False)
 
 
 @bench_app.command("safeagentbench")
