@@ -8,14 +8,17 @@ Format (Appendix C of the paper)::
      "closed_world": ["contains", "supports"],          # optional
      "unlocated_by_default": false}                     # optional
 
-* An instance may be listed several times with different classes.
-* States and materials are individuals: write the class name as the object
-  (``"hasState" -> "OnState"``, ``"hasMaterial" -> "Metal"``) or declare an
-  instance of the class.  Plain words such as ``"closed"`` or ``"on"`` are
-  accepted as data values of ``hasState``/``hasMaterial``.
-* ``isInside``/``isOn``/``isHeldBy`` are stored as their inverses
-  ``contains``/``supports``/``isHolding`` so that the simulator has one
-  spelling of each relation.
+* An instance may be listed several times with different classes, or typed
+  by ``rdf:type`` assertions.
+* One world, many spellings: the reader builds one canonical world.  A state
+  or material is stored as its class's own individual (``hasState OnState``,
+  ``hasMaterial Metal``) whether the scene names that individual, an
+  individual of the class (``On_1``, ``DoorClosedState_1``), a word
+  (``"closed"``), or gives the object the class as a type; a class defined
+  only by a material (``MetallicObject``) becomes ``hasMaterial Metal``.
+  Either direction of an inverse pair is stored in one direction
+  (``isOn`` as ``supports``).  How the scene wrote a rewritten fact is kept in
+  ``Scene.spelling`` for reports.  docs/scenes.md lists every form.
 * Objects in a scene were perceived, so they start *located* (``isLocated
   true``) unless an assertion says ``isLocated false`` or the scene sets
   ``unlocated_by_default`` (as a benchmark scene does for a robot that must
