@@ -40,28 +40,64 @@ def unknown_term(kind: str, term: str, choices: Iterable[str]) -> InputError:
     return InputError(f"unknown {kind} '{clip(term)}'{hint}")
 
 
-def read_input_file(path: str | Path, what: str) -> str:
-    """Read a user's file, turning I/O failures into one-line input errors."""
+# The largest user file VIRF reads (scenes, plans, answers, replays, benchmark
+# files): far above any real input, far below what would exhaust memory.
+MAX_FILE_BYTES = 32 * 1024 * 1024
+
+
+def read_input_file(path: str | Path, what: str, limit: int = MAX_FILE_BYTES) -> str:
+    """Read a user's file, turning I/O failures into one-line input errors.
+
+    Only regular files are read, and at most ``limit`` bytes: a FIFO would block
+    forever and a device such as /dev/zero would never end."""
     p = Path(path)
     try:
-        return p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"{what} file not found: {p}") from None
+        if not p.exists():
+            raise InputError(f"{what} file not found: {p}")
+        if not p.is_file():
+            raise InputError(f"{what} path {p} is not a regular file")
+        with p.open("rb") as fh:
+            raw = fh.read(limit + 1)
+        if len(raw) > limit:
+            size = f"{limit // 2**20} MiB" if limit >= 2**20 else f"{limit} bytes"
+            raise InputError(f"{what} file {p} is larger than {size}")
+        return raw.decode("utf-8")
     except UnicodeDecodeError:
         raise InputError(f"{what} file {p} is not UTF-8 text") from None
     except OSError as exc:
         raise InputError(f"cannot read {what} file {p}: {exc.strerror}") from None
 
 
+def _no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise InputError(
+                f"duplicate key '{clip(key, 40)}' (the later value would hide the first)"
+            )
+        out[key] = value
+    return out
+
+
+def _no_constant(name: str) -> Any:
+    raise InputError(f"{name} is not a JSON number")
+
+
+def parse_json(text: str, what: str) -> Any:
+    """Strict JSON: no duplicate keys (one would silently win), no NaN or Infinity."""
+    try:
+        return json.loads(text, object_pairs_hook=_no_duplicate_keys, parse_constant=_no_constant)
+    except InputError as exc:
+        raise InputError(f"{what} is not valid JSON: {exc}") from None
+    except json.JSONDecodeError as exc:
+        raise InputError(
+            f"{what} is not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}"
+        ) from None
+    except (RecursionError, ValueError):
+        raise InputError(f"{what} is not valid JSON (nested too deeply or malformed)") from None
+
+
 def read_json_file(path: str | Path, what: str) -> Any:
     """Read and parse a user's JSON file; every failure is a one-line input error."""
     p = Path(path)
-    text = read_input_file(p, what)
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise InputError(
-            f"{what} {p} is not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}"
-        ) from None
-    except (RecursionError, ValueError):
-        raise InputError(f"{what} {p} is not valid JSON (nested too deeply or malformed)") from None
+    return parse_json(read_input_file(p, what), f"{what} {p}")

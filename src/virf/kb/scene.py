@@ -42,10 +42,15 @@ from typing import Any
 
 from virf.errors import InputError, clip, closest, read_json_file
 from virf.kb.tbox import Vocabulary
+from virf.names import term_key
 from virf.schema import Fact, FactKind, Provenance
-from virf.sim.plan import term_key
 
-NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
+NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_.\-]*")
+# Limits on one scene (docs/scenes.md): well above real rooms, well below what
+# would overrun the verification deadline or memory.
+MAX_INSTANCES = 5_000
+MAX_ASSERTIONS = 50_000
+MAX_NAME = 128
 # The direction in which the simulator reads each relation; a scene may write
 # either direction of any inverse pair the ontology declares.
 CANONICAL_DIRECTION = ("contains", "supports", "isHolding", "controls")
@@ -145,18 +150,46 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
     assertions = data.get("assertions", [])
     if not isinstance(assertions, list):
         raise InputError("scene 'assertions' must be a list")
+    if len(instances) > MAX_INSTANCES:
+        raise InputError(f"scene has {len(instances)} instances; the limit is {MAX_INSTANCES}")
+    if len(assertions) > MAX_ASSERTIONS:
+        raise InputError(f"scene has {len(assertions)} assertions; the limit is {MAX_ASSERTIONS}")
+    for i, a in enumerate(assertions):
+        if not isinstance(a, dict) or not {"subject", "property", "object"} <= set(a):
+            raise InputError(f"assertions[{i}] needs 'subject', 'property' and 'object'")
+        for key in ("subject", "property"):
+            if not isinstance(a[key], str):
+                raise InputError(f"assertions[{i}]: '{key}' must be a string, not {_shown(a[key])}")
+        if not isinstance(a["object"], str | bool):
+            raise InputError(
+                f"assertions[{i}]: 'object' must be a string (or true/false for a data "
+                f"property), not {_shown(a['object'])}"
+            )
 
     classes: dict[str, set[str]] = {}
     order: list[str] = []
+    # Names that could be read as another term: a plan says 'pan' for a Pan,
+    # so an instance called 'pan' (or 'PAN') would be a second reading.
+    keyed: dict[str, str] = {}
 
     def declare(iname: str, cname: str, where: str) -> None:
-        if not NAME_RE.match(iname):
+        if not NAME_RE.fullmatch(iname) or len(iname) > MAX_NAME:
             raise InputError(
-                f"{where}: instance name '{clip(iname)}' must start with a letter or '_' "
-                "and use only letters, digits, '_', '.', '-'"
+                f"{where}: instance name '{clip(iname)}' must start with a letter or '_', "
+                f"use only letters, digits, '_', '.', '-', and be at most {MAX_NAME} characters"
             )
-        if iname in vocab.individuals or iname in vocab.classes:
-            raise InputError(f"{where}: '{iname}' is already an ontology term; choose another name")
+        key = term_key(iname)
+        term = vocab.term_by_key(key)
+        if term is not None:
+            raise InputError(
+                f"{where}: instance name '{iname}' reads as the ontology term '{term}'; "
+                f"choose another name, such as '{term}_1'"
+            )
+        if keyed.setdefault(key, iname) != iname:
+            raise InputError(
+                f"{where}: instance names '{keyed[key]}' and '{iname}' differ only in case or "
+                "separators, so a plan could not tell them apart"
+            )
         cls = vocab.require_class(cname)
         if iname not in classes:
             classes[iname] = set()
@@ -166,14 +199,17 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
     for i, inst in enumerate(instances):
         if not isinstance(inst, dict) or not {"class_name", "instance_name"} <= set(inst):
             raise InputError(f"instances[{i}] needs 'class_name' and 'instance_name'")
-        declare(str(inst["instance_name"]), str(inst["class_name"]), f"instances[{i}]")
+        for key in ("class_name", "instance_name"):
+            if not isinstance(inst[key], str):
+                raise InputError(
+                    f"instances[{i}]: '{key}' must be a string, not {_shown(inst[key])}"
+                )
+        declare(inst["instance_name"], inst["class_name"], f"instances[{i}]")
     # rdf:type assertions declare and type individuals like 'instances' entries;
     # they are read first because an individual's kind depends on its types.
     for i, a in enumerate(assertions):
-        if isinstance(a, dict) and str(a.get("property", "")) in TYPE_PROPERTIES:
-            if not {"subject", "object"} <= set(a):
-                raise InputError(f"assertions[{i}] needs 'subject', 'property' and 'object'")
-            declare(str(a["subject"]), str(a["object"]), f"assertions[{i}]")
+        if a["property"] in TYPE_PROPERTIES:
+            declare(a["subject"], str(a["object"]), f"assertions[{i}]")
 
     values = _value_individuals(classes, vocab)
     facts: dict[Fact, Provenance] = {}
@@ -219,6 +255,8 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
     if not isinstance(closed, list) or not all(isinstance(c, str) for c in closed):
         raise InputError("scene 'closed_world' must be a list of relation names")
     for entry in closed:
+        if not entry.strip():
+            raise InputError("closed_world: empty entry; choose from " + ", ".join(CLOSABLE))
         # "contains" closes the relation for every receptacle; "contains:Fridge_1"
         # for one (a user confirming what is inside one thing).
         rel, _, owner = entry.partition(":")
@@ -263,7 +301,9 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
             continue
         kind = str(a.get("type", "object_property"))
         if kind not in ("object_property", "data_property"):
-            raise InputError(f"{where}: type '{kind}' must be object_property or data_property")
+            raise InputError(
+                f"{where}: type '{clip(kind)}' must be object_property or data_property"
+            )
         if subj not in classes:
             near = closest(subj, classes)
             hint = f"; closest known: {', '.join(near)}" if near else ""
@@ -303,8 +343,11 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
             if fact != written:
                 spelling.setdefault(fact, written)
 
+    _check_physical(facts)
     unknown_contents = data.get("unknown_contents", [])
-    if not isinstance(unknown_contents, list) or any(u not in classes for u in unknown_contents):
+    if not isinstance(unknown_contents, list) or any(
+        not isinstance(u, str) or u not in classes for u in unknown_contents
+    ):
         raise InputError("scene 'unknown_contents' must list declared instances")
     referents = data.get("referents", {})
     if not isinstance(referents, dict) or not all(
@@ -346,6 +389,47 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
         referents=MappingProxyType({term_key(k): v for k, v in sorted(referents.items())}),
         spelling=MappingProxyType(dict(sorted(spelling.items()))),
     )
+
+
+def _shown(value: Any) -> str:
+    return clip(json.dumps(value), 40)
+
+
+def _check_physical(facts: Mapping[Fact, Provenance]) -> None:
+    """Worlds that cannot exist are bad input, not something to verify: a hand
+    holding two things, an object in or on two places, a thing inside itself."""
+    held: dict[str, list[str]] = {}
+    parents: dict[str, list[str]] = {}
+    for f in facts:
+        if f.kind is not FactKind.OBJECT:
+            continue
+        if f.predicate == "isHolding":
+            held.setdefault(f.subject, []).append(f.object)
+            parents.setdefault(f.object, []).append(f.subject)
+        elif f.predicate in ("contains", "supports"):
+            if f.subject == f.object:
+                raise InputError(f"scene: {f.subject} {f.predicate} itself")
+            parents.setdefault(f.object, []).append(f.subject)
+    for agent, things in sorted(held.items()):
+        if len(things) > 1:
+            raise InputError(
+                f"scene: {agent} holds {' and '.join(sorted(things))}; a robot holds one object"
+            )
+    for thing, places in sorted(parents.items()):
+        if len(places) > 1:
+            raise InputError(
+                f"scene: {thing} is in, on or held by {' and '.join(sorted(places))} at once; "
+                "give it one place"
+            )
+    for start in sorted(parents):
+        seen = [start]
+        node = start
+        while node in parents:
+            node = parents[node][0]
+            if node in seen:
+                cycle = " in ".join([*seen[seen.index(node) :], node])
+                raise InputError(f"scene: containment cycle {cycle}")
+            seen.append(node)
 
 
 def _value_kind(term: str, classes: Mapping[str, set[str]], vocab: Vocabulary) -> str | None:

@@ -12,7 +12,7 @@ import re
 from collections import defaultdict
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from functools import cache
+from functools import cache, cached_property
 from importlib import resources
 from pathlib import Path
 from types import MappingProxyType
@@ -20,6 +20,7 @@ from typing import Any
 
 from virf._java import ensure_jvm
 from virf.errors import InputError, closest, unknown_term
+from virf.names import term_key
 
 NS = "http://virf.dev/ontology#"
 MODULE_BASE = "http://virf.dev/ontology/"
@@ -166,6 +167,17 @@ class Vocabulary:
             if found:
                 return found
         return ()
+
+    @cached_property
+    def _keys(self) -> Mapping[str, str]:
+        out: dict[str, str] = {}
+        for term in sorted(self.classes | self.individuals):
+            out.setdefault(term_key(term), term)
+        return out
+
+    def term_by_key(self, key: str) -> str | None:
+        """The class or individual a name reads as, ignoring case and separators."""
+        return self._keys.get(key)
 
     def excluded_by(self, state: str) -> frozenset[str]:
         """The states an object leaves when it enters ``state``."""
