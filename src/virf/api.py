@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from virf.errors import InputError
 from virf.kb.scene import Scene, build_scene, load_scene_file
 from virf.kb.tbox import DEFAULT_SCENARIO, TBox, load_tbox
 from virf.reasoning import Engine, make_engine
@@ -46,11 +47,16 @@ class LogicTutor:
         self, scene: Scene | dict[str, Any], plan: Sequence[str] | Sequence[PlanStep]
     ) -> Report:
         sc = scene if isinstance(scene, Scene) else self.scene(scene)
+        if isinstance(plan, str):  # a str is a Sequence[str] of characters
+            raise InputError("plan must be a list of action lines, not one string")
         steps = (
             tuple(plan)
             if all(isinstance(p, PlanStep) for p in plan)
             else parse_plan([str(p) for p in plan])
         )
+        if not steps:
+            # Nothing to verify is not a safe plan: the CLI refuses it too.
+            raise InputError("plan has no actions (only blank lines or comments)")
         return self.verifier.verify(sc, steps)  # type: ignore[arg-type]
 
     def verify_files(self, scene_path: str | Path, plan_path: str | Path) -> Report:
