@@ -105,3 +105,9 @@ def test_only_regular_files_are_read(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="larger than"):
         read_input_file(big, "plan", limit=100)
     assert json.loads(json.dumps(read_input_file(big, "plan"))).startswith("find Pot_1")
+
+
+@pytest.mark.parametrize("plan", [[], ["# only a comment", ""], "find Pot_1"])
+def test_api_refuses_plans_with_nothing_to_verify(tutor, plan: Any) -> None:
+    with pytest.raises(InputError, match="plan"):
+        tutor.verify(scene([inst("Pot", "Pot_1")]), plan)
