@@ -203,7 +203,7 @@ def test_unreadable_requirement_is_never_safe(tutor, vocab) -> None:
     assert isinstance(req, Unreadable)
     report = tutor.verifier.verify(tutor.scene(FRIDGE), _plan(["find Apple_1"]), [req])
     assert report.status == "UNKNOWN"
-    assert any("cannot read the requirement" in q for q in report.questions)
+    assert any("cannot read the requirement" in q.text for q in report.questions)
 
 
 def _plan(lines: list[str]):

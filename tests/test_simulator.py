@@ -191,7 +191,7 @@ def test_missing_object_suggests_closest(tutor, scene) -> None:
     assert report.status == "UNKNOWN"
     assert report.violated_concept is not None
     assert report.violated_concept.id == "MissingObject"
-    assert any("Apple_1" in q for q in report.questions)
+    assert any("Apple_1" in q.text for q in report.questions)
 
 
 def test_resolution_prefers_the_object_just_found(sim, tutor) -> None:

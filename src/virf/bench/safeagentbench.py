@@ -32,8 +32,9 @@ from typing import Any
 
 from virf.errors import InputError, read_input_file
 from virf.kb.tbox import Vocabulary
+from virf.names import term_key
 from virf.schema import FactKind
-from virf.sim.plan import PlanStep, parse_plan
+from virf.sim.plan import MAX_NAME_WORDS, PlanStep, parse_plan, singular_forms
 from virf.sim.simulator import WorldState
 
 CATEGORIES = (
@@ -184,7 +185,7 @@ def named_types(task: Task, vocab: Vocabulary, plan: list[str] | None = None) ->
     first-mention order."""
     words: list[str] = []
     for step in [*task.steps, *(plan or [])]:
-        words.extend(step.replace("(", " ").replace(")", " ").replace(",", " ").split()[1:])
+        words.extend(_step_names(_step_tokens(step)[1:], vocab))
     for key in ("objects", "involved_objects"):
         if isinstance(task.data.get(key), list):
             words.extend(str(o) for o in task.data[key])
@@ -224,14 +225,52 @@ def _is_catalogue_type(vocab: Vocabulary, cls: str) -> bool:
     return bool(comment) and comment[0].startswith("AI2-THOR object type")
 
 
+def _step_tokens(step: str) -> list[str]:
+    return step.replace("(", " ").replace(")", " ").replace(",", " ").split()
+
+
+def _class_in_words(words: list[str], vocab: Vocabulary) -> str | None:
+    """The class a run of words names ('dining table', 'StoveKnob', 'apples')."""
+    joined = term_key("".join(words))
+    if not joined:
+        return None
+    cls = vocab.canonical_class(joined)
+    if cls is not None:
+        return cls
+    singular = {c for f in singular_forms(joined) if (c := vocab.canonical_class(f))}
+    return singular.pop() if len(singular) == 1 else None
+
+
+def _step_names(tokens: list[str], vocab: Vocabulary) -> list[str]:
+    """Class names a step's words spell, longest first, so 'soap bottle' is a
+    SoapBottle and not also a Bottle, exactly as the CamelCase plan would be."""
+    out: list[str] = []
+    i = 0
+    while i < len(tokens):
+        for span in range(min(MAX_NAME_WORDS, len(tokens) - i), 0, -1):
+            cls = _class_in_words(tokens[i : i + span], vocab)
+            if cls is not None:
+                out.append(cls)
+                i += span
+                break
+        else:
+            i += 1
+    return out
+
+
 def _numbered(steps: list[str], vocab: Vocabulary) -> dict[str, int]:
-    """Type -> highest instance number a plan names ("find Mug 2")."""
+    """Type -> highest instance number a plan names ("find Mug 2", "find stove knob 2")."""
     out: dict[str, int] = {}
     for step in steps:
-        for a, b in zip(step.split(), step.split()[1:], strict=False):
-            cls = vocab.canonical_class(a)
-            if cls and b.isdigit() and int(b) > 0:
-                out[cls] = max(out.get(cls, 1), int(b))
+        tokens = _step_tokens(step)
+        for j, number in enumerate(tokens):
+            if not (number.isascii() and number.isdigit() and int(number) > 0):
+                continue
+            for span in range(min(MAX_NAME_WORDS, j), 0, -1):
+                cls = _class_in_words(tokens[j - span : j], vocab)
+                if cls is not None:
+                    out[cls] = max(out.get(cls, 1), int(number))
+                    break
     return out
 
 

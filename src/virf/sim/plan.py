@@ -11,16 +11,24 @@ skipped, leading numbering such as ``3.`` or ``3)`` is ignored)::
 
 and the function style of the paper's walkthrough: ``put_in(Pot_1, Microwave_1)``.
 A plan file may also be a JSON list of such strings.
+
+Objects may be named in words, as SafeAgentBench's reference plans and LLM
+replies do: ``find dining table``, ``turn off coffee machine``, ``pick up the
+knives``, ``find stove knob 2``.  The parser only groups the words into object
+terms; which type or instance a term names is the simulator's decision, since
+only it knows the vocabulary and the scene.
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 import re
 from dataclasses import dataclass
 from pathlib import Path
 
 from virf.errors import InputError, clip, closest, read_input_file
+from virf.names import term_key
 
 VERBS = (
     "find",
@@ -119,14 +127,30 @@ _ALIASES = {
 ACTION_WORDS = frozenset(_ALIASES) | {"turn", "toggle", "switch"}
 _NUMBERING = re.compile(r"^\s*(?:step\s*)?\d+\s*[.):]\s*", re.IGNORECASE)
 _CALL = re.compile(r"^([A-Za-z_]+)\s*\((.*)\)\s*$")
-_CONNECTORS = {"in", "into", "on", "onto", "to"}
+_CONNECTORS = {"in", "into", "inside", "on", "onto", "to"}
 _ARTICLES = {"the", "a", "an"}
+# A word of an object name written in words ("dining", "Table", "watering-can").
+# Anything else (Apple_1, Mug2, "apple,") is a name on its own.
+_PLAIN_WORD = re.compile(r"^[A-Za-z]+(?:['-][A-Za-z]+)*$")
+# The longest catalogue names have three words ("toilet paper hanger"); a
+# longer run of words is prose ("open the fridge door slowly"), not a name.
+MAX_NAME_WORDS = 3
 
 
-def term_key(term: str) -> str:
-    """How a plan's object name is compared with types and instances: case,
-    spaces, underscores and hyphens do not matter ('stove knob 2', 'StoveKnob_2')."""
-    return re.sub(r"[\s_\-]+", "", term).lower()
+def singular_forms(term: str) -> tuple[str, ...]:
+    """Singular readings of a name that may be plural ('apples' -> 'apple',
+    'knives' -> 'knif', 'knife'); the caller keeps the ones that name something."""
+    low = term.lower()
+    out: list[str] = []
+    if low.endswith("ies"):
+        out.append(term[:-3] + "y")
+    if low.endswith("ves"):
+        out += [term[:-3] + "f", term[:-3] + "fe"]
+    if low.endswith("es"):
+        out.append(term[:-2])
+    if low.endswith("s") and not low.endswith("ss"):
+        out.append(term[:-1])
+    return tuple(o for o in out if len(term_key(o)) > 1)
 
 
 @dataclass(frozen=True)
@@ -150,47 +174,104 @@ def _unknown_verb(word: str, line_no: int) -> InputError:
     return InputError(f"plan line {line_no}: unknown action '{word}'{hint}")
 
 
+def _is_number(token: str) -> bool:
+    # isdigit alone accepts '²', which int() refuses: only ASCII digits count.
+    return token.isascii() and token.isdigit() and int(token) > 0
+
+
+def _name(words: list[str]) -> str:
+    # SafeAgentBench numbers instances of one type: "find Mug 2" means Mug_2.
+    # A numbered name in words stays in words ("stove knob 2"); the simulator
+    # compares it with StoveKnob_2 through term_key.
+    if len(words) == 2 and _is_number(words[1]):
+        return f"{words[0]}_{words[1]}"
+    return " ".join(words)
+
+
+def _terms(tokens: list[str], max_words: int = MAX_NAME_WORDS) -> list[str]:
+    """Group a line's words into object names: a run of plain words (closed by
+    an instance number) is one name; an identifier such as Apple_1 stands alone."""
+    out: list[str] = []
+    run: list[str] = []
+
+    def close() -> None:
+        words = len(run) - (1 if run and _is_number(run[-1]) else 0)
+        if words > max_words:  # prose, not a name: every word counts as one
+            out.extend(run)
+        elif run:
+            out.append(_name(run))
+        run.clear()
+
+    for token in tokens:
+        if _PLAIN_WORD.match(token):
+            run.append(token)
+        elif _is_number(token) and run:
+            run.append(token)
+            close()
+        else:
+            close()
+            out.append(token)
+    close()
+    return out
+
+
+def _put_terms(tokens: list[str]) -> list[str]:
+    """'put X in R', 'put the X on the R', 'put in R', 'put R', 'put X R'."""
+    while len(tokens) > 1 and tokens[0].lower() in _CONNECTORS:
+        tokens = tokens[1:]
+    # A connector can stand only between two names, so an object named "A" or
+    # "On" at either end survives.
+    cuts = [i for i in range(1, len(tokens) - 1) if tokens[i].lower() in _CONNECTORS]
+    if cuts:
+        bounds = [-1, *cuts, len(tokens)]
+        return [t for a, b in itertools.pairwise(bounds) for t in _terms(tokens[a + 1 : b])]
+    # Without a connector the words may be one name (the receptacle: "put dining
+    # table") or an object and a receptacle ("put apple fridge"); only the
+    # simulator, which knows the names, can tell, so the words stay together.
+    return _terms(tokens, max_words=2 * MAX_NAME_WORDS)
+
+
 def parse_line(line: str, line_no: int = 1, index: int = 1) -> PlanStep:
     text = _NUMBERING.sub("", line.strip()).strip().rstrip(".;")
     call = _CALL.match(text)
     if call:
         word = call.group(1).lower()
-        args = [a.strip() for a in call.group(2).split(",") if a.strip()]
+        args = [_name(a.split()) for a in call.group(2).split(",") if a.strip()]
     else:
         tokens = text.split()
         if not tokens:
             raise InputError(f"plan line {line_no}: empty action")
         word = tokens[0].lower()
-        args = tokens[1:]
+        words = tokens[1:]
         # Two-word verbs: "turn on X", "toggle off X", "pick up X".
-        if word in ("turn", "toggle", "switch") and args and args[0].lower() in ("on", "off"):
-            word = f"turn_{args[0].lower()}"
-            args = args[1:]
-        elif word in ("turn", "toggle", "switch") and args and args[-1].lower() in ("on", "off"):
-            word = f"turn_{args[-1].lower()}"
-            args = args[:-1]
-        elif word == "pick" and args and args[0].lower() == "up":
-            args = args[1:]
+        if word in ("turn", "toggle", "switch") and words and words[0].lower() in ("on", "off"):
+            word = f"turn_{words[0].lower()}"
+            words = words[1:]
+        elif word in ("turn", "toggle", "switch") and words and words[-1].lower() in ("on", "off"):
+            word = f"turn_{words[-1].lower()}"
+            words = words[:-1]
+        elif word == "pick" and words and words[0].lower() == "up":
+            words = words[1:]
+        # Articles are dropped only in lower case: "A" may be an object's name.
+        words = [w for w in words if w not in _ARTICLES] or words
     verb = _ALIASES.get(word)
     if verb is None:
         raise _unknown_verb(clip(word, 40), line_no)
-    # SafeAgentBench numbers instances of one type: "find Mug 2" means Mug_2.
-    merged: list[str] = []
-    for a in args:
-        if a.isdigit() and int(a) > 0 and merged and not merged[-1].isdigit():
-            merged[-1] = f"{merged[-1]}_{a}"
+    if not call:
+        if verb == "put":
+            args = _put_terms(words)
+        elif verb == "fillLiquid" and words:
+            # The liquid is the last word; the container's name may have several.
+            body = words[:-1]
+            if len(body) > 1 and body[-1].lower() == "with":
+                body = body[:-1]
+            args = [*_terms(body), words[-1]]
+        elif verb == "pour":
+            while len(words) > 1 and words[0].lower() in _CONNECTORS:
+                words = words[1:]
+            args = _terms(words)
         else:
-            merged.append(a)
-    args = merged
-    if verb == "put" and not call:
-        # "put X in R", "put the X into the R", "put in R": drop connecting words,
-        # but only where a connector can stand, so an object named "A" survives.
-        # Articles are dropped only in lower case: "A" may be an object's name.
-        args = [a for a in args if a not in _ARTICLES] or args
-        while len(args) > 2 and args[-2].lower() in _CONNECTORS:
-            args = [*args[:-2], args[-1]]
-        while len(args) > 1 and args[0].lower() in _CONNECTORS:
-            args = args[1:]
+            args = _terms(words)
     lo, hi = ARITY[verb]
     if not lo <= len(args) <= hi:
         want = str(lo) if lo == hi else f"{lo} to {hi}"

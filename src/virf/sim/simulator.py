@@ -7,16 +7,17 @@ it changes.  Whether the result is safe is the reasoner's business.
 
 from __future__ import annotations
 
+import difflib
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from types import MappingProxyType
 
-from virf.errors import closest
 from virf.kb.scene import Scene
 from virf.kb.tbox import Vocabulary
+from virf.names import term_key
 from virf.schema import Fact, FactKind, Provenance
-from virf.sim.plan import PlanStep
+from virf.sim.plan import PlanStep, singular_forms
 
 # Actions whose only effect is one state of their target.
 RESULT_STATE = {
@@ -51,6 +52,8 @@ class WorldState:
     closed_world: frozenset[str]
     unknown_contents: frozenset[str] = frozenset()
     found: tuple[str, ...] = ()  # objects found so far, most recent last
+    # The user's answers to ambiguity questions: term_key(word) -> instance.
+    referents: Mapping[str, str] = field(default_factory=lambda: MappingProxyType({}))
 
     @property
     def last_found(self) -> str | None:
@@ -76,6 +79,30 @@ class WorldState:
             if f.kind is FactKind.OBJECT:
                 index.setdefault((f.predicate, f.object), []).append(f.subject)
         return index
+
+    @cached_property
+    def _by_lower(self) -> dict[str, str]:
+        index: dict[str, str] = {}
+        for ind in self.order + tuple(sorted(set(self.objects) - set(self.order))):
+            index.setdefault(ind.lower(), ind)
+        return index
+
+    @cached_property
+    def _by_key(self) -> dict[str, list[str]]:
+        index: dict[str, list[str]] = {}
+        for ind in self.order + tuple(sorted(set(self.objects) - set(self.order))):
+            index.setdefault(term_key(ind), []).append(ind)
+        return index
+
+    def named(self, term: str) -> list[str]:
+        """The individuals ``term`` spells: itself, else the first that differs
+        only in case, else all that differ only in case and separators."""
+        if term in self.objects:
+            return [term]
+        same_case = self._by_lower.get(term.lower())
+        if same_case is not None:
+            return [same_case]
+        return list(self._by_key.get(term_key(term), ()))
 
     def objects_of(self, subject: str, predicate: str) -> list[str]:
         return sorted(self._forward.get((subject, predicate), ()))
@@ -121,6 +148,8 @@ class PreconditionFailure:
 class Simulator:
     def __init__(self, vocab: Vocabulary) -> None:
         self.vocab = vocab
+        # canonical_class ignores only case; plans also write "dining table".
+        self._class_keys = {term_key(c): c for c in vocab.classes}
 
     # ------------------------------------------------------------------ setup
     def initial(self, scene: Scene) -> WorldState:
@@ -140,6 +169,7 @@ class Simulator:
             agent=scene.agent,
             closed_world=scene.closed_world,
             unknown_contents=scene.unknown_contents,
+            referents=scene.referents,
         )
 
     def _is_physical(self, classes: frozenset[str]) -> bool:
@@ -162,16 +192,55 @@ class Simulator:
         return self._is_catalogue_type(classes) and not self.vocab.any_is_a(classes, affordance)
 
     # ------------------------------------------------------------------ resolution
+    def class_named(self, term: str) -> str | None:
+        """The class a plan term names, whatever its case and spacing
+        ('dining table', 'stove-knob', 'DiningTable')."""
+        cls = self.vocab.canonical_class(term)
+        if cls is not None:
+            return cls
+        hit = self._class_keys.get(term_key(term))
+        return self.vocab.canonical_class(hit) if hit else None
+
+    def spelling(self, state: WorldState, term: str) -> str | None:
+        """``term`` if it names an instance or a type; else its singular when
+        exactly one singular reading names something ('apples' -> 'apple');
+        else None.  A plural is read only when the word itself names nothing,
+        so 'boots' stays the catalogue's Boots."""
+        if state.named(term) or self.class_named(term):
+            return term
+        readings: dict[str, str] = {}
+        for form in singular_forms(term):
+            named = state.named(form)
+            target = named[0] if len(named) == 1 else self.class_named(form)
+            if target is not None or named:
+                readings.setdefault(target or term_key(form), form)
+        # Two singulars naming different things would be a guess.
+        return next(iter(readings.values())) if len(readings) == 1 else None
+
     def resolve_term(self, state: WorldState, term: str) -> str | tuple[str, ...] | None:
         """The instance ``term`` names; None if none; the candidates if the
         choice is ambiguous (several equally plausible instances)."""
-        if term in state.objects:
-            return term
-        lowered = term.lower()
-        for ind in state.order + tuple(sorted(set(state.objects) - set(state.order))):
-            if ind.lower() == lowered:
-                return ind
-        cls = self.vocab.canonical_class(term)
+        spelled = self.spelling(state, term)
+        if spelled is None:
+            return None
+        keys = (term_key(term), term_key(spelled))
+
+        def choose(pool: list[str], among: list[str]) -> str | tuple[str, ...]:
+            if len(pool) == 1:
+                return pool[0]
+            # Only a tie is settled by the user's earlier answer ("by 'bowl' I
+            # mean Bowl_2"): it must never outrank what the plan itself says.
+            for key in keys:
+                meant = state.referents.get(key)
+                if meant in among:
+                    return meant
+            return tuple(pool)
+
+        named = state.named(spelled)
+        if named:
+            # Two instances spelled alike ('Mug_12', 'Mug1_2'): never guess.
+            return choose(named, named)
+        cls = self.class_named(spelled)
         if cls is None:
             return None
         candidates = [
@@ -195,8 +264,28 @@ class Simulator:
         visible = [
             c for c in candidates if Fact(c, "isLocated", "true", FactKind.DATA) in state.facts
         ]
-        pool = visible or candidates
-        return pool[0] if len(pool) == 1 else tuple(pool)
+        return choose(visible or candidates, candidates)
+
+    def _put_splits(self, state: WorldState, phrase: str) -> list[tuple[str, str]]:
+        """The readings of 'put apple fridge' (no connector) as an object and a
+        receptacle where both sides name something."""
+        words = phrase.split()
+        return [
+            (" ".join(words[:i]), " ".join(words[i:]))
+            for i in range(1, len(words))
+            if self.spelling(state, " ".join(words[:i]))
+            and self.spelling(state, " ".join(words[i:]))
+        ]
+
+    @staticmethod
+    def near(term: str, pool: Iterable[str], n: int = 3) -> tuple[str, ...]:
+        """The closest known names, compared in compacted form so that
+        'dinning table' finds DiningTable."""
+        by_key: dict[str, str] = {}
+        for name in sorted(set(pool)):
+            by_key.setdefault(term_key(name), name)
+        hits = difflib.get_close_matches(term_key(term), list(by_key), n=n, cutoff=0.5)
+        return tuple(by_key[h] for h in hits)
 
     def resolve(self, state: WorldState, step: PlanStep) -> ResolvedStep | MissingObject:
         def need(term: str) -> str | MissingObject:
@@ -205,7 +294,7 @@ class Simulator:
                 pool = list(state.objects) + sorted(
                     {c for cs in state.objects.values() for c in cs}
                 )
-                return MissingObject(step, term, tuple(closest(term, pool)))
+                return MissingObject(step, term, self.near(term, pool))
             if isinstance(found, tuple):
                 return MissingObject(step, term, found, ambiguous=True)
             if (
@@ -217,6 +306,16 @@ class Simulator:
 
         verb, args = step.verb, step.args
         held = state.held()
+        # The whole phrase names the receptacle if it can ("put dining table");
+        # otherwise one object-receptacle split must work, since choosing
+        # between several would be a guess.
+        if verb == "put" and len(args) == 1 and self.spelling(state, args[0]) is None:
+            splits = self._put_splits(state, args[0])
+            if len(splits) == 1:
+                args = splits[0]
+            elif splits:
+                sides = tuple(dict.fromkeys(side for split in splits for side in split))
+                return MissingObject(step, args[0], sides)
         if verb == "put":
             dest = need(args[-1])
             if isinstance(dest, MissingObject):
