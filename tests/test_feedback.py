@@ -75,7 +75,7 @@ def test_render_marks_assumptions_and_questions(example_report) -> None:
     assert "(assumed)" in text
     assert "Questions for the user:" in text
     for q in report.questions:
-        assert q.split()[0] in text
+        assert q.text.split()[0] in text
 
 
 def test_render_stopped_plan(example_report) -> None:

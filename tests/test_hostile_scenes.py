@@ -111,3 +111,17 @@ def test_only_regular_files_are_read(tmp_path: Path) -> None:
 def test_api_refuses_plans_with_nothing_to_verify(tutor, plan: Any) -> None:
     with pytest.raises(InputError, match="plan"):
         tutor.verify(scene([inst("Pot", "Pot_1")]), plan)
+
+
+def test_relations_are_not_literals(tutor) -> None:
+    data = scene(
+        [inst("Pot", "Pot_1"), inst("CounterTop", "C_1")],
+        [rel("Pot_1", "isOn", "C_1", "data_property")],
+    )
+    with pytest.raises(InputError, match="write it with type object_property"):
+        tutor.scene(data)
+    # The paper's own spelling of a state as a data value stays accepted.
+    ok = scene(
+        [inst("Fridge", "Fridge_1")], [rel("Fridge_1", "hasState", "closed", "data_property")]
+    )
+    assert tutor.scene(ok).objects["Fridge_1"] == frozenset({"Fridge"})

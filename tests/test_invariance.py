@@ -23,6 +23,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from virf.feedback import render_report
+from virf.schema import Triple
+
 FULL = os.environ.get("VIRF_FULL") == "1"
 
 APPLIANCES = {  # type -> (toggleable, openable, receptacle relation)
@@ -310,3 +313,24 @@ def test_open_replaces_a_door_closed_state_individual(tutor) -> None:
     assert (left_open.status, left_open.dangerous_step) == ("UNSAFE", 2)
     assert left_open.violated_concept is not None
     assert left_open.violated_concept.id == "FridgeLeftOpenDanger"
+
+
+def test_reports_show_the_users_own_spelling(tutor) -> None:
+    scene = {
+        "instances": [
+            {"class_name": "Toaster", "instance_name": "Toaster_1"},
+            {"class_name": "Fork", "instance_name": "Fork_1"},
+            {"class_name": "OnState", "instance_name": "On_1"},
+        ],
+        "assertions": [
+            {"subject": "Toaster_1", "property": "hasState", "object": "On_1"},
+            {"subject": "Fork_1", "property": "isInside", "object": "Toaster_1"},
+        ],
+    }
+    report = tutor.verify(scene, ["find Toaster_1"])
+    assert report.status == "UNSAFE"
+    v = report.violations[0]
+    assert Triple(subject="Toaster_1", predicate="hasState", object="OnState") in v.triggering_facts
+    assert Triple(subject="Toaster_1", predicate="hasState", object="On_1") in v.as_written
+    assert Triple(subject="Fork_1", predicate="isInside", object="Toaster_1") in v.as_written
+    assert "As the scene wrote them:" in render_report(report)

@@ -15,7 +15,7 @@ from virf.kb.scene import build_scene
 from virf.planner import ScriptedApprentice
 from virf.planner.loop import LoopResult, refine
 from virf.planner.prompting import read_plan
-from virf.planner.questions import answers_file, apply_answers, questions_from
+from virf.planner.questions import answers_file, apply_answers
 from virf.sim.plan import load_plan_file
 
 FRIDGE_SCENE: dict[str, Any] = {
@@ -116,7 +116,7 @@ def test_unanswered_questions_go_back_to_the_apprentice(tutor: LogicTutor) -> No
 
 def test_answers_file_and_scene_update(tmp_path: Path, tutor: LogicTutor) -> None:
     report = tutor.verify(BURNER, BURNER_PLAN.splitlines())
-    questions = questions_from(report)
+    questions = report.questions
     path = tmp_path / "answers.json"
     path.write_text(json.dumps({"contents:supports:StoveBurner_1": "yes", "other": "no"}))
     answers = answers_file(path)(questions)
@@ -131,14 +131,14 @@ def test_answers_file_and_scene_update(tmp_path: Path, tutor: LogicTutor) -> Non
 def test_material_answers_are_checked(tutor: LogicTutor) -> None:
     scene = json.loads((EXAMPLES_DIR / "unknown-material-microwave" / "scene.json").read_text())
     plan = load_plan_file(EXAMPLES_DIR / "unknown-material-microwave" / "plan.txt")
-    questions = questions_from(tutor.verify(scene, plan))
+    questions = tutor.verify(scene, plan).questions
     material = [q for q in questions if q.kind == "material"]
     assert material
     with pytest.raises(InputError, match="unknown material 'Kryptonite'"):
         apply_answers(scene, material, {material[0].key: "Kryptonite"}, tutor.tbox.vocabulary)
     update = apply_answers(scene, material, {material[0].key: "glass"}, tutor.tbox.vocabulary)
     assert update.applied == (material[0].key,)
-    after = questions_from(tutor.verify(update.scene, plan))
+    after = tutor.verify(update.scene, plan).questions
     assert material[0].key not in {q.key for q in after}
 
 

@@ -147,14 +147,15 @@ def test_terminal_answers_that_cannot_be_used_are_asked_again(
     monkeypatch: pytest.MonkeyPatch, tutor: Any
 ) -> None:
     from virf.cli.main import _terminal_policy
-    from virf.planner.questions import Question
-    from virf.schema import Triple
+    from virf.schema import Question, Triple
 
     replies = iter(["Kryptonite", "glass", ""])
     monkeypatch.setattr("typer.prompt", lambda *a, **k: next(replies))
     marker = Triple(subject="Bowl_1", predicate="hasMaterial", object="UnknownMaterial")
-    material = Question("material:Bowl_1", "material", "What material?", "Bowl_1", marker)
-    fill = Question("fill:Bowl_1", "fill", "Liquid?", "Bowl_1", marker)
+    material = Question(
+        key="material:Bowl_1", kind="material", text="What material?", subject="Bowl_1", fact=marker
+    )
+    fill = Question(key="fill:Bowl_1", kind="fill", text="Liquid?", subject="Bowl_1", fact=marker)
     ask = _terminal_policy(tutor.tbox.vocabulary)
     assert ask([material, fill]) == {"material:Bowl_1": "glass"}  # Enter leaves one open
 

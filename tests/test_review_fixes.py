@@ -55,7 +55,7 @@ def test_ambiguous_type_is_a_question(tutor) -> None:
     }
     status, concept, report = _status(tutor, scene, ["pick Bowl", *MICROWAVE_PLAN])
     assert status == "UNKNOWN" and concept == "AmbiguousObject"
-    assert "Bowl_1 or Bowl_2" in report.questions[0]
+    assert "Bowl_1 or Bowl_2" in report.questions[0].text
 
 
 def test_people_are_not_objects(tutor) -> None:
@@ -117,7 +117,7 @@ def test_unstated_knob_wiring_is_assumed_and_asked(tutor) -> None:
     }
     status, _, report = _status(tutor, scene, ["find Knob_1", "turn_on Knob_1"])
     assert status != "SAFE"
-    assert any("Knob_1 controls Burner_1" in q for q in report.questions) or status == "UNSAFE"
+    assert any("Knob_1 controls Burner_1" in q.text for q in report.questions) or status == "UNSAFE"
 
 
 def test_heat_spreads_to_what_a_lit_burner_holds(tutor) -> None:

@@ -81,7 +81,11 @@ def test_a_state_individual_without_a_canonical_one_is_kept(tutor) -> None:
 )
 def test_misplaced_values_are_input_errors(tutor, assertion: dict[str, str], message: str) -> None:
     data = {
-        "instances": [inst("Toaster", "Toaster_1"), inst("Fork", "Fork_1"), inst("OnState", "On_1")],
+        "instances": [
+            inst("Toaster", "Toaster_1"),
+            inst("Fork", "Fork_1"),
+            inst("OnState", "On_1"),
+        ],
         "assertions": [assertion],
     }
     with pytest.raises(InputError, match=message):

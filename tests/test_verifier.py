@@ -148,7 +148,7 @@ def test_question_names_object_when_material_assumed(tutor) -> None:
     assert report.status == "UNKNOWN"
     assert report.violated_concept is not None
     assert report.violated_concept.id == "MicrowaveContainsUnknownMaterialDanger"
-    assert any("Thing_1" in q for q in report.questions)
+    assert any("Thing_1" in q.text for q in report.questions)
 
 
 @pytest.mark.parametrize("case", ["unknown-material-microwave", "noise-uncertainty"])
@@ -160,7 +160,7 @@ def test_question_names_object_of_stated_unknown_material(example_report, case: 
         if t.predicate == "hasMaterial" and t.object == "UnknownMaterial"
     ]
     assert unknown
-    assert any(unknown[0] in q for q in report.questions), report.questions
+    assert any(unknown[0] in q.text for q in report.questions), report.questions
 
 
 # ---------------------------------------------------------------- fail closed

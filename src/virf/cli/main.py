@@ -306,7 +306,7 @@ def plan(
 
 def _terminal_policy(vocab: Any) -> Any:
     """Ask each question on the terminal; an answer that cannot be used is asked again."""
-    from virf.planner.questions import apply_answers
+    from virf.planner.questions import check_answer
 
     def ask(questions: Any) -> dict[str, str]:
         typer.echo(
@@ -314,12 +314,17 @@ def _terminal_policy(vocab: Any) -> Any:
         )
         out: dict[str, str] = {}
         for q in questions:
+            prompt = f"  {q.text}"
+            if q.kind == "contradiction":  # answered by number
+                prompt += "".join(f"\n    {n}) {o}" for n, o in enumerate(q.options, start=1))
+            elif q.options and len(q.options) <= 6:
+                prompt += f" [{'/'.join(q.options)}]"
             while True:
-                reply = typer.prompt(f"  {q.text}", default="", show_default=False, err=True)
+                reply = typer.prompt(prompt, default="", show_default=False, err=True)
                 if not reply.strip():
                     break
                 try:
-                    apply_answers({}, [q], {q.key: reply.strip()}, vocab)
+                    check_answer(q, reply.strip(), vocab)
                 except VirfError as exc:
                     typer.echo(f"  {exc}", err=True)
                     continue

@@ -58,7 +58,7 @@ def feedback_prompt(report: Report) -> str:
         # The apprentice must not guess the answers: the user is asked.
         text += (
             "\n[OPEN QUESTIONS FOR THE USER]\n"
-            + "\n".join(f"- {q}" for q in report.questions)
+            + "\n".join(f"- {q.text}" for q in report.questions)
             + "\n"
         )
     return text
@@ -89,6 +89,10 @@ def render_report(report: Report, title: str | None = None) -> str:
             for t in v.triggering_facts:
                 mark = "  (assumed)" if t in v.assumed_facts else ""
                 lines.append(f"      - {t.subject} {t.predicate} {t.object}{mark}")
+        if v.as_written:
+            lines.append("    As the scene wrote them:")
+            for t in v.as_written:
+                lines.append(f"      - {t.subject} {t.predicate} {t.object}")
         if v.background:
             lines.append("    Background knowledge used:")
             for b in v.background:
@@ -98,7 +102,7 @@ def render_report(report: Report, title: str | None = None) -> str:
     if report.questions:
         lines.append("  Questions for the user:")
         for q in report.questions:
-            lines.append(_wrap(f"? {q}", "    "))
+            lines.append(_wrap(f"? {q.text}", "    "))
     if report.trace:
         lines.append("  Trace:")
         for st in report.trace:

@@ -54,7 +54,6 @@ MAX_NAME = 128
 # The direction in which the simulator reads each relation; a scene may write
 # either direction of any inverse pair the ontology declares.
 CANONICAL_DIRECTION = ("contains", "supports", "isHolding", "controls")
-INVERSES = {"isInside": "contains", "isOn": "supports", "isHeldBy": "isHolding"}
 TYPE_PROPERTIES = frozenset({"rdf:type", "type", "a", "isA", "is_a", "instanceOf"})
 # The property that carries each kind of value individual.
 VALUE_PROPERTY = {"State": "hasState", "Material": "hasMaterial", "Attribute": "hasProperty"}
@@ -321,6 +320,14 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
             value = str(obj).lower()
             facts[Fact(subj, prop, value, FactKind.DATA)] = Provenance.SCENE
             continue
+        if kind == "data_property" and prop not in VALUE_PROPERTY.values():
+            # Appendix C writes states as data values; a relation between two
+            # individuals has no literal reading.
+            raise InputError(
+                f"{where}: {prop_name} relates two individuals; write it with type object_property"
+            )
+        if isinstance(obj, bool):
+            raise InputError(f"{where}: {prop_name} needs an individual, not {str(obj).lower()}")
         written_obj = str(obj)
         for target in resolve_value(written_obj, prop, where):
             written = Fact(subj, prop_name, written_obj)

@@ -6,11 +6,12 @@ The apprentice proposes a plan and the tutor verifies it:
 * **UNSAFE** or **ERROR**: the diagnostic report goes back to the apprentice
   as its next prompt, and it proposes again.
 * **A refusal** (``TASK_ABORT``): ``TASK_REJECTED``.
-* **UNKNOWN**: the questions go to the user (:mod:`virf.planner.questions`).
-  When the answers settle something, the scene is updated and the same plan
-  is verified again, within the same iteration. When nothing is settled, the
-  report goes to the apprentice like an unsafe one: the plan cannot be
-  approved on assumptions.
+* **UNKNOWN**: the report's questions that an answer can settle go to the
+  user (:mod:`virf.planner.questions`). When the answers settle something,
+  the scene is updated and the same plan is verified again, within the same
+  iteration. When nothing is settled, the report goes to the apprentice like
+  an unsafe one: the plan cannot be approved on assumptions. A question is
+  asked at most ``MAX_ASKS`` times per plan.
 
 Each proposal uses one of ``max_iter`` iterations. When they run out, the
 outcome is ``TASK_REJECTED``.
@@ -23,6 +24,7 @@ it is given.
 from __future__ import annotations
 
 import json
+from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any, Literal, Protocol
@@ -32,11 +34,15 @@ from virf.kb.scene import Scene
 from virf.kb.tbox import Vocabulary
 from virf.planner.apprentices import Apprentice
 from virf.planner.prompting import ReadPlan, apprentice_prompt, read_plan, unreadable_message
-from virf.planner.questions import AnswerPolicy, apply_answers, deny, questions_from
+from virf.planner.questions import SETTLEABLE, AnswerPolicy, apply_answers, deny
 from virf.schema import Report
 from virf.sim.plan import PlanStep
 
 Outcome = Literal["APPROVED", "TASK_REJECTED"]
+# An answer can settle a question and still leave it open in the next report
+# (a referent the simulator cannot use, a receptacle that changes nothing):
+# asking again once is enough to let a person correct a slip.
+MAX_ASKS = 2
 SYSTEM = (
     "You plan actions for a household robot. Answer with a plan in the requested "
     "format, or TASK_ABORT when the task cannot be done safely."
@@ -156,19 +162,25 @@ def refine(
             Turn(i, "tutor", "report", report.reason, report.status, json.loads(report.to_json()))
         )
         # UNKNOWN: ask, update the scene, verify the same plan again. This is
-        # part of the same iteration, so answers given in the last one count;
-        # it ends because every round settles at least one question.
+        # part of the same iteration, so answers given in the last one count.
+        # It ends: every round asks a question at least once more, and the
+        # questions a plan can raise are bounded by the scene and the plan
+        # (an answer adds at most the one object a question named).
+        asked: Counter[str] = Counter()
         while report.status == "UNKNOWN":
-            questions = questions_from(report)
+            questions = [
+                q for q in report.questions if q.kind in SETTLEABLE and asked[q.key] < MAX_ASKS
+            ]
             if not questions:
                 break
+            asked.update(q.key for q in questions)
             log.append(
                 Turn(
                     i,
                     "tutor",
                     "questions",
                     "\n".join(q.text for q in questions),
-                    data={q.key: q.text for q in questions},
+                    data={"questions": [q.model_dump(mode="json") for q in questions]},
                 )
             )
             answers = answer(questions)

@@ -131,6 +131,9 @@ class Violation(_Frozen):
     message: str
     triggering_facts: tuple[Triple, ...] = ()
     assumed_facts: tuple[Triple, ...] = ()
+    # The scene's own statements behind triggering facts it wrote another way
+    # (a state individual, an inverse relation, a material class).
+    as_written: tuple[Triple, ...] = ()
     background: tuple[BackgroundKnowledge, ...] = ()
 
 
@@ -154,6 +157,35 @@ class StepTrace(_Frozen):
     removed: tuple[str, ...] = ()
 
 
+QuestionKind = Literal[
+    "material",  # what is X made of (an UnknownMaterial marker)
+    "fill",  # does X hold liquid (an UnknownFillState marker)
+    "contents",  # are X's listed contents complete (an open-world closure)
+    "confirm",  # is an assumed fact true
+    "which",  # which instance a plan's type word means (several fit)
+    "where",  # where an object the plan needs but the scene lacks is
+    "contradiction",  # which of the scene's contradictory facts is wrong
+    "requirement",  # does the plan meet a requirement VIRF cannot read
+    "other",  # a rule's question that no scene datum answers yet
+]
+
+
+class Question(_Frozen):
+    """One question for the user behind an UNKNOWN verdict.
+
+    ``key`` is stable across runs (answers files are keyed by it); ``options``
+    lists the accepted answers when they form a closed set, and is empty when
+    the answer is free."""
+
+    key: str
+    kind: QuestionKind
+    text: str
+    subject: str
+    fact: Triple | None = None
+    options: tuple[str, ...] = ()
+    step: int | None = None
+
+
 class Report(_Frozen):
     """The Logic Tutor's verdict on one plan (paper, Appendix E, extended)."""
 
@@ -163,7 +195,7 @@ class Report(_Frozen):
     violated_concept: ViolatedConcept | None
     causal_chain: CausalChain | None
     violations: tuple[Violation, ...]
-    questions: tuple[str, ...]
+    questions: tuple[Question, ...]
     suggestion: str | None
     danger_level: str | None
     category: str | None

@@ -35,6 +35,7 @@ from virf.schema import (
     Fact,
     FactKind,
     Provenance,
+    Question,
     Report,
     StepTrace,
     ViolatedConcept,
@@ -50,6 +51,13 @@ from virf.sim.simulator import (
     diff,
 )
 from virf.verify.explain import minimize, needed_background
+from virf.verify.questions import (
+    contradiction_question,
+    requirement_question,
+    rule_questions,
+    where_question,
+    which_question,
+)
 from virf.verify.requirements import Requirement, StepEvent, Unreadable, check_requirement
 
 Outcome = Literal["ok", "unsafe", "unknown", "not-checked", "not-simulated", "error"]
@@ -82,7 +90,7 @@ class _Finding:
     provenance: Mapping[Fact, Provenance]
     background: list[BackgroundKnowledge] = field(default_factory=list)
     message: str = ""
-    questions: list[str] = field(default_factory=list)
+    questions: list[Question] = field(default_factory=list)
 
 
 class Verifier:
@@ -222,7 +230,7 @@ class Verifier:
                 break
         for pending in ahead:  # snapshots after the first definite finding are not needed
             pending.cancel()
-        return self._report(plan, states, resolved, stop, findings, first_definite)
+        return self._report(plan, states, resolved, stop, findings, first_definite, scene.spelling)
 
     def _simulate(
         self, scene: Scene, plan: Sequence[PlanStep]
@@ -325,7 +333,7 @@ class Verifier:
             for f in defaults
         ]
         definite = usc.kind != "uncertainty" and not assumed
-        questions = self._questions(usc, ind, facts, assumed)
+        questions = [] if definite else rule_questions(usc, ind, facts, assumed, step, self.vocab)
         chain = "; ".join(f.render() for f in facts if snapshot[f] is not Provenance.DEFAULT)
         extra = "; ".join(b.text for b in background)
         message = f"{usc.trigger_reason[:1].upper()}{usc.trigger_reason[1:]}: {chain}"
@@ -354,47 +362,8 @@ class Verifier:
         definite = usc.kind != "uncertainty" and self.engine.entails(known, usc.name, ind)
         if not definite:  # uncertain findings are rare; their questions need the proof
             return self._explain_full(usc, ind, step, phase, snapshot)
-        questions: list[str] = []
         message = f"{usc.trigger_reason[:1].upper()}{usc.trigger_reason[1:]} ({ind})."
-        return _Finding(usc, step, phase, ind, definite, [], dict(snapshot), [], message, questions)
-
-    def _questions(
-        self, usc: UnsafeStateConcept, ind: str, facts: list[Fact], assumed: list[Fact]
-    ) -> list[str]:
-        out = []
-        # The object the question is about: whatever the proof says is of unknown
-        # material, whether the scene stated it or VIRF marked it.
-        markers = [
-            f
-            for f in facts
-            if (f.predicate, f.object)
-            in (("hasMaterial", "UnknownMaterial"), ("hasState", "UnknownFillState"))
-        ]
-        if usc.question:
-            x = markers[0].subject if markers else ind
-            out.append(usc.question.replace("{x}", x))
-        for f in assumed:
-            if f in markers and usc.question:
-                continue
-            if f.kind is FactKind.CLOSURE:
-                where = "in" if f.predicate == "contains" else "on"
-                listed = ", ".join(f.members())
-                claim = (
-                    f"only {listed} is {where} {f.subject}"
-                    if listed
-                    else f"nothing is {where} {f.subject}"
-                )
-                out.append(
-                    f"Is it true that {claim}? "
-                    f"The scene does not say its '{f.predicate}' list is complete."
-                )
-            elif f.predicate == "hasMaterial" and f.object == "UnknownMaterial":
-                out.append(f"What material is {f.subject} made of?")
-            elif f.predicate == "hasState" and f.object == "UnknownFillState":
-                out.append(f"Does {f.subject} hold any liquid?")
-            else:
-                out.append(f"Please confirm: {f.render()}?")
-        return out
+        return _Finding(usc, step, phase, ind, definite, [], dict(snapshot), [], message)
 
     def _onset(self, facts: list[Fact], states: list[WorldState], n: int) -> int:
         """Earliest step from which a final-state finding's facts hold to the end."""
@@ -428,7 +397,6 @@ class Verifier:
             module="",
         )
         subject = facts[0].subject if facts else ""
-        question = f"The scene is contradictory: {listed}. Which of these is wrong?"
         return _Finding(
             concept,
             k,
@@ -439,7 +407,7 @@ class Verifier:
             dict(snapshot),
             [],
             f"These facts cannot all be true: {listed}.",
-            [question],
+            [contradiction_question(k, facts)],
         )
 
     def _unclear(self, stop: MissingObject) -> _Finding:
@@ -453,7 +421,7 @@ class Verifier:
                 f"step {stop.step.index} refers to '{stop.term}', which could be {options}",
                 "Name the object by its instance name in the plan.",
             )
-            question = f"Step {stop.step.index} ('{stop.step.text}') says '{stop.term}': do you mean {options}?"
+            question = which_question(stop.step.index, stop.step.text, stop.term, stop.near)
             return _Finding(
                 concept,
                 stop.step.index,
@@ -502,10 +470,7 @@ class Verifier:
         for n, req in enumerate(requirements, start=1):
             if isinstance(req, Unreadable):
                 concept = _requirement_concept(n, req.text, "the requirement could not be read")
-                question = (
-                    f"VIRF cannot read the requirement '{req.text}' ({req.reason}). "
-                    "Does the plan satisfy it?"
-                )
+                question = requirement_question(n, req.text, req.reason, plan_length)
                 out.append(
                     _Finding(
                         concept,
@@ -577,7 +542,12 @@ class Verifier:
                 definition="",
                 module="",
             )
-            question = f"Step {stop.step.index} ('{stop.step.text}') needs '{stop.term}', but the scene has none{near}. Where is it?"
+            receptacles = [
+                o for o in state.order if self.vocab.any_is_a(state.objects[o], "Receptacle")
+            ]
+            question = where_question(
+                stop.step.index, stop.step.text, stop.term, stop.near, receptacles
+            )
             return _Finding(
                 concept,
                 stop.step.index,
@@ -614,6 +584,7 @@ class Verifier:
         stop: MissingObject | PreconditionFailure | None,
         findings: dict[int, list[_Finding]],
         first_definite: int | None,
+        spelling: Mapping[Fact, Fact],
     ) -> Report:
         uncertain_steps = sorted(
             s for s, fs in findings.items() if fs and not any(f.definite for f in fs)
@@ -625,15 +596,14 @@ class Verifier:
         else:
             status, step = "SAFE", None
         at_step = sorted(findings.get(step, []) if step is not None else [], key=_rank)
-        questions: list[str] = []
+        questions: dict[str, Question] = {}  # by key: the first finding asking it words it
         for s in sorted(findings):
             if step is not None and s > step and status == "UNSAFE":
                 break
             for f in sorted(findings[s], key=_rank):
                 for q in f.questions:
-                    if q not in questions:
-                        questions.append(q)
-        violations = tuple(self._violation(f) for f in at_step)
+                    questions.setdefault(q.key, q)
+        violations = tuple(self._violation(f, spelling) for f in at_step)
         primary = violations[0] if violations else None
         action = None
         if step is not None and 1 <= step <= len(plan):
@@ -665,7 +635,7 @@ class Verifier:
             if primary
             else None,
             violations=violations,
-            questions=tuple(questions),
+            questions=tuple(questions.values()),
             suggestion=primary.suggestion if primary else None,
             danger_level=primary.danger_level if primary else None,
             category=primary.category if primary else None,
@@ -676,10 +646,19 @@ class Verifier:
             scenario=self.tbox.scenario,
         )
 
-    def _violation(self, f: _Finding) -> Violation:
+    def _violation(self, f: _Finding, spelling: Mapping[Fact, Fact]) -> Violation:
         u = f.concept
         trig = tuple(x.triple() for x in f.facts if f.provenance.get(x) is not Provenance.DEFAULT)
         assumed = tuple(x.triple() for x in f.facts if f.provenance.get(x) is Provenance.ASSUMED)
+        # The canonical facts are what every spelling of the scene shares; the
+        # user's own statements behind them are shown beside them.
+        written = tuple(
+            dict.fromkeys(
+                spelling[x].triple()
+                for x in f.facts
+                if x in spelling and f.provenance.get(x) is Provenance.SCENE
+            )
+        )
         return Violation(
             id=u.id,
             name=u.name,
@@ -698,6 +677,7 @@ class Verifier:
             message=f.message,
             triggering_facts=trig,
             assumed_facts=assumed,
+            as_written=written,
             background=tuple(f.background),
         )
 
