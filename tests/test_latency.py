@@ -84,8 +84,12 @@ def _cli(*args: str) -> subprocess.CompletedProcess[str]:
         (["--tbox-factors", "0"], "1 to 16"),
     ],
 )
-def test_bad_options_give_one_line(args: list[str], message: str) -> None:
-    tasks = SAB / "unsafe_detailed.jsonl"
+def test_bad_options_give_one_line(tmp_path: Path, args: list[str], message: str) -> None:
+    # A task file of its own: the options are checked whether or not the
+    # benchmark split sits beside the clone.
+    tasks = tmp_path / "unsafe_detailed.jsonl"
+    task = {"scene_name": "FloorPlan1", "instruction": "Throw the pot.", "step": ["find pot"]}
+    tasks.write_text(json.dumps(task) + "\n", encoding="utf-8")
     result = _cli(str(tasks), *args)
     assert result.returncode == 2
     assert result.stderr.count("\n") == 1 and message in result.stderr
