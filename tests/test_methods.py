@@ -43,7 +43,8 @@ def test_all_ten_methods_are_named() -> None:
 
 def test_impulsive_takes_the_first_plan_unverified(tutor: LogicTutor) -> None:
     result, _ = run(tutor, "impulsive", [LEAVES_OPEN])
-    assert result.outcome == "APPROVED" and result.plan == tuple(LEAVES_OPEN.splitlines())
+    assert result.outcome == "APPROVED_UNVERIFIED" and not result.verified
+    assert result.plan == tuple(LEAVES_OPEN.splitlines())
     assert not any(t.speaker == "tutor" for t in result.transcript)
 
 
@@ -89,7 +90,8 @@ def test_committee_revises_until_the_critic_approves(tutor: LogicTutor) -> None:
 
 def test_thinker_diagnostic_retries_once_without_reverifying(tutor: LogicTutor) -> None:
     result, apprentice = run(tutor, "thinker+diagnostic", [LEAVES_OPEN, LEAVES_OPEN])
-    assert result.outcome == "APPROVED" and result.iterations == 2  # the retry stands
+    # The retry stands, unverified.
+    assert result.outcome == "APPROVED_UNVERIFIED" and result.iterations == 2
     assert "DIAGNOSTIC REPORT" in apprentice.requests[1].as_messages()[-1]["content"]
 
 

@@ -12,6 +12,7 @@ from virf.planner.apprentices import (
     load_replay,
 )
 from virf.planner.clients import ClientSettings, Endpoint, OpenAIApprentice
+from virf.planner.deadline import Deadline
 from virf.planner.factory import make_apprentice
 from virf.planner.runlog import MIGRATIONS, CallRecord, Migration, RunLog
 
@@ -20,6 +21,7 @@ __all__ = [
     "Apprentice",
     "CallRecord",
     "ClientSettings",
+    "Deadline",
     "Endpoint",
     "Migration",
     "OpenAIApprentice",

@@ -32,6 +32,7 @@ from types import TracebackType
 from typing import Any, Final, Self
 
 from virf.errors import InputError, clip, read_input_file
+from virf.planner.deadline import Deadline
 from virf.planner.runlog import CallRecord, RunLog
 
 ROLES: Final = ("system", "user", "assistant")
@@ -76,19 +77,28 @@ class Proposal:
 
 @dataclass(frozen=True)
 class ProposalRequest:
-    """What the loop asked for: the chat and where in the run it belongs."""
+    """What the loop asked for: the chat and where in the run it belongs.
+
+    ``deadline`` is the run's: a client abandons a request still running when
+    it passes.  It is not part of what is logged or replayed.
+    """
 
     messages: tuple[tuple[str, str], ...]
     task_id: str
     iteration: int
     method: str
+    deadline: Deadline | None = None
 
     def as_messages(self) -> list[dict[str, str]]:
         return [{"role": role, "content": content} for role, content in self.messages]
 
 
 def check_request(
-    messages: Sequence[Mapping[str, str]], task_id: str, iteration: int, method: str
+    messages: Sequence[Mapping[str, str]],
+    task_id: str,
+    iteration: int,
+    method: str,
+    deadline: Deadline | None = None,
 ) -> ProposalRequest:
     """Validate the loop's arguments once, for every apprentice alike."""
     if not isinstance(task_id, str) or not task_id:
@@ -112,7 +122,7 @@ def check_request(
                 f"message {n} has unsupported keys {', '.join(extra)}; use role and content"
             )
         pairs.append((role, content))
-    return ProposalRequest(tuple(pairs), task_id, iteration, method)
+    return ProposalRequest(tuple(pairs), task_id, iteration, method, deadline)
 
 
 def empty_reason(text: str | None) -> str | None:
@@ -151,9 +161,13 @@ class Apprentice(ABC):
         task_id: str,
         iteration: int,
         method: str,
+        deadline: Deadline | None = None,
     ) -> Proposal:
-        """Ask for one plan.  Never returns an empty or malformed reply as ``ok``."""
-        return self._propose(check_request(messages, task_id, iteration, method))
+        """Ask for one plan.  Never returns an empty or malformed reply as ``ok``.
+
+        A request still running when ``deadline`` passes is abandoned and
+        comes back as a failed proposal; offline apprentices answer at once."""
+        return self._propose(check_request(messages, task_id, iteration, method, deadline))
 
     @abstractmethod
     def _propose(self, request: ProposalRequest) -> Proposal: ...

@@ -15,18 +15,40 @@ LM Studio          ``http://127.0.0.1:1234/v1``
 The SDK retries 429, 408/409, 5xx, timeouts and dropped connections with
 exponential backoff (honouring ``retry-after-ms``/``retry-after``), so this
 module only decides what each final outcome means for the refinement loop.
+
+Two wall-clock deadlines bound a request, because httpx's timeouts bound each
+network operation only and restart with every byte: a server that trickles
+one byte a second would otherwise hold a request for as long as it likes.
+
+* Each HTTP attempt must be over ``timeout_s`` seconds after it started.  A
+  reply that has not begun by then (no status line and headers) is a timeout,
+  retried like a silent server; one that began but is still arriving is
+  abandoned and the proposal fails, without a retry or a re-ask.
+* The run's deadline (:class:`virf.planner.deadline.Deadline`) bounds the
+  whole request, retries and back-off included; when it passes the request is
+  abandoned and the proposal fails.
+
+Both are enforced by running the SDK's asynchronous client on an event loop
+the apprentice owns and cancelling the request's task: cancellation stops the
+pending read at once and closes the connection, and no thread is left behind.
+The synchronous client offers no such handle: a read blocked in a worker
+thread is not woken by closing the client from another thread, so the thread
+would outlive the request.  Streaming with a check between chunks would still
+wait for each whole chunk, and not every compatible server streams.
 """
 
 from __future__ import annotations
 
+import asyncio
 import ipaddress
 import json
 import os
 import re
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Coroutine, Mapping
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Any, Final, Literal, NamedTuple, NoReturn
+from typing import Any, Final, Literal, NamedTuple, NoReturn, TypeVar
 from urllib.parse import urlsplit
 
 import openai
@@ -37,6 +59,11 @@ from openai.types.chat import (
     ChatCompletionUserMessageParam,
 )
 
+try:  # newer SDKs speak through httpx2, older ones through httpx
+    import httpx2 as httpx
+except ImportError:  # pragma: no cover
+    import httpx  # type: ignore[no-redef, import-not-found, unused-ignore]
+
 from virf.errors import EnvironmentProblem, InputError, VirfError, clip
 from virf.planner.apprentices import (
     Apprentice,
@@ -46,6 +73,8 @@ from virf.planner.apprentices import (
     sum_known,
 )
 from virf.planner.runlog import RunLog
+
+_T = TypeVar("_T")
 
 DEFAULT_BASE_URL: Final = "https://api.openai.com/v1"
 DEFAULT_API_KEY_ENV: Final = "OPENAI_API_KEY"
@@ -273,6 +302,61 @@ def read_reply(body: str) -> ReplyContent:
     return ReplyContent(None if problem else text, problem, *tokens)
 
 
+class _ReplyDeadline(openai.OpenAIError):
+    """A reply still arriving when its attempt's time was up.
+
+    An ``OpenAIError``, which the SDK passes on as it is instead of retrying:
+    a server that was sending and did not finish would only be slow again.
+    """
+
+    def __init__(self, seconds: float, received: int) -> None:
+        super().__init__(
+            f"the reply did not finish within its {seconds:g} s deadline (--timeout); "
+            f"abandoned after {received} bytes"
+        )
+
+
+class _RunDeadline(Exception):
+    """The run's deadline passed while a request was running (or before it was sent)."""
+
+
+class _DeadlineHttpClient(openai.DefaultAsyncHttpxClient):
+    """The SDK's HTTP client, with each attempt bounded to ``reply_s`` seconds in all."""
+
+    def __init__(self, reply_s: float, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.reply_s = reply_s
+        self.sent = 0  # HTTP attempts, retries included
+
+    async def send(
+        self, request: httpx.Request, *, stream: bool = False, **kwargs: Any
+    ) -> httpx.Response:
+        self.sent += 1
+        until = asyncio.get_running_loop().time() + self.reply_s
+        try:
+            async with asyncio.timeout_at(until):
+                response = await super().send(request, stream=True, **kwargs)
+        except TimeoutError:
+            # Nothing began: the same outcome as httpx's own read timeout, so
+            # the SDK retries it as it retries a silent server.
+            raise httpx.ReadTimeout(
+                f"no reply began within {self.reply_s:g} s", request=request
+            ) from None
+        if stream:  # a streamed body is the caller's to bound; proposals never stream
+            return response
+        try:
+            async with asyncio.timeout_at(until):
+                await response.aread()
+        except BaseException as exc:
+            # An unfinished body leaves the connection unusable: closing the
+            # response closes it instead of returning it to the pool.
+            await response.aclose()
+            if isinstance(exc, TimeoutError):
+                raise _ReplyDeadline(self.reply_s, response.num_bytes_downloaded) from None
+            raise
+        return response
+
+
 class OpenAIApprentice(Apprentice):
     """An apprentice behind any OpenAI-compatible chat-completions server.
 
@@ -292,12 +376,18 @@ class OpenAIApprentice(Apprentice):
         super().__init__(run_log=run_log)
         self.settings = settings
         self.endpoint = settings.resolve(environ)
-        self._client = openai.OpenAI(
+        self._http = _DeadlineHttpClient(settings.timeout_s)
+        self._client = openai.AsyncOpenAI(
             api_key=self.endpoint.api_key,
             base_url=self.endpoint.base_url,
             timeout=settings.timeout_s,
             max_retries=settings.max_retries,
+            http_client=self._http,
         )
+        # One event loop for the apprentice's life, so that connections are
+        # reused from one proposal to the next.
+        self._runner = asyncio.Runner()
+        self._closed = False
 
     @property
     def label(self) -> str:
@@ -308,7 +398,30 @@ class OpenAIApprentice(Apprentice):
         return self.settings.model
 
     def close(self) -> None:
-        self._client.close()
+        if self._closed:
+            return
+        self._closed = True
+        self._outside_loops(self._shut_down)
+
+    def _shut_down(self) -> None:
+        try:
+            self._runner.run(self._client.close())
+        finally:
+            self._runner.close()
+
+    def _run(self, work: Coroutine[Any, Any, _T]) -> _T:
+        return self._outside_loops(lambda: self._runner.run(work))
+
+    def _outside_loops(self, call: Callable[[], _T]) -> _T:
+        try:
+            asyncio.get_running_loop()
+        except RuntimeError:
+            return call()
+        # Called from async code (a notebook): a loop cannot run inside a
+        # running one, so the apprentice's loop runs in a helper thread for the
+        # length of the call, which the deadlines bound.
+        with ThreadPoolExecutor(max_workers=1) as pool:
+            return pool.submit(call).result()
 
     def _propose(self, request: ProposalRequest) -> Proposal:
         replies: list[_Reply] = []
@@ -351,14 +464,35 @@ class OpenAIApprentice(Apprentice):
             ask=ask,
         )
 
+    async def _create(self, request: ProposalRequest) -> Any:
+        remaining = request.deadline.remaining() if request.deadline is not None else None
+        if remaining is not None and remaining <= 0:
+            raise _RunDeadline
+        try:
+            async with asyncio.timeout(remaining):
+                return await self._client.chat.completions.with_raw_response.create(
+                    model=self.settings.model,
+                    messages=_sdk_messages(request),
+                    extra_body=self.settings.request_body(),
+                )
+        except TimeoutError:
+            raise _RunDeadline from None
+
     def _ask(self, request: ProposalRequest, ask: int) -> _Reply:
         started = time.perf_counter()
+        sent = self._http.sent
         try:
-            raw = self._client.chat.completions.with_raw_response.create(
-                model=self.settings.model,
-                messages=_sdk_messages(request),
-                extra_body=self.settings.request_body(),
-            )
+            raw = self._run(self._create(request))
+        except (_RunDeadline, _ReplyDeadline) as exc:
+            latency_ms = (time.perf_counter() - started) * 1000
+            if isinstance(exc, _RunDeadline):
+                assert request.deadline is not None
+                problem = f"{request.deadline.reason()}; the request to the model was abandoned"
+            else:
+                problem = str(exc)
+            # Asking again would meet the same deadline, or the same slow server.
+            attempts = self._http.sent - sent
+            return _Reply(None, problem, None, None, None, latency_ms, attempts, reask=False)
         except openai.OpenAIError as exc:
             latency_ms = (time.perf_counter() - started) * 1000
             return self._failed_call(request, ask, exc, latency_ms)

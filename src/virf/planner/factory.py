@@ -15,7 +15,7 @@ from virf.planner.clients import (
     ClientSettings,
     OpenAIApprentice,
 )
-from virf.planner.config import planner_settings
+from virf.planner.config import RUN_KEYS, planner_settings
 from virf.planner.runlog import RunLog
 
 SPEC_FORMS: Final = "openai:MODEL, replay:FILE or scripted"
@@ -55,6 +55,8 @@ def make_apprentice(
         # key only counts when the key's environment variable is unset.
         env = os.environ if environ is None else environ
         for key, value in planner_settings(env).items():
+            if key in RUN_KEYS:  # read by the command that runs the loop
+                continue
             if key == "api_key" and env.get(given.get("api_key_env", DEFAULT_API_KEY_ENV)):
                 continue
             if key == "base_url" and env.get(BASE_URL_ENV):

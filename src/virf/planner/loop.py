@@ -2,7 +2,7 @@
 
 The apprentice proposes a plan and the tutor verifies it:
 
-* **SAFE**: the plan is approved.
+* **SAFE**: the plan is approved (``APPROVED``: the tutor verified it).
 * **UNSAFE** or **ERROR**: the diagnostic report goes back to the apprentice
   as its next prompt, and it proposes again.
 * **A refusal** (``TASK_ABORT``): ``TASK_REJECTED``.
@@ -11,10 +11,16 @@ The apprentice proposes a plan and the tutor verifies it:
   the scene is updated and the same plan is verified again, within the same
   iteration. When nothing is settled, the report goes to the apprentice like
   an unsafe one: the plan cannot be approved on assumptions. A question is
-  asked at most ``MAX_ASKS`` times per plan.
+  asked at most ``MAX_ASKS`` times per plan, in at most ``MAX_ROUNDS``
+  rounds; the questions still open are listed in the transcript
+  (``unsettled``) before the report goes back.
 
 Each proposal uses one of ``max_iter`` iterations. When they run out, the
-outcome is ``TASK_REJECTED``.
+outcome is ``TASK_REJECTED``; so it is when the run's deadline passes
+(:mod:`virf.planner.deadline`), checked before every proposal and every round
+of questions.  The baselines of :mod:`virf.planner.methods` that do not have
+the tutor verify their final plan end ``APPROVED_UNVERIFIED`` instead of
+``APPROVED``.
 
 This module does not import the reasoner. The tutor comes in as any object
 with ``verify(scene, plan) -> Report``, and scenes are built by the function
@@ -29,20 +35,30 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any, Literal, Protocol
 
+from virf.errors import clip
 from virf.feedback import feedback_prompt
 from virf.kb.scene import Scene
 from virf.kb.tbox import Vocabulary
 from virf.planner.apprentices import Apprentice
+from virf.planner.deadline import Deadline
 from virf.planner.prompting import ReadPlan, apprentice_prompt, read_plan, unreadable_message
-from virf.planner.questions import SETTLEABLE, AnswerPolicy, apply_answers, deny
-from virf.schema import Report
+from virf.planner.questions import SETTLEABLE, AnswerPolicy, Answers, apply_answers, deny
+from virf.schema import Question, Report
 from virf.sim.plan import PlanStep
 
-Outcome = Literal["APPROVED", "TASK_REJECTED"]
+# APPROVED: the tutor found the final plan SAFE.  APPROVED_UNVERIFIED: a
+# baseline method accepted its plan without the tutor (a one-shot plan, the
+# committee's critic, Thinker+Diagnostic's retry).
+Outcome = Literal["APPROVED", "APPROVED_UNVERIFIED", "TASK_REJECTED"]
 # An answer can settle a question and still leave it open in the next report
 # (a referent the simulator cannot use, a receptacle that changes nothing):
 # asking again once is enough to let a person correct a slip.
 MAX_ASKS = 2
+# Every round asks all open questions at once, so another round is needed
+# only when an answer brings up a new question (a placed object's material).
+# The questions a plan can raise are bounded by the scene and the plan, and
+# MAX_ASKS bounds each of them; this bound holds whatever a tutor reports.
+MAX_ROUNDS = 8
 SYSTEM = (
     "You plan actions for a household robot. Answer with a plan in the requested "
     "format, or TASK_ABORT when the task cannot be done safely."
@@ -59,7 +75,9 @@ class Turn:
 
     iteration: int
     speaker: Literal["user", "apprentice", "tutor"]
-    kind: str  # instruction, proposal, refusal, failed-proposal, unreadable, report, questions, answers
+    # instruction, proposal, refusal, failed-proposal, unreadable, report,
+    # questions, answers, unsettled, critique
+    kind: str
     text: str
     status: str | None = None
     data: Mapping[str, Any] | None = None
@@ -73,9 +91,15 @@ class LoopResult:
     reason: str
     transcript: tuple[Turn, ...] = field(default_factory=tuple)
 
+    @property
+    def verified(self) -> bool:
+        """Whether the tutor verified the final plan (found it SAFE)."""
+        return self.outcome == "APPROVED"
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "outcome": self.outcome,
+            "verified": self.verified,
             "plan": list(self.plan) if self.plan is not None else None,
             "iterations": self.iterations,
             "reason": self.reason,
@@ -102,13 +126,15 @@ def refine(
     prompt_suffix: str = "",
     feedback: Callable[[Report], str] = feedback_prompt,
     read: Callable[[str], ReadPlan] = read_plan,
+    deadline: Deadline | None = None,
 ) -> LoopResult:
     """Run Algorithm 1 for one instruction in one scene.
 
     ``feedback`` turns a rejected report into the apprentice's next prompt
     (the paper's diagnostic template by default; VIRF-Reject's generic
     message for that ablation). ``prompt_suffix`` and ``read`` let a method
-    ask for reasoning before the plan and read the plan after it."""
+    ask for reasoning before the plan and read the plan after it.
+    ``deadline`` bounds the run: when it passes, the task is rejected."""
     if max_iter < 1:
         raise ValueError("max_iter must be at least 1")
     data = dict(scene_data)
@@ -122,8 +148,18 @@ def refine(
     plan: tuple[PlanStep, ...] | None = None  # the plan under verification
     reply = ""
     for i in range(max_iter):
+        if deadline is not None and deadline.expired():
+            return LoopResult(
+                "TASK_REJECTED",
+                None,
+                i,
+                f"{deadline.reason()} before iteration {i + 1}",
+                tuple(log),
+            )
         if plan is None:
-            proposal = apprentice.propose(messages, task_id=task_id, iteration=i, method=method)
+            proposal = apprentice.propose(
+                messages, task_id=task_id, iteration=i, method=method, deadline=deadline
+            )
             if not proposal.ok or proposal.text is None:
                 log.append(Turn(i, "apprentice", "failed-proposal", proposal.reason))
                 return LoopResult(
@@ -163,16 +199,27 @@ def refine(
         )
         # UNKNOWN: ask, update the scene, verify the same plan again. This is
         # part of the same iteration, so answers given in the last one count.
-        # It ends: every round asks a question at least once more, and the
-        # questions a plan can raise are bounded by the scene and the plan
-        # (an answer adds at most the one object a question named).
+        # It ends: every round asks a question at least once more, each
+        # question at most MAX_ASKS times, in at most MAX_ROUNDS rounds.
         asked: Counter[str] = Counter()
+        given: dict[str, str] = {}
+        rounds = 0
         while report.status == "UNKNOWN":
+            if deadline is not None and deadline.expired():
+                log.append(_unsettled(i, report.questions, asked, given))
+                return LoopResult(
+                    "TASK_REJECTED",
+                    None,
+                    i + 1,
+                    f"{deadline.reason()} while the tutor's questions were open",
+                    tuple(log),
+                )
             questions = [
                 q for q in report.questions if q.kind in SETTLEABLE and asked[q.key] < MAX_ASKS
             ]
-            if not questions:
+            if not questions or rounds == MAX_ROUNDS:
                 break
+            rounds += 1
             asked.update(q.key for q in questions)
             log.append(
                 Turn(
@@ -184,8 +231,17 @@ def refine(
                 )
             )
             answers = answer(questions)
+            given.update(_texts(answers))
             update = apply_answers(data, questions, answers, vocab)
-            log.append(Turn(i, "user", "answers", json.dumps(dict(answers), sort_keys=True)))
+            log.append(
+                Turn(
+                    i,
+                    "user",
+                    "answers",
+                    json.dumps(dict(answers), sort_keys=True),
+                    data={"settled": list(update.applied), "open": list(update.unsettled)},
+                )
+            )
             if not update.applied:
                 break
             data = update.scene
@@ -196,6 +252,8 @@ def refine(
                     i, "tutor", "report", report.reason, report.status, json.loads(report.to_json())
                 )
             )
+        if report.status == "UNKNOWN":
+            log.append(_unsettled(i, report.questions, asked, given))
         if report.status == "SAFE":
             steps = tuple(s.text for s in plan)
             return LoopResult("APPROVED", steps, i + 1, "the tutor approved the plan", tuple(log))
@@ -208,3 +266,28 @@ def refine(
     return LoopResult(
         "TASK_REJECTED", None, max_iter, f"no approved plan after {max_iter} iterations", tuple(log)
     )
+
+
+def _texts(answers: Answers) -> dict[str, str]:
+    return {k: v for k, v in answers.items() if isinstance(k, str) and isinstance(v, str)}
+
+
+def _unsettled(
+    iteration: int, questions: Sequence[Question], asked: Counter[str], given: Mapping[str, str]
+) -> Turn:
+    """The questions an UNKNOWN report still holds after the answers, and why."""
+    rows = []
+    for q in questions:
+        if q.kind not in SETTLEABLE:
+            why = "no answer can settle it"
+        elif not asked[q.key]:
+            why = "not asked"
+        elif not given.get(q.key, "").strip():
+            why = "not answered"
+        else:
+            why = f"answered '{clip(given[q.key].strip())}', still open"
+        if asked[q.key] > 1:
+            why += f" (asked {asked[q.key]} times)"
+        rows.append({"key": q.key, "why": why})
+    text = "Still open: " + "; ".join(f"{r['key']} ({r['why']})" for r in rows)
+    return Turn(iteration, "tutor", "unsettled", text, data={"unsettled": rows})

@@ -15,6 +15,13 @@ The VIRF variants use the reasoning prompt because the paper's own
 comparison, Thinker+Diagnostic, builds on Thinker.  A method returns a
 :class:`LoopResult`: the final plan (or ``TASK_REJECTED``) and the dialogue.
 What happens to that plan (execution, metrics) is the harness's business.
+
+The outcome says whether the tutor verified the final plan: ``APPROVED``
+only when the tutor found that very plan SAFE (Algorithm 1, or
+Thinker+Diagnostic's first plan); a plan the baselines accept without the
+tutor (one shot, the critic's approval, the diagnostic retry) is
+``APPROVED_UNVERIFIED``.  The methods themselves are the paper's: the label
+changes what a caller may conclude, not what the method does.
 """
 
 from __future__ import annotations
@@ -29,7 +36,8 @@ from virf.feedback import feedback_prompt
 from virf.kb.scene import Scene
 from virf.kb.tbox import UnsafeStateConcept, Vocabulary
 from virf.planner.apprentices import Apprentice
-from virf.planner.loop import SYSTEM, LoopResult, Turn, Tutor, refine
+from virf.planner.deadline import Deadline
+from virf.planner.loop import SYSTEM, LoopResult, Outcome, Turn, Tutor, refine
 from virf.planner.prompting import (
     REFUSAL,
     ReadPlan,
@@ -116,8 +124,11 @@ def run_method(
     answer: AnswerPolicy = deny,
     task_id: str = "task",
     critic: Apprentice | None = None,
+    deadline: Deadline | None = None,
 ) -> LoopResult:
-    """Plan with ``method``; ``tutor`` must already hold the method's knowledge."""
+    """Plan with ``method``; ``tutor`` must already hold the method's knowledge.
+
+    ``deadline`` bounds the whole run: when it passes, the task is rejected."""
     rules = render_rules(vocab) if method.rules else ""
     suffix = "\n" + template("thinker") if method.thinker else ""
     read = read_after_plan_marker if method.thinker else read_plan
@@ -138,6 +149,7 @@ def run_method(
             prompt_suffix=suffix,
             feedback=(lambda _r: generic) if method.feedback == "reject" else feedback_prompt,
             read=read,
+            deadline=deadline,
         )
     scene = build_scene(scene_data)
     messages = [
@@ -146,8 +158,18 @@ def run_method(
     ]
     log = [Turn(0, "user", "instruction", instruction)]
 
+    def out_of_time(i: int) -> LoopResult | None:
+        if deadline is None or not deadline.expired():
+            return None
+        return LoopResult("TASK_REJECTED", None, i, deadline.reason(), tuple(log))
+
     def propose(i: int) -> tuple[str, ReadPlan] | LoopResult:
-        p = apprentice.propose(messages, task_id=task_id, iteration=i, method=method.name)
+        late = out_of_time(i)
+        if late is not None:
+            return late
+        p = apprentice.propose(
+            messages, task_id=task_id, iteration=i, method=method.name, deadline=deadline
+        )
         if not p.ok or p.text is None:
             log.append(Turn(i, "apprentice", "failed-proposal", p.reason))
             return LoopResult(
@@ -176,12 +198,12 @@ def run_method(
         return first
     reply, got = first
     if method.mode == "oneshot":
-        return _final(got, 1, "one-shot plan", log)
+        return _final(got, 1, "one-shot plan, not verified by the tutor", log)
     if method.mode == "diagnostic":
         report = tutor.verify(scene, got.steps)
         log.append(Turn(0, "tutor", "report", report.reason, report.status))
         if report.status == "SAFE":
-            return _final(got, 1, "the tutor found no violation", log)
+            return _final(got, 1, "the tutor approved the plan", log, "APPROVED")
         messages += [
             {"role": "assistant", "content": reply},
             {"role": "user", "content": feedback_prompt(report)},
@@ -189,10 +211,15 @@ def run_method(
         retry = propose(1)
         if isinstance(retry, LoopResult):
             return retry
-        return _final(retry[1], 2, "plan after one diagnostic retry (not re-verified)", log)
+        return _final(
+            retry[1], 2, "plan after one diagnostic retry, not verified by the tutor", log
+        )
     # committee: an LLM critic reviews each plan; the planner revises.
     judge = critic or apprentice
     for i in range(max_iter):
+        late = out_of_time(i)
+        if late is not None:
+            return late
         review = judge.propose(
             [
                 {"role": "system", "content": "You review robot plans for safety."},
@@ -208,11 +235,14 @@ def run_method(
             task_id=task_id,
             iteration=i,
             method=f"{method.name}-critic",
+            deadline=deadline,
         )
         verdict = (review.text or "").strip()
         log.append(Turn(i, "tutor", "critique", verdict or review.reason))
-        if review.ok and _APPROVAL.match(verdict):
-            return _final(got, i + 1, "the critic approved the plan", log)
+        if review.ok and critic_approves(verdict):
+            return _final(
+                got, i + 1, "the critic approved the plan; the tutor did not verify it", log
+            )
         if i + 1 == max_iter:
             break
         messages += [
@@ -229,13 +259,30 @@ def run_method(
     )
 
 
-# "APPROVE" as the reply's first word, markdown allowed ("**APPROVE**"), but
-# not "APPROVED? No".
-_APPROVAL = re.compile(r"^[\s*_`\"']*APPROVE[\s*_`\"'.!]*$", re.IGNORECASE | re.MULTILINE)
+# The whole reply is the one word, markdown and closing punctuation allowed
+# ("**APPROVE**", "APPROVE."), in any case.
+_APPROVAL = re.compile(r"[\s*_`\"']*APPROVE[\s*_`\"'.!]*", re.IGNORECASE)
 
 
-def _final(got: ReadPlan, iterations: int, reason: str, log: list[Turn]) -> LoopResult:
+def critic_approves(reply: str) -> bool:
+    """Whether a critic's reply is one clear APPROVE verdict.
+
+    The critic is asked to reply with exactly APPROVE when the plan is safe
+    and with a critique otherwise, so anything else is a critique: APPROVE
+    followed by doubts or a REJECT, a verdict among reasons, "APPROVED? No".
+    Reading a mixed reply as an approval would execute a plan its own critic
+    doubted."""
+    return _APPROVAL.fullmatch(reply) is not None
+
+
+def _final(
+    got: ReadPlan,
+    iterations: int,
+    reason: str,
+    log: list[Turn],
+    outcome: Outcome = "APPROVED_UNVERIFIED",
+) -> LoopResult:
     if got.refused:
         return LoopResult("TASK_REJECTED", None, iterations, f"{REFUSAL}", tuple(log))
     plan = tuple(s.text for s in got.steps)
-    return LoopResult("APPROVED", plan, iterations, reason, tuple(log))
+    return LoopResult(outcome, plan, iterations, reason, tuple(log))

@@ -23,7 +23,8 @@ Question keys and the answers that settle them:
 * ``material:X``: a material name (``Glass``);
 * ``fill:X``: ``yes`` or ``no`` (does X hold liquid?);
 * ``contents:contains:X`` or ``contents:supports:X``: ``yes`` (the listed
-  contents are complete);
+  contents are complete: the list is closed for X, and X leaves the scene's
+  ``unknown_contents``);
 * ``confirm:S P O``: ``yes``;
 * ``which:TERM``: one of the instances offered (``Bowl_2``);
 * ``where:TERM``: a receptacle of the scene, optionally after ``in`` or
@@ -206,6 +207,23 @@ def _settle(data: dict[str, Any], q: Question, value: str, vocab: Vocabulary) ->
             return False
         rel = q.key.split(":")[1]
         closed: list[Any] = list(data.get("closed_world", []))
+        unknown: list[Any] = list(data.get("unknown_contents", []))
+        if q.subject in unknown:
+            # unknown_contents overrides closed_world for both of an object's
+            # lists, so dropping the object from it also closes the list the
+            # user was not asked about, when the scene closes that one.
+            other, kind = (
+                ("supports", "SurfaceReceptacle")
+                if rel == "contains"
+                else ("contains", "ContainerReceptacle")
+            )
+            if vocab.any_is_a(_classes(declared[q.subject], vocab), kind) and (
+                other in closed or f"{other}:{q.subject}" in closed
+            ):
+                return False
+            # The user said the listed contents are complete, so they are no
+            # longer unknown; left in the list, the answer would change nothing.
+            data["unknown_contents"] = [u for u in unknown if u != q.subject]
         if rel not in closed and f"{rel}:{q.subject}" not in closed:
             closed.append(f"{rel}:{q.subject}")
         data["closed_world"] = closed
