@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import difflib
 import json
+import unicodedata
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -29,9 +30,38 @@ def closest(term: str, choices: Iterable[str], n: int = 3) -> list[str]:
     return [lowered[h] for h in hits]
 
 
+# Control, format (zero-width, bidi overrides), separator, surrogate, private
+# and unassigned characters: invisible or able to break a message's one line or
+# rewrite the terminal it is printed on.
+_HIDDEN = frozenset({"Cc", "Cf", "Zl", "Zp", "Cs", "Co", "Cn"})
+
+
+def hidden_char(text: str) -> str | None:
+    """The first character of ``text`` that is not visible text, if any (tab counts as space)."""
+    for ch in text:
+        if ch != "\t" and unicodedata.category(ch) in _HIDDEN:
+            return ch
+    return None
+
+
+def printable(text: str) -> str:
+    """``text`` with every hidden character escaped (``\\x1b``, ``\\u200b``),
+    so a message stays one line and cannot drive the terminal."""
+    return "".join(
+        _escape(ch) if ch != "\t" and unicodedata.category(ch) in _HIDDEN else ch for ch in text
+    )
+
+
+def _escape(ch: str) -> str:
+    code = ord(ch)
+    if code < 0x100:
+        return f"\\x{code:02x}"
+    return f"\\u{code:04x}" if code < 0x10000 else f"\\U{code:08x}"
+
+
 def clip(term: str, limit: int = 60) -> str:
-    """A user's term, shortened for a one-line message."""
-    return term if len(term) <= limit else term[: limit - 3] + "..."
+    """A user's term, shortened and made printable for a one-line message."""
+    return printable(term if len(term) <= limit else term[: limit - 3] + "...")
 
 
 def unknown_term(kind: str, term: str, choices: Iterable[str]) -> InputError:
@@ -61,7 +91,8 @@ def read_input_file(path: str | Path, what: str, limit: int = MAX_FILE_BYTES) ->
         if len(raw) > limit:
             size = f"{limit // 2**20} MiB" if limit >= 2**20 else f"{limit} bytes"
             raise InputError(f"{what} file {p} is larger than {size}")
-        return raw.decode("utf-8")
+        # utf-8-sig: a byte-order mark (Windows editors write one) is not text.
+        return raw.decode("utf-8-sig")
     except UnicodeDecodeError:
         raise InputError(f"{what} file {p} is not UTF-8 text") from None
     except OSError as exc:

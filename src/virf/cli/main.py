@@ -1,26 +1,68 @@
 """The ``virf`` command: thin wrappers over :mod:`virf.api`.
 
-Exit codes of ``virf verify`` (and ``virf demo``):
+Exit codes of ``virf verify``:
   0 SAFE, 1 UNSAFE, 2 bad input or usage, 3 UNKNOWN, 4 ERROR (verification
   could not be completed: fail closed).
+Exit codes of ``virf plan``:
+  0 a plan the tutor verified, 1 the task was rejected, 5 a baseline's plan
+  the tutor did not verify.
+Every command: 2 bad input or usage, 4 an environment problem (Java, memory,
+a model that cannot be reached) or an internal error, each as one line on
+stderr and, when ``--json`` was given, one JSON error object on stdout
+(docs/reliability.md).
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import re
 import sys
+import traceback
+from collections.abc import Sequence
+from contextvars import ContextVar
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
+from typer.core import TyperGroup
 
-from virf.errors import EnvironmentProblem, VirfError
+from virf.errors import EnvironmentProblem, VirfError, printable
 
 EXIT = {"SAFE": 0, "UNSAFE": 1, "UNKNOWN": 3, "ERROR": 4}
 EXIT_BAD_INPUT = 2
+# Whether this invocation asked for --json: its errors are then also a JSON
+# object on stdout, so a caller parsing stdout never gets nothing.
+_JSON_ERRORS: ContextVar[bool] = ContextVar("virf_json_errors", default=False)
+
+
+def _json_requested(args: Sequence[str]) -> bool:
+    for arg in args:
+        if arg == "--":  # what follows is file names
+            return False
+        if arg == "--json":
+            return True
+    return False
+
+
+class _FailClosedGroup(TyperGroup):
+    """The root command: whatever fails below it ends as a documented exit code
+    with one line on stderr, never a traceback, and never as exit 1 (UNSAFE)."""
+
+    def parse_args(self, ctx: Any, args: list[str]) -> list[str]:
+        _JSON_ERRORS.set(_json_requested(args))
+        return super().parse_args(ctx, args)
+
+    def invoke(self, ctx: Any) -> Any:
+        try:
+            return super().invoke(ctx)
+        except Exception as exc:
+            raise _exit_for(exc) from None
+
 
 app = typer.Typer(
+    cls=_FailClosedGroup,
     name="virf",
     help="VIRF Logic Tutor: verify robot task plans against an OWL 2 DL safety ontology.",
     no_args_is_help=True,
@@ -70,8 +112,56 @@ SeedOpt = Annotated[int | None, typer.Option(help="Sampling seed, where the serv
 
 
 def _fail(message: str, code: int = EXIT_BAD_INPUT) -> typer.Exit:
-    typer.echo(f"error: {message}", err=True)
+    """One line on stderr and, under --json, one JSON error object on stdout:
+    {"status": "BAD_INPUT" (exit 2) or "ERROR" (any other code), "error": line}."""
+    # A message quoting a file name or an OWLAPI error may hold line breaks or
+    # escape sequences; the line must stay one line and plain text.
+    line = printable(re.sub(r"\s*[\r\n]+\s*", " ", message.strip()))
+    typer.echo(f"error: {line}", err=True)
+    if _JSON_ERRORS.get():
+        status = "BAD_INPUT" if code == EXIT_BAD_INPUT else "ERROR"
+        typer.echo(json.dumps({"status": status, "error": line}))
     return typer.Exit(code)
+
+
+def _fail_for(exc: VirfError) -> typer.Exit:
+    """Exit 4 for what the user's input cannot fix (Java, memory), else 2."""
+    return _fail(str(exc), EXIT["ERROR"] if isinstance(exc, EnvironmentProblem) else EXIT_BAD_INPUT)
+
+
+def _exit_for(exc: BaseException) -> BaseException:
+    """The exception that ends the process for ``exc`` under the exit-code rules."""
+    names = {c.__name__ for c in type(exc).__mro__}
+    if isinstance(exc, typer.Exit | typer.Abort) or names & {"Exit", "Abort"}:
+        return exc  # already an exit, or an interrupt that main() reports
+    if "ClickException" in names:
+        # click's usage errors (vendored inside newer typer versions, so
+        # matched by name).  Their own exit code may be 1, which verify uses
+        # for UNSAFE: every usage error is 2.
+        ctx = getattr(exc, "ctx", None)
+        hint = f" (see '{ctx.command_path} --help')" if "UsageError" in names and ctx else ""
+        message = exc.format_message()  # type: ignore[attr-defined]
+        if "NoArgsIsHelpError" in names:  # the help is already on stdout
+            message = "give a command"
+        return _fail(f"{message}{hint}")
+    if isinstance(exc, VirfError):
+        return _fail_for(exc)
+    detail = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+    if isinstance(exc, BrokenPipeError):
+        # Whoever read stdout stopped reading; later writes (and the flush at
+        # exit) would fail again, so stdout goes nowhere from here on.
+        with contextlib.suppress(OSError, ValueError):  # a stdout without a descriptor
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return _fail("stdout was closed before all output was written", EXIT["ERROR"])
+    if isinstance(exc, MemoryError) or "OutOfMemoryError" in names:
+        return _fail(f"out of memory ({detail})", EXIT["ERROR"])
+    # A bug.  Exit 4 (ERROR), never 1: a crash must not read as UNSAFE, nor
+    # as any verdict.
+    debug = os.environ.get("VIRF_DEBUG", "") not in ("", "0")
+    if debug:
+        traceback.print_exception(exc, file=sys.stderr)
+    where = "" if debug else " (VIRF_DEBUG=1 shows the traceback)"
+    return _fail(f"internal error: {detail}; please report{where}", EXIT["ERROR"])
 
 
 @app.command()
@@ -90,31 +180,34 @@ def verify(
     scenario: ScenarioOpt = "kitchen",
     engine: EngineOpt = "fast",
     timeout: Annotated[
-        float, typer.Option(help="Give up (status ERROR) after this many seconds.")
+        float,
+        typer.Option(
+            help="Give up (status ERROR) after this many seconds (above 0, at most 86400)."
+        ),
     ] = 120.0,
     workers: Annotated[
         int,
         typer.Option(
             min=1,
+            max=64,
             help="Classify the plan's snapshots on this many engines in parallel "
             "(pays off with the reference engine; the report is the same).",
         ),
     ] = 1,
 ) -> None:
     """Verify PLAN in SCENE.  Exit 0 SAFE, 1 UNSAFE, 3 UNKNOWN, 4 ERROR, 2 bad input."""
-    from virf.api import LogicTutor
+    from virf.api import LogicTutor, check_timeout
     from virf.feedback import feedback_prompt, render_report
     from virf.kb.scene import load_scene_file
     from virf.sim.plan import load_plan_file
 
     try:
+        check_timeout(timeout, "--timeout")
         steps = load_plan_file(plan)
         tutor = LogicTutor(scenario=scenario, engine=engine, timeout_s=timeout, workers=workers)
         sc = load_scene_file(scene, tutor.tbox.vocabulary)
-    except EnvironmentProblem as exc:
-        raise _fail(str(exc), EXIT["ERROR"]) from None
     except VirfError as exc:
-        raise _fail(str(exc)) from None
+        raise _fail_for(exc) from None
     report = tutor.verifier.verify(sc, steps)
     if as_json:
         typer.echo(report.to_json())
@@ -134,34 +227,39 @@ def demo(
 ) -> None:
     """Verify every example and print the reports; checks each against its expected.json."""
     from rich.console import Console
+    from rich.markup import escape
     from rich.table import Table
 
     from virf.api import LogicTutor
+    from virf.errors import read_json_file
     from virf.feedback import render_report
 
-    cases = sorted(p.parent for p in folder.glob("*/plan.txt"))
+    cases = sorted(p.parent for p in folder.glob("*/plan.txt")) if folder.is_dir() else []
     if not cases:
         raise _fail(f"no examples in {folder} (expected <name>/scene.json and <name>/plan.txt)")
     try:
         tutor = LogicTutor(engine=engine)
     except VirfError as exc:
-        raise _fail(str(exc), EXIT["ERROR"]) from None
+        raise _fail_for(exc) from None
     console = Console(highlight=False, width=150)
     table = Table(title="VIRF demo", show_lines=False)
     for col in ("example", "expected", "verdict", "step", "violated concept", "match"):
         table.add_column(col)
     mismatches = 0
     for case in cases:
-        expected = {}
-        if (case / "expected.json").exists():
-            expected = json.loads((case / "expected.json").read_text())
+        expected: dict[str, Any] = {}
         try:
+            if (case / "expected.json").exists():
+                expected = read_json_file(case / "expected.json", "expected verdict")
+                if not isinstance(expected, dict):
+                    raise VirfError(f"{case / 'expected.json'} must be a JSON object")
             report = tutor.verify_files(case / "scene.json", case / "plan.txt")
         except VirfError as exc:
-            console.print(f"[red]{case.name}: {exc}[/red]")
+            console.print(f"{case.name}: {exc}", style="red", markup=False)
             mismatches += 1
             continue
-        console.print(render_report(report, title=case.name))
+        # Reports quote the user's files: '[/red]' in a plan is text, not markup.
+        console.print(render_report(report, title=case.name), markup=False)
         ok = (not expected) or (
             expected.get("status") == report.status
             and expected.get("dangerous_step", report.dangerous_step) == report.dangerous_step
@@ -172,8 +270,8 @@ def demo(
         )
         mismatches += 0 if ok else 1
         table.add_row(
-            case.name,
-            str(expected.get("status", "-")),
+            escape(case.name),
+            escape(str(expected.get("status", "-"))),
             report.status,
             "-" if report.dangerous_step is None else str(report.dangerous_step),
             report.violated_concept.id if report.violated_concept else "-",
@@ -202,7 +300,22 @@ def plan(
     seed: SeedOpt = None,
     top_p: TopPOpt = None,
     max_tokens: MaxTokensOpt = None,
-    timeout: ModelTimeoutOpt = None,
+    timeout: Annotated[
+        float | None,
+        typer.Option(
+            help="Seconds one model reply may take, start to end (default 120). A reply "
+            "still arriving then is abandoned and the proposal fails; a server that has "
+            "not begun to answer is retried."
+        ),
+    ] = None,
+    deadline: Annotated[
+        float | None,
+        typer.Option(
+            help="Seconds the whole run may take (default 600, or deadline_s in the config "
+            "file). When they pass, the request in flight is abandoned and the task is "
+            "rejected. Time spent answering questions at the terminal does not count."
+        ),
+    ] = None,
     max_iter: Annotated[int, typer.Option(min=1, help="Refinement iterations (N_max).")] = 5,
     method: Annotated[
         str,
@@ -234,18 +347,25 @@ def plan(
 ) -> None:
     """Let the apprentice plan and the tutor verify until a plan is approved (Algorithm 1).
 
-    Exit 0 when a plan is approved, 1 when the task is rejected, 2 on bad input,
-    4 when the model cannot be reached.
+    Exit 0 when the tutor verified the approved plan, 1 when the task is
+    rejected (also when --deadline passes), 2 on bad input, 4 when the model
+    cannot be reached, 5 when a baseline method (impulsive, thinker, committee,
+    the +rules methods, thinker+diagnostic's retry) approved a plan the tutor
+    did not verify.
     """
     from virf.api import LogicTutor
     from virf.kb.scene import build_scene, load_scene_data
     from virf.planner import RunLog, make_apprentice
+    from virf.planner.config import run_deadline
+    from virf.planner.deadline import Deadline
     from virf.planner.methods import get_method, knowledge_filter, run_method
     from virf.planner.questions import answers_file, deny
     from virf.verify.verifier import Verifier
 
     run_log: Any = None
     try:
+        # Started first: the deadline bounds the whole run, loading included.
+        clock = Deadline(run_deadline(deadline))
         data = load_scene_data(scene)
         tutor = LogicTutor(engine=engine)
         vocab = tutor.tbox.vocabulary
@@ -253,7 +373,11 @@ def plan(
         policy = (
             answers_file(answers)
             if answers is not None
-            else (_terminal_policy(vocab) if sys.stdin.isatty() and not as_json else deny)
+            else (
+                clock.excluding(_terminal_policy(vocab))
+                if sys.stdin.isatty() and not as_json
+                else deny
+            )
         )
         run_log = RunLog(log) if log is not None else None
         apprentice = make_apprentice(
@@ -289,6 +413,7 @@ def plan(
                 max_iter=max_iter,
                 answer=policy,
                 task_id=task_id,
+                deadline=clock,
             )
     except EnvironmentProblem as exc:
         raise _fail(str(exc), EXIT["ERROR"]) from None
@@ -301,7 +426,13 @@ def plan(
         typer.echo(result.to_json())
     else:
         _print_dialogue(result)
-    raise typer.Exit(0 if result.outcome == "APPROVED" else 1)
+        if result.outcome == "APPROVED_UNVERIFIED":
+            typer.echo(
+                f"Not verified: the method '{chosen.name}' did not have the Logic Tutor "
+                "check this plan (exit 5)."
+            )
+    codes = {"APPROVED": 0, "TASK_REJECTED": 1, "APPROVED_UNVERIFIED": 5}
+    raise typer.Exit(codes[result.outcome])
 
 
 def _terminal_policy(vocab: Any) -> Any:
@@ -353,7 +484,9 @@ def _print_dialogue(result: Any) -> None:
         else:
             console.print(t.text, markup=False)
     console.print(Rule())
-    console.print(f"{result.outcome} after {result.iterations} iteration(s): {result.reason}")
+    console.print(
+        f"{result.outcome} after {result.iterations} iteration(s): {result.reason}", markup=False
+    )
     if result.plan:
         console.print("\n".join(result.plan), markup=False)
 
@@ -374,7 +507,7 @@ def kb_check(
     try:
         result = check_tbox(scenario)
     except VirfError as exc:
-        raise _fail(str(exc)) from None
+        raise _fail_for(exc) from None
     if as_json:
         typer.echo(json.dumps(result, indent=2, sort_keys=True))
     else:
@@ -456,7 +589,7 @@ def kb_rules(
     try:
         vocab = load_tbox(scenario).vocabulary
     except VirfError as exc:
-        raise _fail(str(exc)) from None
+        raise _fail_for(exc) from None
     rules = sorted(vocab.uscs.values(), key=lambda u: (u.module, u.id))
     if as_json:
         typer.echo(json.dumps([asdict(u) for u in rules], indent=2))
@@ -482,7 +615,7 @@ def scene_safeagentbench(
         task = task_at(file, line)
         typer.echo(json.dumps(build_scene(task, vocab), indent=2))
     except VirfError as exc:
-        raise _fail(str(exc)) from None
+        raise _fail_for(exc) from None
 
 
 @scene_app.command("show")
@@ -500,6 +633,7 @@ def scene_show(
     the scene wrote what was rewritten (a state individual, an inverse relation,
     a material class)."""
     from rich.console import Console
+    from rich.markup import escape
     from rich.table import Table
 
     from virf.kb.scene import describe_scene, load_scene_file
@@ -525,7 +659,7 @@ def scene_show(
         return "\n".join(out)
 
     console = Console(highlight=False, width=150)
-    table = Table(title=f"Scene {world['name']}: the canonical world")
+    table = Table(title=f"Scene {escape(world['name'])}: the canonical world")
     for col in ("object", "types", "states", "materials", "relations"):
         table.add_column(col)
     rewritten: list[str] = []
@@ -673,7 +807,7 @@ def bench_latency(
         ),
     ] = 20,
     paper_max_objects: Annotated[
-        int, typer.Option(help="Largest synthetic scene the paper's method is timed on.")
+        int, typer.Option(min=0, help="Largest synthetic scene the paper's method is timed on.")
     ] = 200,
     no_paper: Annotated[
         bool, typer.Option("--no-paper", help="Skip the paper's method (needs .venv-paper).")
@@ -696,6 +830,8 @@ def bench_latency(
     from rich.console import Console
 
     from virf.bench.latency import run_latency
+    from virf.kb.scene import MAX_INSTANCES
+    from virf.sim.plan import MAX_PLAN_STEPS
 
     try:
         for f in files:
@@ -705,8 +841,11 @@ def bench_latency(
             size_list = [int(x) for x in sizes.split(",") if x.strip()]
         except ValueError:
             raise VirfError(f"--sizes '{sizes}': give whole numbers, e.g. 20,50,200") from None
-        if not size_list or min(size_list) < 10:
-            raise VirfError(f"--sizes '{sizes}': every size must be at least 10 objects")
+        if not size_list or min(size_list) < 10 or max(size_list) > MAX_INSTANCES:
+            raise VirfError(
+                f"--sizes '{sizes}': every size must be at least 10 objects and at most "
+                f"{MAX_INSTANCES} (the scene limit)"
+            )
         try:
             factors = [int(x) for x in tbox_factors.split(",") if x.strip()]
         except ValueError:
@@ -719,8 +858,11 @@ def bench_latency(
             length_list = [int(x) for x in lengths.split(",") if x.strip()]
         except ValueError:
             raise VirfError(f"--lengths '{lengths}': give whole numbers, e.g. 10,20,40") from None
-        if not length_list or any(n < 10 or n % 10 for n in length_list):
-            raise VirfError(f"--lengths '{lengths}': each length must be a multiple of 10 steps")
+        if not length_list or any(n < 10 or n % 10 or n > MAX_PLAN_STEPS for n in length_list):
+            raise VirfError(
+                f"--lengths '{lengths}': each length must be a multiple of 10 steps, "
+                f"at most {MAX_PLAN_STEPS} (the plan limit)"
+            )
         if markdown is not None:
             _check_writable(markdown)
         err = Console(stderr=True)
@@ -893,6 +1035,7 @@ def _check_writable(path: Path) -> None:
 
 def _print_bench(results: list[Any], summary: dict[str, Any]) -> None:
     from rich.console import Console
+    from rich.markup import escape
     from rich.table import Table
 
     console = Console(highlight=False, width=160)
@@ -902,14 +1045,14 @@ def _print_bench(results: list[Any], summary: dict[str, Any]) -> None:
     for r in results:
         label = r.label if r.corrected_label == r.label else f"{r.label}->{r.corrected_label}"
         table.add_row(
-            f"{r.file}:{r.line}",
+            escape(f"{r.file}:{r.line}"),
             label,
             r.status or "-",
             "-" if r.dangerous_step is None else str(r.dangerous_step),
             r.violated_concept or "-",
             {True: "met", False: "NOT met", None: "-"}[r.goal_satisfied],
             f"{r.time_ms:.0f}",
-            r.instruction[:60],
+            escape(r.instruction[:60]),
         )
     console.print(table)
     figs = Table(title="Figures")
@@ -1150,19 +1293,16 @@ def main() -> None:
         typer.echo("interrupted", err=True)
         sys.exit(130)
     except Exception as exc:
-        # click's usage errors (vendored inside newer typer versions, so
-        # matched by name): one line naming the problem, like every other
-        # bad input.  Anything else is a bug and keeps its traceback.
-        names = {c.__name__ for c in type(exc).__mro__}
-        if "Abort" in names:
+        # Errors before a command runs (the root's own options, no command at
+        # all) and anything the root group let through take the same road.
+        ending = _exit_for(exc)
+        if isinstance(ending, typer.Exit):
+            sys.exit(ending.exit_code)
+        if "Abort" in {c.__name__ for c in type(ending).__mro__}:
             typer.echo("interrupted", err=True)
             sys.exit(130)
-        if "ClickException" not in names:
-            raise
-        ctx = getattr(exc, "ctx", None)
-        hint = f" (see '{ctx.command_path} --help')" if "UsageError" in names and ctx else ""
-        typer.echo(f"error: {exc.format_message()}{hint}", err=True)  # type: ignore[attr-defined]
-        sys.exit(int(getattr(exc, "exit_code", EXIT_BAD_INPUT)))
+        exit_code = getattr(ending, "exit_code", EXIT["ERROR"])
+        sys.exit(exit_code if isinstance(exit_code, int) else EXIT["ERROR"])
     sys.exit(code if isinstance(code, int) else 0)
 
 

@@ -40,7 +40,7 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
-from virf.errors import InputError, clip, closest, read_json_file
+from virf.errors import InputError, clip, closest, hidden_char, read_json_file
 from virf.kb.tbox import Vocabulary
 from virf.names import term_key
 from virf.schema import Fact, FactKind, Provenance
@@ -84,6 +84,8 @@ VALUE_WORDS = {
     "metallic": "Metal",
 }
 DEFAULT_AGENT = "Robot_1"
+INSTANCE_KEYS = frozenset({"class_name", "instance_name"})
+ASSERTION_KEYS = frozenset({"subject", "property", "object", "type"})
 
 
 @dataclass(frozen=True)
@@ -156,6 +158,7 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
     for i, a in enumerate(assertions):
         if not isinstance(a, dict) or not {"subject", "property", "object"} <= set(a):
             raise InputError(f"assertions[{i}] needs 'subject', 'property' and 'object'")
+        _no_stray_keys(a, ASSERTION_KEYS, f"assertions[{i}]")
         for key in ("subject", "property"):
             if not isinstance(a[key], str):
                 raise InputError(f"assertions[{i}]: '{key}' must be a string, not {_shown(a[key])}")
@@ -198,6 +201,7 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
     for i, inst in enumerate(instances):
         if not isinstance(inst, dict) or not {"class_name", "instance_name"} <= set(inst):
             raise InputError(f"instances[{i}] needs 'class_name' and 'instance_name'")
+        _no_stray_keys(inst, INSTANCE_KEYS, f"instances[{i}]")
         for key in ("class_name", "instance_name"):
             if not isinstance(inst[key], str):
                 raise InputError(
@@ -250,6 +254,7 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
             raise InputError(
                 f"scene '{key}' must be true or false, not {json.dumps(data[key])[:40]}"
             )
+    _check_labels(data)
     closed = data.get("closed_world", [])
     if not isinstance(closed, list) or not all(isinstance(c, str) for c in closed):
         raise InputError("scene 'closed_world' must be a list of relation names")
@@ -258,15 +263,21 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
             raise InputError("closed_world: empty entry; choose from " + ", ".join(CLOSABLE))
         # "contains" closes the relation for every receptacle; "contains:Fridge_1"
         # for one (a user confirming what is inside one thing).
-        rel, _, owner = entry.partition(":")
+        rel, colon, owner = entry.partition(":")
         if rel not in CLOSABLE:
             raise InputError(
-                f"closed_world: '{rel}' cannot be closed; choose from {', '.join(CLOSABLE)}"
+                f"closed_world: '{clip(rel)}' cannot be closed; choose from {', '.join(CLOSABLE)}"
+            )
+        if colon and not owner:
+            # "contains:" closes nothing a reader can name: neither every
+            # receptacle nor one.
+            raise InputError(
+                f"closed_world: '{entry}' names no instance; write '{rel}' or '{rel}:NAME'"
             )
         if owner and owner not in classes:
-            near = closest(owner, classes)
+            near = closest(owner[:200], classes)
             hint = f"; closest known: {', '.join(near)}" if near else ""
-            raise InputError(f"closed_world: '{entry}' names an undeclared instance{hint}")
+            raise InputError(f"closed_world: '{clip(entry)}' names an undeclared instance{hint}")
 
     def resolve_value(value: str, prop: str, where: str) -> list[str]:
         if value in classes:
@@ -371,6 +382,13 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
     object_order = tuple(ind for ind in order if ind in objects)
 
     agents = [ind for ind in object_order if vocab.any_is_a(objects[ind], "Robot")]
+    if len(agents) > 1:
+        # The plan's actor would be whichever robot the file lists first, so
+        # reordering the file could turn UNSAFE into SAFE.
+        raise InputError(
+            f"scene has {len(agents)} robots ({', '.join(sorted(agents)[:3])}); a plan is "
+            "verified for one agent, so declare one Robot"
+        )
     if agents:
         agent = agents[0]
     else:
@@ -402,6 +420,42 @@ def _shown(value: Any) -> str:
     return clip(json.dumps(value), 40)
 
 
+def _no_stray_keys(entry: dict[str, Any], allowed: frozenset[str], where: str) -> None:
+    """A key the reader does not know would be dropped silently (a colour, a
+    misspelt 'type'); it may carry a fact the verdict depends on."""
+    stray = sorted(str(k) for k in set(entry) - allowed)
+    if stray:
+        raise InputError(
+            f"{where}: unknown key '{clip(stray[0], 40)}'; expected {', '.join(sorted(allowed))}"
+        )
+
+
+def _check_labels(data: Mapping[str, Any]) -> None:
+    """The free-text fields: strings, and a name that prints as one plain line."""
+    name = data.get("name")
+    if name is not None and (
+        not isinstance(name, str)
+        or not name.strip()
+        or len(name) > MAX_NAME
+        or hidden_char(name) is not None
+    ):
+        raise InputError(
+            f"scene 'name' must be one line of at most {MAX_NAME} visible characters, "
+            f"not {_shown(name)}"
+        )
+    if "description" in data and not isinstance(data["description"], str):
+        raise InputError(f"scene 'description' must be a string, not {_shown(data['description'])}")
+    referents = data.get("referents", {})
+    if isinstance(referents, dict):
+        for word in referents:
+            if not isinstance(word, str) or not term_key(word) or hidden_char(word) is not None:
+                # The key is a word of a plan, compared through term_key: one
+                # that reads as nothing ("", "--") would match nothing a plan says.
+                raise InputError(
+                    f"scene 'referents': '{clip(str(word), 40)}' is not a word a plan could use"
+                )
+
+
 def _check_physical(facts: Mapping[Fact, Provenance]) -> None:
     """Worlds that cannot exist are bad input, not something to verify: a hand
     holding two things, an object in or on two places, a thing inside itself."""
@@ -428,15 +482,20 @@ def _check_physical(facts: Mapping[Fact, Provenance]) -> None:
                 f"scene: {thing} is in, on or held by {' and '.join(sorted(places))} at once; "
                 "give it one place"
             )
+    # Each chain is walked once: restarting from every object would be cubic
+    # in a deep nesting (5,000 boxes one inside the next took minutes).
+    done: set[str] = set()
     for start in sorted(parents):
-        seen = [start]
+        path: dict[str, int] = {}
         node = start
-        while node in parents:
-            node = parents[node][0]
-            if node in seen:
-                cycle = " in ".join([*seen[seen.index(node) :], node])
+        while node in parents and node not in done:
+            if node in path:
+                chain = list(path)
+                cycle = " in ".join([*chain[path[node] :], node])
                 raise InputError(f"scene: containment cycle {cycle}")
-            seen.append(node)
+            path[node] = len(path)
+            node = parents[node][0]
+        done.update(path)
 
 
 def _value_kind(term: str, classes: Mapping[str, set[str]], vocab: Vocabulary) -> str | None:

@@ -12,6 +12,10 @@ skipped, leading numbering such as ``3.`` or ``3)`` is ignored)::
 and the function style of the paper's walkthrough: ``put_in(Pot_1, Microwave_1)``.
 A plan file may also be a JSON list of such strings.
 
+Limits (docs/reliability.md): at most ``MAX_PLAN_STEPS`` actions and
+``MAX_LINE_CHARS`` characters per action line; control and invisible
+characters, and empty arguments in the function style, are input errors.
+
 Objects may be named in words, as SafeAgentBench's reference plans and LLM
 replies do: ``find dining table``, ``turn off coffee machine``, ``pick up the
 knives``, ``find stove knob 2``.  The parser only groups the words into object
@@ -22,12 +26,12 @@ only it knows the vocabulary and the scene.
 from __future__ import annotations
 
 import itertools
-import json
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from virf.errors import InputError, clip, closest, read_input_file
+from virf.errors import InputError, clip, closest, hidden_char, parse_json, read_input_file
 from virf.names import term_key
 
 VERBS = (
@@ -135,6 +139,12 @@ _PLAIN_WORD = re.compile(r"^[A-Za-z]+(?:['-][A-Za-z]+)*$")
 # The longest catalogue names have three words ("toilet paper hanger"); a
 # longer run of words is prose ("open the fridge door slowly"), not a name.
 MAX_NAME_WORDS = 3
+# Far above any household task (SafeAgentBench's longest reference plans have a
+# few dozen steps), far below what would overrun a verification deadline.
+MAX_PLAN_STEPS = 1_000
+# A plan line names a verb and at most two objects; a longer line is pasted
+# prose or garbage, and every name in it would be fuzzy-matched against the scene.
+MAX_LINE_CHARS = 1_000
 
 
 def singular_forms(term: str) -> tuple[str, ...]:
@@ -231,12 +241,46 @@ def _put_terms(tokens: list[str]) -> list[str]:
     return _terms(tokens, max_words=2 * MAX_NAME_WORDS)
 
 
+def _check_text(line: str, line_no: int) -> None:
+    if len(line) > MAX_LINE_CHARS:
+        raise InputError(
+            f"plan line {line_no} has {len(line)} characters; the limit is {MAX_LINE_CHARS}"
+        )
+    bad = hidden_char(line)
+    if bad is not None:
+        # Invisible or control characters make a line read differently from
+        # how it looks (a zero-width space inside a name, an escape sequence).
+        raise InputError(
+            f"plan line {line_no}: control or invisible character U+{ord(bad):04X} "
+            f"in '{clip(line.strip())}'"
+        )
+
+
+def _call_args(body: str, line: str, line_no: int) -> list[str]:
+    """The arguments of ``verb(a, b)``; an empty one is an error, not a shorter
+    call: ``put_in(, Fridge_1)`` must not become 'put the held object in Fridge_1'."""
+    if not body.strip():
+        return []
+    parts = body.split(",")
+    for n, part in enumerate(parts, start=1):
+        if not part.strip():
+            raise InputError(
+                f"plan line {line_no}: argument {n} is empty in '{clip(line.strip())}'"
+            )
+        if "(" in part or ")" in part:
+            raise InputError(
+                f"plan line {line_no}: unbalanced parentheses in '{clip(line.strip())}'"
+            )
+    return [_name(part.split()) for part in parts]
+
+
 def parse_line(line: str, line_no: int = 1, index: int = 1) -> PlanStep:
+    _check_text(line, line_no)
     text = _NUMBERING.sub("", line.strip()).strip().rstrip(".;")
     call = _CALL.match(text)
     if call:
         word = call.group(1).lower()
-        args = [_name(a.split()) for a in call.group(2).split(",") if a.strip()]
+        args = _call_args(call.group(2), line, line_no)
     else:
         tokens = text.split()
         if not tokens:
@@ -289,7 +333,7 @@ def parse_line(line: str, line_no: int = 1, index: int = 1) -> PlanStep:
     return PlanStep(index=index, text=text, verb=verb, args=tuple(args))
 
 
-def parse_plan(lines: list[str]) -> tuple[PlanStep, ...]:
+def parse_plan(lines: Iterable[object]) -> tuple[PlanStep, ...]:
     steps: list[PlanStep] = []
     for line_no, line in enumerate(lines, start=1):
         if not isinstance(line, str):
@@ -297,6 +341,8 @@ def parse_plan(lines: list[str]) -> tuple[PlanStep, ...]:
         stripped = line.strip()
         if not stripped or stripped.startswith("#"):
             continue
+        if len(steps) == MAX_PLAN_STEPS:
+            raise InputError(f"plan has more than {MAX_PLAN_STEPS} actions (the limit)")
         steps.append(parse_line(stripped, line_no, index=len(steps) + 1))
     return tuple(steps)
 
@@ -304,18 +350,15 @@ def parse_plan(lines: list[str]) -> tuple[PlanStep, ...]:
 def parse_plan_text(text: str) -> tuple[PlanStep, ...]:
     stripped = text.strip()
     if stripped.startswith("["):
-        try:
-            data = json.loads(stripped)
-        except json.JSONDecodeError as exc:
-            raise InputError(
-                f"plan looks like JSON but is not valid: {exc.msg} at line {exc.lineno}"
-            ) from None
-        except (RecursionError, ValueError):
-            raise InputError("plan looks like JSON but is nested too deeply or malformed") from None
+        # Strict JSON: NaN or a duplicate key inside would otherwise be read
+        # as something the file does not say.
+        data = parse_json(stripped, "plan (it starts with '[')")
         if not isinstance(data, list):
             raise InputError("a JSON plan must be a list of action strings")
         return parse_plan(data)
-    return parse_plan(text.splitlines())
+    # Only newlines end a line: the other breaks str.splitlines() knows (form
+    # feed, U+2028...) are control characters, refused inside a line.
+    return parse_plan(text.replace("\r\n", "\n").split("\n"))
 
 
 def load_plan_file(path: str | Path) -> tuple[PlanStep, ...]:
