@@ -234,7 +234,8 @@ class Simulator:
                 meant = state.referents.get(key)
                 if meant in among:
                     return meant
-            return tuple(pool)
+            # Sorted, so the question's options do not follow the file's order.
+            return tuple(sorted(pool))
 
         named = state.named(spelled)
         if named:
