@@ -11,7 +11,10 @@ for the same snapshots, stopping at the first snapshot where it finds a
 hazard, as the paper's loop does.  Inputs: the SafeAgentBench reference plans
 given on the command line, and a 10-step plan over synthetic kitchens of
 growing size.  The TBox scaling rows load extra synthetic domain modules
-(copies of the kitchen layer under new class names).
+(copies of the kitchen layer under new class names).  The containment rows
+time the fast engine on chains of boxes nested ever deeper (``encloses`` is
+transitive), and the deadline rows how soon each engine stops once a
+verification's timeout has passed.
 """
 
 from __future__ import annotations
@@ -44,6 +47,13 @@ from virf.verify.verifier import Verifier
 
 SCENE_SIZES = (20, 50, 200, 1000)
 PLAN_LENGTHS = (10, 20, 40, 80)
+CHAIN_LENGTHS = (100, 300, 1000)
+# Moves the outermost box of a chain and puts it back: the whole chain moves
+# with it, and every snapshot holds the chain.
+CHAIN_PLAN = ("find Box_0", "pick Box_0", "find CounterTop_1", "put CounterTop_1")
+# The deadline rows: chains that take each engine several times the timeout.
+DEADLINE_S = 0.5
+DEADLINE_CHAINS = (("fast", 4000), ("reference", 3000))
 # Ten safe steps that put everything back where it was, so a plan of any
 # multiple of ten steps is the cycle repeated (after the first pass, which also
 # marks objects as found and near, every pass ends in the same state).
@@ -184,6 +194,43 @@ def synthetic_case(objects: int, tbox: TBox, steps: int = 10) -> Case:
     return Case(name, scene, parse_plan(list(SYNTHETIC_CYCLE) * cycles))
 
 
+def chain_scene(boxes: int) -> dict[str, Any]:
+    """Box_0 on a counter, Box_1 inside it, Box_2 inside Box_1, and so on:
+    containment ``boxes`` deep, whose transitive closure has boxes²/2 pairs."""
+    instances = [{"class_name": "CounterTop", "instance_name": "CounterTop_1"}]
+    instances += [{"class_name": "Box", "instance_name": f"Box_{i}"} for i in range(boxes)]
+    assertions = [{"subject": "Box_0", "property": "isOn", "object": "CounterTop_1"}]
+    assertions += [
+        {"subject": f"Box_{i}", "property": "contains", "object": f"Box_{i + 1}"}
+        for i in range(boxes - 1)
+    ]
+    return {
+        "description": f"{boxes} boxes, each inside the previous one",
+        "instances": instances,
+        "assertions": assertions,
+    }
+
+
+def chain_case(boxes: int, tbox: TBox) -> Case:
+    scene = build_scene(chain_scene(boxes), tbox.vocabulary, name=f"chain-{boxes}")
+    return Case(f"chain-{boxes}", scene, parse_plan(list(CHAIN_PLAN)))
+
+
+def deadline_row(tbox: TBox, engine: Engine, boxes: int, timeout_s: float) -> dict[str, Any]:
+    """How long a verification that cannot finish in time takes to give up."""
+    case = chain_case(boxes, tbox)
+    verifier = Verifier(tbox, engine, timeout_s=timeout_s)
+    start = time.perf_counter()
+    report = verifier.verify(case.scene, case.plan)
+    return {
+        "engine": engine.name,
+        "objects": boxes,
+        "timeout_s": timeout_s,
+        "status": report.status,
+        "elapsed_ms": round((time.perf_counter() - start) * 1000, 1),
+    }
+
+
 def synthetic_modules(copies: int, folder: Path) -> tuple[str, ...]:
     """``copies`` renamed copies of the kitchen domain layer (for TBox scaling)."""
     source = (ontology_dir() / "kitchen.omn").read_text(encoding="utf-8")
@@ -295,6 +342,8 @@ def run_latency(
     paper_max_objects: int = 200,
     tbox_factors: Sequence[int] = (1, 4),
     lengths: Sequence[int] = PLAN_LENGTHS,
+    chains: Sequence[int] = CHAIN_LENGTHS,
+    deadline_s: float = DEADLINE_S,
     progress: Callable[[str, int], Callable[[], None]] | None = None,
 ) -> dict[str, Any]:
     """All figures of ``virf bench latency`` as one dict."""
@@ -397,6 +446,27 @@ def run_latency(
         by_length.append(scaling_row(synthetic_case(50, tbox, steps)))
         tick()
     out["length_scaling"] = by_length
+    by_depth = []
+    tick = bar("containment chains", len(chains))
+    for boxes in chains:
+        c_ms, c_rep = time_plans(vf, [chain_case(boxes, tbox)], repeats)
+        by_depth.append(
+            {
+                "objects": boxes,
+                "steps": len(CHAIN_PLAN),
+                "status": c_rep[0].status,
+                "fast_ms": round(c_ms[0], 2),
+            }
+        )
+        tick()
+    out["chain_scaling"] = by_depth
+    tick = bar("deadline", len(DEADLINE_CHAINS))
+    out["deadline"] = []
+    for which, boxes in DEADLINE_CHAINS:
+        out["deadline"].append(
+            deadline_row(tbox, fast if which == "fast" else reference, boxes, deadline_s)
+        )
+        tick()
 
     # (a) the paper's method, on a sample of the same plans and the smaller scenes.
     paper_rows: dict[str, float | None] = {}
@@ -478,6 +548,47 @@ def _paper_rss(result: dict[str, Any]) -> float | None:
     if isinstance(peak, (int, float)):
         return round(peak / 1024, 1)
     return None
+
+
+def chain_markdown(fig: dict[str, Any]) -> list[str]:
+    """The containment-chain and deadline sections of performance.md."""
+    lines: list[str] = []
+    if fig.get("chain_scaling"):
+        lines += [
+            "",
+            "## Scaling with containment depth (fast engine)",
+            "",
+            f"Boxes nested in one another, Box_0 on a counter, and a {len(CHAIN_PLAN)}-step plan",
+            "that moves Box_0 and puts it back. `encloses` is transitive, so the chain's",
+            "closure has n²/2 pairs; the fast engine does not materialise it",
+            "([fast-engine.md](fast-engine.md)).",
+            "",
+            "| boxes | verdict | fast ms | fast ms per box |",
+            "|---|---|---|---|",
+        ]
+        for row in fig["chain_scaling"]:
+            lines.append(
+                f"| {row['objects']} | {row['status']} | {row['fast_ms']:.1f} | "
+                f"{row['fast_ms'] / row['objects']:.3f} |"
+            )
+    if fig.get("deadline"):
+        lines += [
+            "",
+            "## The deadline",
+            "",
+            "`--timeout` is one deadline for the whole verification. The engines stop inside",
+            "a step once it passes, and the report is ERROR (fail closed). Chains that take",
+            "each engine several times the timeout:",
+            "",
+            "| engine | boxes | timeout s | verdict | stopped after ms |",
+            "|---|---|---|---|---|",
+        ]
+        for row in fig["deadline"]:
+            lines.append(
+                f"| {row['engine']} | {row['objects']} | {row['timeout_s']:g} | "
+                f"{row['status']} | {row['elapsed_ms']:.0f} |"
+            )
+    return lines
 
 
 def render_markdown(fig: dict[str, Any], command: str) -> str:
@@ -594,6 +705,7 @@ def render_markdown(fig: dict[str, Any], command: str) -> str:
                 f"{'-' if paper_ms is None else f'{paper_ms:.0f}'} | "
                 f"{'yes' if row['identical'] else 'NO'} |"
             )
+    lines += chain_markdown(fig)
     lines += [
         "",
         "## Scaling with TBox size (50-object scene, 10-step plan)",

@@ -5,12 +5,23 @@ which individuals are instances of which concepts, and is one class assertion
 entailed (optionally with some background axioms left out).  The verifier
 builds diagnoses from nothing else, so any engine that answers these exactly
 gives the same reports.
+
+Every question takes an optional ``deadline`` (a :func:`time.monotonic`
+instant).  Once it passes, the engine stops where it is and raises
+:class:`DeadlineExceeded`, a :class:`ReasonerFailure`, so the caller fails
+closed.  The deadline is held in a context variable for the duration of the
+call: an engine that asks another engine (the fast engine's fallback, a
+wrapper that delegates) passes it on without having to thread it through,
+and an engine's inner loops read it with :func:`check_deadline`.
 """
 
 from __future__ import annotations
 
+import time
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Collection, Iterable, Sequence
+from collections.abc import Callable, Collection, Iterable, Iterator, Sequence
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
 
 from virf.errors import InputError, closest
@@ -20,6 +31,43 @@ from virf.schema import Fact
 
 class ReasonerFailure(Exception):
     """The engine could not answer (crash, timeout).  Verification fails closed."""
+
+
+class DeadlineExceeded(ReasonerFailure):
+    """The caller's deadline passed before the engine had an answer."""
+
+
+_DEADLINE: ContextVar[float | None] = ContextVar("virf_deadline", default=None)
+
+
+def current_deadline() -> float | None:
+    """The deadline in force for the engine call running in this context."""
+    return _DEADLINE.get()
+
+
+def check_deadline(where: str = "") -> None:
+    """Raise :class:`DeadlineExceeded` when the deadline in force has passed.
+
+    Cheap enough for an inner loop that calls it every few thousand
+    iterations, not on every one."""
+    deadline = _DEADLINE.get()
+    if deadline is not None and time.monotonic() > deadline:
+        raise DeadlineExceeded(f"the deadline passed{' ' + where if where else ''}")
+
+
+@contextmanager
+def until(deadline: float | None) -> Iterator[None]:
+    """Engine calls inside the block stop at ``deadline``.  An earlier deadline
+    already in force is kept: a nested call may not extend its caller's time."""
+    outer = _DEADLINE.get()
+    if deadline is None or (outer is not None and outer <= deadline):
+        yield
+        return
+    token = _DEADLINE.set(deadline)
+    try:
+        yield
+    finally:
+        _DEADLINE.reset(token)
 
 
 @dataclass(frozen=True)
@@ -40,20 +88,36 @@ class Engine(ABC):
         """An independent engine of the same kind, for another thread."""
         return type(self)(self.tbox, self.timeout_s)
 
-    def classify(self, facts: Iterable[Fact], concepts: Sequence[str]) -> Classification:
+    def classify(
+        self, facts: Iterable[Fact], concepts: Sequence[str], *, deadline: float | None = None
+    ) -> Classification:
         """Consistency, then the ABox instances of each concept."""
         unknown = [c for c in concepts if c not in self.tbox.vocabulary.classes]
         if unknown:
             raise InputError(f"unknown concept '{unknown[0]}'")
-        return self._classify(sorted(set(facts)), list(concepts))
+        with until(deadline):
+            check_deadline(f"before the {self.name} engine classified the facts")
+            return self._classify(sorted(set(facts)), list(concepts))
 
     def entails(
-        self, facts: Iterable[Fact], concept: str, individual: str, without: Collection[str] = ()
+        self,
+        facts: Iterable[Fact],
+        concept: str,
+        individual: str,
+        without: Collection[str] = (),
+        *,
+        deadline: float | None = None,
     ) -> bool:
-        return self._entails(sorted(set(facts)), concept, individual, frozenset(without))
+        with until(deadline):
+            check_deadline(f"before the {self.name} engine answered an entailment")
+            return self._entails(sorted(set(facts)), concept, individual, frozenset(without))
 
-    def consistent(self, facts: Iterable[Fact], without: Collection[str] = ()) -> bool:
-        return self._consistent(sorted(set(facts)), frozenset(without))
+    def consistent(
+        self, facts: Iterable[Fact], without: Collection[str] = (), *, deadline: float | None = None
+    ) -> bool:
+        with until(deadline):
+            check_deadline(f"before the {self.name} engine checked consistency")
+            return self._consistent(sorted(set(facts)), frozenset(without))
 
     @abstractmethod
     def _classify(self, facts: list[Fact], concepts: list[str]) -> Classification: ...

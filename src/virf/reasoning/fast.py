@@ -30,7 +30,7 @@ from contextlib import contextmanager
 from typing import Any
 
 from virf.kb.tbox import TBox
-from virf.reasoning import Classification, Engine, register
+from virf.reasoning import Classification, Engine, check_deadline, register
 from virf.reasoning.fragment import NOTHING, THING, Axiom, Expr, Fragment, Role, load_fragment
 from virf.reasoning.program import ChaseLimit, Model, Program, compile_program
 from virf.schema import Fact, FactKind
@@ -442,12 +442,7 @@ class FastEngine(Engine):
             elif f.kind is FactKind.DATA:
                 m.datum(f.subject, f.predicate, f.object == "true")
             else:
-                key = (f.subject, f.predicate)
-                old = m.closures.get(key)
-                m.closures[key] = frozenset(members) if old is None else old & frozenset(members)
-                m.element(f.subject)
-                for member in members:
-                    m.element(member)
+                m.close(f.subject, f.predicate, frozenset(members))
         m.run()
         return m, _Eval(m, self._definitions(without), self.fragment.sinks)
 
@@ -523,6 +518,7 @@ class FastEngine(Engine):
             }
             found: dict[str, tuple[str, ...]] = {}
             for concept in concepts:
+                check_deadline("while the fast engine classified the facts")
                 guard = self._guards.get(concept)
                 if guard is None:
                     pool = abox

@@ -10,11 +10,20 @@ stale ``is_a`` after ABox edits cannot happen here).
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
 from virf.kb.tbox import NS, TBox
-from virf.reasoning import Classification, Engine, ReasonerFailure, register
+from virf.reasoning import (
+    Classification,
+    DeadlineExceeded,
+    Engine,
+    ReasonerFailure,
+    check_deadline,
+    current_deadline,
+    register,
+)
 from virf.schema import Fact, FactKind
 
 
@@ -103,32 +112,43 @@ class OwlapiEngine(Engine):
             for ax in self._by_id.get(ident, ()):
                 removed.add(ax)
         with self._lock:
+            # Waiting for the lock may have used up the caller's time.
+            check_deadline(f"before the {self.name} engine started")
             self.manager.addAxioms(self.ontology, added)
             self.manager.removeAxioms(self.ontology, removed)
-            reasoner = None
-            fired = threading.Event()
-            watchdog: threading.Timer | None = None
+            # The reasoner is stopped from a watchdog thread at its own timeout
+            # or at the caller's deadline, whichever comes first; the
+            # interruption surfaces as ReasonerFailure (DeadlineExceeded for
+            # the deadline), never as an answer.
+            deadline = current_deadline()
+            limit, by_deadline = self.timeout_s, False
+            if deadline is not None and deadline - time.monotonic() < limit:
+                limit, by_deadline = max(0.0, deadline - time.monotonic()), True
+            watch = _Watchdog()
+            watchdog = threading.Timer(limit, watch.fire)
+            watchdog.daemon = True
+            watchdog.start()
             try:
-                reasoner = self._reasoner(self.ontology)
-                # A reasoner that runs past the timeout is interrupted from this
-                # watchdog thread; the interruption surfaces as ReasonerFailure.
-                watchdog = threading.Timer(self.timeout_s, _interrupt, (reasoner, fired))
-                watchdog.daemon = True
-                watchdog.start()
-                return question(reasoner)
+                # Started before the reasoner is built: building it (HermiT's
+                # preprocessing) takes time too, and is checked right after.
+                watch.attach(self._reasoner(self.ontology))
+                return question(watch.reasoner)
             except ReasonerFailure:
                 raise
             except Exception as exc:  # any Java-side failure: fail closed upstream
-                if fired.is_set() or "TimeOut" in type(exc).__name__ or "TimeOut" in str(exc):
+                timed_out = "TimeOut" in type(exc).__name__ or "TimeOut" in str(exc)
+                if watch.fired.is_set() and by_deadline:
+                    raise DeadlineExceeded(
+                        f"the deadline passed while the {self.name} engine was reasoning"
+                    ) from exc
+                if watch.fired.is_set() or timed_out:
                     raise ReasonerFailure(
                         f"{self.name} timed out after {self.timeout_s:g}s"
                     ) from exc
                 raise ReasonerFailure(f"{self.name} failed: {type(exc).__name__}: {exc}") from exc
             finally:
-                if watchdog is not None:
-                    watchdog.cancel()
-                if reasoner is not None:
-                    reasoner.dispose()
+                watchdog.cancel()
+                watch.detach()
                 self.manager.removeAxioms(self.ontology, added)
                 self.manager.addAxioms(self.ontology, removed)
 
@@ -144,6 +164,8 @@ class OwlapiEngine(Engine):
                 return Classification(False, {})
             found: dict[str, tuple[str, ...]] = {}
             for concept in concepts:
+                # Also here, in case a reasoner ignores the interruption.
+                check_deadline(f"while the {self.name} engine classified the facts")
                 nodes = reasoner.getInstances(self._entity("class", concept), False).getFlattened()
                 names = sorted(
                     n for n in (str(i.getIRI().getShortForm()) for i in nodes) if n in abox
@@ -175,9 +197,37 @@ class OwlapiEngine(Engine):
         return result
 
 
-def _interrupt(reasoner: Any, fired: threading.Event) -> None:
-    fired.set()
-    reasoner.interrupt()
+class _Watchdog:
+    """Interrupts the reasoner it is attached to once fired (from the timer
+    thread), including a reasoner attached after the timer went off."""
+
+    def __init__(self) -> None:
+        self.fired = threading.Event()
+        self.reasoner: Any = None
+        self._lock = threading.Lock()
+
+    def fire(self) -> None:
+        with self._lock:
+            self.fired.set()
+            if self.reasoner is not None:
+                self.reasoner.interrupt()
+
+    def attach(self, reasoner: Any) -> None:
+        with self._lock:
+            self.reasoner = reasoner
+            late = self.fired.is_set()
+        if late:
+            raise _Late()
+
+    def detach(self) -> None:
+        with self._lock:
+            reasoner, self.reasoner = self.reasoner, None
+        if reasoner is not None:
+            reasoner.dispose()
+
+
+class _Late(Exception):
+    """The watchdog went off while the reasoner was being built."""
 
 
 class HermitEngine(OwlapiEngine):

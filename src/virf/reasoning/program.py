@@ -8,22 +8,46 @@ the least model of the rules satisfies it by construction.  The others
 evaluated on the finished model by :func:`Model.violations`; when none is
 violated the model is a genuine model of the knowledge base, which makes it a
 countermodel for everything false in it.
+
+A transitive role that no rule reads (VIRF's ``encloses``: transitive, and
+extended by ``encloses o supports``, but asked about only by the queries) is
+not materialised: its closure over a chain of n objects has n²/2 edges, and
+deriving them one rule firing at a time costs n³.  The model keeps the edges
+the other rules give it and answers a question about the role with a search
+over them (:class:`LazyRole`), which is the same relation.
 """
 
 from __future__ import annotations
 
+import time
 from collections import defaultdict, deque
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from itertools import count
 from typing import Any
 
+from virf.reasoning import DeadlineExceeded, current_deadline
 from virf.reasoning.fragment import NOTHING, THING, Axiom, Expr, Fragment, Role
 
 
 def nominal(individual: str) -> str:
     """The class {individual}; the braces keep it apart from every OWL name."""
     return "{" + individual + "}"
+
+
+@dataclass(frozen=True)
+class LazyRole:
+    """A role p whose extension is the least relation that contains its base
+    edges (asserted, or derived by rules other than the ones below) and is
+    closed under ``p o p ⊑ p`` (when ``transitive``), ``p o s ⊑ p`` for each
+    s in ``right`` and ``s o p ⊑ p`` for each s in ``left``.
+
+    A p-path is then a word of (left* base right*), once, or repeated when p
+    is transitive; :meth:`Model.reach` follows such words over the graph."""
+
+    transitive: bool
+    left: tuple[Role, ...]
+    right: tuple[Role, ...]
 
 
 @dataclass
@@ -70,6 +94,7 @@ class Program:
     )
     facts: list[tuple[Any, ...]] = field(default_factory=list)
     checks: list[Axiom] = field(default_factory=list)
+    lazy: dict[str, LazyRole] = field(default_factory=dict)
     # ids of axioms compiled into facts or role tables: removing one of them
     # needs a fresh compile, not just disabled rules
     structural: set[str] = field(default_factory=set)
@@ -277,6 +302,64 @@ class Program:
     def supers(self, p: str) -> list[Role]:
         return self.role_up.get(p, [])
 
+    def find_lazy(self) -> None:
+        """Choose the roles left unmaterialised and drop the chain rules that
+        would derive their closure edge by edge.
+
+        A role p qualifies when no rule is triggered by a p-edge except the
+        chains that define p itself: no super-role (a super-role, or an
+        inverse, would have to see every derived edge), no ``some``/``only``
+        rule on p, every chain that reads p derives p, and p appears in those
+        chains only uninverted and as ``p o p``, ``p o s`` or ``s o p`` with s
+        itself materialised.  Then whatever the least model contains outside
+        p is the same with or without p's derived edges, and p's extension
+        can be read off the base edges when a query asks for it."""
+        chains = [(r1, r2, r) for r1, pairs in self.chain_first.items() for r2, r in pairs]
+        lazy: dict[str, LazyRole] = {}
+        for p in sorted({r[0] for r1, r2, r in chains if r[0] in (r1[0], r2[0])}):
+            fwd, inv = (p, False), (p, True)
+            if self.role_up.get(p) or any(
+                self.exists_by_role.get(r) or self.all_by_role.get(r) for r in (fwd, inv)
+            ):
+                continue
+            transitive, left, right, ok = False, [], [], True
+            for r1, r2, r in chains:
+                if p not in (r1[0], r2[0], r[0]):
+                    continue
+                if r1 == r2 == r == fwd:
+                    transitive = True
+                elif r == fwd and r1 == fwd and r2[0] != p:
+                    right.append(r2)
+                elif r == fwd and r2 == fwd and r1[0] != p:
+                    left.append(r1)
+                elif r == fwd and p not in (r1[0], r2[0]):
+                    continue  # derives base edges of p from other roles: an ordinary rule
+                else:
+                    ok = False
+            if ok:
+                lazy[p] = LazyRole(transitive, tuple(sorted(set(left))), tuple(sorted(set(right))))
+        # A lazy role's search walks the edges of its left and right roles as
+        # they are stored, so those must be materialised.
+        changed = True
+        while changed:
+            changed = False
+            for p, spec in sorted(lazy.items()):
+                if any(s[0] in lazy for s in spec.left + spec.right):
+                    del lazy[p]
+                    changed = True
+        self.lazy = lazy
+        for table in (self.chain_first, self.chain_second):
+            for key in list(table):
+                kept = [
+                    (other, r)
+                    for other, r in table[key]
+                    if not (r[0] in lazy and r[0] in (key[0], other[0]))
+                ]
+                if kept:
+                    table[key] = kept
+                else:
+                    del table[key]
+
     def finish(self) -> None:
         """Index the rules by trigger: one lookup per new class or role fact."""
         self.ctrig: dict[str, tuple[Any, ...]] = {}
@@ -348,6 +431,7 @@ def compile_program(frag: Fragment, without: frozenset[str]) -> Program:
     for ax in axioms:
         prog.add(ax)
     prog.roles(axioms)
+    prog.find_lazy()
     prog.checks.sort(key=lambda a: a.text)
     prog.finish()
     return prog
@@ -365,6 +449,10 @@ _STRUCTURAL = {
     "dfunc",
 }
 WITNESS_LIMIT = 5000
+# Queue items the rules process between two looks at the clock: small enough
+# that a deadline is noticed within milliseconds, large enough that the look
+# costs nothing measurable.
+_BATCH = 256
 
 
 class ChaseLimit(Exception):
@@ -390,6 +478,13 @@ class Model:
         self.fresh = 0
         self.witness: dict[tuple[str, Role, str], str] = {}
         self.version = next(_STATES)
+        self.lazy = prog.lazy
+        # (role, backward, start) -> (model version, individuals reached)
+        self._reached: dict[tuple[str, bool, str], tuple[int, set[str]]] = {}
+        # Closures "x p nothing" on a lazy role.  run() checks p's base edges
+        # against a closure as they arrive, but no rule sees p's derived
+        # edges, so it also searches for one at its end.
+        self._empty_lazy: list[tuple[str, str]] = []
 
     def copy(self) -> Model:
         assert not self.queue and self.journal is None
@@ -414,7 +509,22 @@ class Model:
         m.fresh = self.fresh
         m.witness = dict(self.witness)
         m.version = next(_STATES)
+        m.lazy = self.lazy
+        m._reached = {}
+        m._empty_lazy = list(self._empty_lazy)
         return m
+
+    def close(self, x: str, p: str, members: frozenset[str]) -> None:
+        """``x p only {members}`` (nothing when empty); two closures on the
+        same pair intersect.  Only before the rules run."""
+        key = (x, p)
+        old = self.closures.get(key)
+        self.closures[key] = members if old is None else old & members
+        if not self.closures[key] and p in self.lazy and key not in self._empty_lazy:
+            self._empty_lazy.append(key)
+        self.element(x)
+        for member in members:
+            self.element(member)
 
     # ------------------------------------------------------------------ growth
     def element(self, x: str) -> None:
@@ -477,9 +587,11 @@ class Model:
         self.queue.append(("d", x, d, v))
 
     def rsucc(self, r: Role, x: str) -> set[str]:
+        """The r-successors of x (do not modify the set)."""
         p, inv = r
-        table = self.pred if inv else self.succ
-        inner = table.get(p)
+        if p in self.lazy:
+            return self.reach(p, x, inv)
+        inner = (self.pred if inv else self.succ).get(p)
         if inner is None:
             return _EMPTY
         return inner.get(x, _EMPTY)
@@ -487,93 +599,165 @@ class Model:
     def rpred(self, r: Role, x: str) -> set[str]:
         return self.rsucc((r[0], not r[1]), x)
 
+    def _stored(self, r: Role, x: str) -> set[str]:
+        """The r-edges from x held in the tables: for a lazy role only its base
+        edges.  The rules use this; they never read a lazy role."""
+        p, inv = r
+        table = self.pred if inv else self.succ
+        inner = table.get(p)
+        if inner is None:
+            return _EMPTY
+        return inner.get(x, _EMPTY)
+
+    def reach(self, p: str, x: str, backward: bool) -> set[str]:
+        """The p-successors (``backward``: p-predecessors) of x for a lazy role
+        p: a search over base, left and right edges, remembered until the
+        model changes."""
+        key = (p, backward, x)
+        hit = self._reached.get(key)
+        if hit is not None and hit[0] == self.version:
+            return hit[1]
+        spec = self.lazy[p]
+        base = (self.pred if backward else self.succ).get(p, {})
+        # A p-path is (left* base right*), repeated when p is transitive.
+        # State 1 means a whole block has been crossed (the node is an
+        # answer), state 0 that the current block still needs its base edge.
+        # Read backward, the blocks are (right* base left*), so the roles
+        # taken before the base edge swap with those taken after it.
+        before = spec.right if backward else spec.left
+        after = spec.left if backward else spec.right
+        seen: tuple[set[str], set[str]] = ({x}, set())
+        todo: list[tuple[str, int]] = [(x, 0)]
+
+        def edges(roles: tuple[Role, ...], node: str) -> Iterable[str]:
+            for s in roles:
+                yield from self._stored((s[0], s[1] != backward), node)
+
+        while todo:
+            node, state = todo.pop()
+            moves: list[tuple[Iterable[str], int]] = []
+            if state == 0 or spec.transitive:  # start a block, or the next one
+                moves += [(base.get(node, _EMPTY), 1), (edges(before, node), 0)]
+            if state == 1:
+                moves.append((edges(after, node), 1))
+            for targets, nxt in moves:
+                for y in targets:
+                    if y not in seen[nxt]:
+                        seen[nxt].add(y)
+                        todo.append((y, nxt))
+        self._reached[key] = (self.version, seen[1])
+        return seen[1]
+
     def run(self) -> None:
+        """Apply the rules to everything queued, until nothing new follows.
+
+        Raises :class:`DeadlineExceeded` when the deadline of the engine call
+        passes; the model is then unfinished and must be dropped (or rolled
+        back)."""
         ctrig = self.prog.ctrig
         rtrig = self.prog.rtrig
         off = self.disabled
         q = self.queue
         types = self.types
+        stored = self._stored
+        deadline = current_deadline()
         while q:
-            if self.clash is not None:
-                q.clear()
-                return
-            item = q.popleft()
-            if item[0] == "t":
-                _, x, a = item
-                if a == NOTHING:
-                    self.clash = f"{x} is an instance of owl:Nothing"
-                    continue
-                trig = ctrig.get(a)
-                if trig is None:
-                    continue
-                subs, conj, value_head, all_by_class, exists_by_filler, some_head, data_head = trig
-                ts = types[x]
-                for b, tag in subs:
-                    if b not in ts and tag not in off:
-                        self.cls(x, b)
-                for body, head, tag in conj:
-                    if head not in ts and tag not in off and all(c in ts for c in body):
-                        self.cls(x, head)
-                for r, i, tag in value_head:
-                    if tag not in off:
-                        self.role(r, x, i)
-                for r, b, tag in all_by_class:
-                    if tag not in off:
-                        for y in list(self.rsucc(r, x)):
-                            self.cls(y, b)
-                for r, b in exists_by_filler:
-                    for z in list(self.rpred(r, x)):
-                        self.cls(z, b)
-                for r, w, tag in some_head:
-                    key = (x, r, w)
-                    if key not in self.witness and tag not in off:
-                        if self.fresh > WITNESS_LIMIT:
-                            raise ChaseLimit(f"more than {WITNESS_LIMIT} anonymous witnesses")
-                        y = self.new_element()
-                        self.witness[key] = y
-                        if self.journal is not None:
-                            self.journal.append(("w", key))
-                        self.role(r, x, y)
-                        self.cls(y, w)
-                for d, v, tag in data_head:
-                    if tag not in off:
-                        self.datum(x, d, v)
-            elif item[0] == "r":
-                _, p, x, y = item
-                if self.closures:
-                    bound = self.closures.get((x, p))
-                    if bound is not None and not bound:
-                        self.clash = f"{x} {p} {y} contradicts '{x} {p} nothing'"
+            if deadline is not None and time.monotonic() > deadline:
+                raise DeadlineExceeded(
+                    "the deadline passed while the fast engine applied its rules"
+                )
+            for _ in range(min(len(q), _BATCH)):
+                if self.clash is not None:
+                    q.clear()
+                    return
+                item = q.popleft()
+                if item[0] == "t":
+                    _, x, a = item
+                    if a == NOTHING:
+                        self.clash = f"{x} is an instance of owl:Nothing"
                         continue
-                rt = rtrig.get(p)
-                if rt is None:
-                    continue
-                up, forward, backward = rt
-                for s in up:
-                    self.role(s, x, y)
-                for (exists_r, all_r, chain1, chain2), a, b in ((forward, x, y), (backward, y, x)):
-                    if exists_r:
-                        tb = types[b]
-                        for filler, head in exists_r:
-                            if filler in tb:
-                                self.cls(a, head)
-                    if all_r:
-                        ta = types[a]
-                        for cls_, head, tag in all_r:
-                            if cls_ in ta and tag not in off:
-                                self.cls(b, head)
-                    for r2, r3 in chain1:
-                        for c in list(self.rsucc(r2, b)):
-                            self.role(r3, a, c)
-                    for r1, r3 in chain2:
-                        for w in list(self.rpred(r1, a)):
-                            self.role(r3, w, b)
-            else:
-                _, x, d, v = item
-                for head in self.prog.data_rule.get((d, v), ()):
-                    self.cls(x, head)
-                if d in self.prog.functional_data and len(self.data[x][d]) > 1:
-                    self.clash = f"{x} has two values for the functional property {d}"
+                    trig = ctrig.get(a)
+                    if trig is None:
+                        continue
+                    subs, conj, value_head, all_by_class, exists_by_filler, some_head, data_head = (
+                        trig
+                    )
+                    ts = types[x]
+                    for b, tag in subs:
+                        if b not in ts and tag not in off:
+                            self.cls(x, b)
+                    for body, head, tag in conj:
+                        if head not in ts and tag not in off and all(c in ts for c in body):
+                            self.cls(x, head)
+                    for r, i, tag in value_head:
+                        if tag not in off:
+                            self.role(r, x, i)
+                    for r, b, tag in all_by_class:
+                        if tag not in off:
+                            for y in list(stored(r, x)):
+                                self.cls(y, b)
+                    for r, b in exists_by_filler:
+                        for z in list(stored((r[0], not r[1]), x)):
+                            self.cls(z, b)
+                    for r, w, tag in some_head:
+                        key = (x, r, w)
+                        if key not in self.witness and tag not in off:
+                            if self.fresh > WITNESS_LIMIT:
+                                raise ChaseLimit(f"more than {WITNESS_LIMIT} anonymous witnesses")
+                            y = self.new_element()
+                            self.witness[key] = y
+                            if self.journal is not None:
+                                self.journal.append(("w", key))
+                            self.role(r, x, y)
+                            self.cls(y, w)
+                    for d, v, tag in data_head:
+                        if tag not in off:
+                            self.datum(x, d, v)
+                elif item[0] == "r":
+                    _, p, x, y = item
+                    if self.closures:
+                        bound = self.closures.get((x, p))
+                        if bound is not None and not bound:
+                            self.clash = f"{x} {p} {y} contradicts '{x} {p} nothing'"
+                            continue
+                    rt = rtrig.get(p)
+                    if rt is None:
+                        continue
+                    up, forward, backward = rt
+                    for s in up:
+                        self.role(s, x, y)
+                    for (exists_r, all_r, chain1, chain2), a, b in (
+                        (forward, x, y),
+                        (backward, y, x),
+                    ):
+                        if exists_r:
+                            tb = types[b]
+                            for filler, head in exists_r:
+                                if filler in tb:
+                                    self.cls(a, head)
+                        if all_r:
+                            ta = types[a]
+                            for cls_, head, tag in all_r:
+                                if cls_ in ta and tag not in off:
+                                    self.cls(b, head)
+                        for r2, r3 in chain1:
+                            for c in list(stored(r2, b)):
+                                self.role(r3, a, c)
+                        for r1, r3 in chain2:
+                            for w in list(stored((r1[0], not r1[1]), a)):
+                                self.role(r3, w, b)
+                else:
+                    _, x, d, v = item
+                    for head in self.prog.data_rule.get((d, v), ()):
+                        self.cls(x, head)
+                    if d in self.prog.functional_data and len(self.data[x][d]) > 1:
+                        self.clash = f"{x} has two values for the functional property {d}"
+        if self._empty_lazy and self.clash is None:
+            for x, p in self._empty_lazy:
+                found = self.reach(p, x, False)
+                if found:
+                    self.clash = f"{x} {p} {min(found)} contradicts '{x} {p} nothing'"
+                    break
 
     # ------------------------------------------------------------------ journal
     def begin(self) -> tuple[int, int, str | None, bool]:

@@ -31,24 +31,26 @@ def _component(
     Entailment of a class assertion depends only on this component; TBox
     individuals (OnState, Metal) are shared leaves and are not walked through.
     """
+    # A graph search, not repeated passes over the facts: a chain of n
+    # objects would need up to n passes.
+    links: dict[str, set[str]] = {}  # relations, both ways; TBox individuals are not entered
+    members: dict[str, set[str]] = {}  # closures, from the subject to its members
+    for f in facts:
+        if f.kind is FactKind.OBJECT:
+            links.setdefault(f.subject, set()).add(f.object)
+            links.setdefault(f.object, set()).add(f.subject)
+        elif f.kind is FactKind.CLOSURE:
+            members.setdefault(f.subject, set()).update(f.members())
     reach = set(start)
-    changed = True
-    while changed:
-        changed = False
-        for f in facts:
-            if f.kind is FactKind.OBJECT:
-                a, b = f.subject, f.object
-                if a in reach and b not in reach and b not in tbox_individuals:
-                    reach.add(b)
-                    changed = True
-                elif b in reach and a not in reach and a not in tbox_individuals:
-                    reach.add(a)
-                    changed = True
-            elif f.kind is FactKind.CLOSURE and f.subject in reach:
-                for m in f.members():
-                    if m not in reach:
-                        reach.add(m)
-                        changed = True
+    todo = list(start)
+    while todo:
+        x = todo.pop()
+        found = [y for y in links.get(x, ()) if y not in tbox_individuals]
+        found += members.get(x, ())
+        for y in found:
+            if y not in reach:
+                reach.add(y)
+                todo.append(y)
     return [
         f
         for f in facts
@@ -85,8 +87,11 @@ def needed_background(
     concept: str,
     individual: str,
     vocab: Vocabulary,
+    *,
+    deadline: float | None = None,
 ) -> list[str]:
-    """Background axiom ids the entailment needs, given the minimal facts."""
+    """Background axiom ids the entailment needs, given the minimal facts.
+    Each engine call stops at ``deadline`` (see :mod:`virf.reasoning`)."""
     names: set[str] = {concept}
     for f in facts:
         names.update((f.subject, f.predicate))
@@ -111,6 +116,6 @@ def needed_background(
                     changed = True
     removed: set[str] = set()
     for ident in sorted(candidates):
-        if engine.entails(facts, concept, individual, without=removed | {ident}):
+        if engine.entails(facts, concept, individual, without=removed | {ident}, deadline=deadline):
             removed.add(ident)
     return sorted(set(candidates) - removed)

@@ -14,7 +14,10 @@ Protocol (the paper's Algorithm 2, extended):
   support contains an open-world assumption; definite findings make the plan
   UNSAFE at the first step that has one, otherwise uncertain ones make it
   UNKNOWN with questions.  An inconsistent snapshot is UNKNOWN.
-* Fail closed: any error or timeout gives status ERROR, never SAFE.
+* Fail closed: any error or timeout gives status ERROR, never SAFE.  The
+  timeout is one deadline for the whole verification: every engine call gets
+  it and stops inside its own work once it passes, so a step that could not
+  be checked in time is never taken as safe.
 """
 
 from __future__ import annotations
@@ -28,7 +31,7 @@ from typing import Literal
 
 from virf.kb.scene import Scene
 from virf.kb.tbox import TBox, UnsafeStateConcept
-from virf.reasoning import Classification, Engine, ReasonerFailure
+from virf.reasoning import Classification, DeadlineExceeded, Engine, ReasonerFailure
 from virf.schema import (
     BackgroundKnowledge,
     CausalChain,
@@ -119,6 +122,9 @@ class Verifier:
             raise ValueError("workers must be at least 1")
         self.workers = workers
         self._engines: Queue[Engine] | None = None
+        self._pending: list[Future[Classification]] = []
+        self._step = -1  # the snapshot being checked, for the timeout message
+        self._deadline = float("inf")  # of the verification under way
         self.explain = explain
         self.tbox = tbox
         self.vocab = tbox.vocabulary
@@ -146,14 +152,26 @@ class Verifier:
         """Verify ``plan`` in ``scene`` (and the task's step-bounded
         ``requirements``).  Never raises for a verification problem: errors
         become an ERROR report (fail closed)."""
+        self._step = -1
         try:
             return self._verify(scene, plan, requirements)
         except VerificationTimeout as exc:
             return self._error(plan, f"verification timed out: {exc}")
+        except DeadlineExceeded as exc:
+            where = f" at step {self._step}" if self._step >= 0 else ""
+            return self._error(
+                plan, f"verification timed out: more than {self.timeout_s:g}s{where} ({exc})"
+            )
         except ReasonerFailure as exc:
             return self._error(plan, f"reasoner failure: {exc}")
         except Exception as exc:
             return self._error(plan, f"internal error: {type(exc).__name__}: {exc}")
+        finally:
+            # Steps classified ahead are not needed after a definite finding
+            # or a failure; those already running stop at the deadline.
+            for pending in self._pending:
+                pending.cancel()
+            self._pending = []
 
     # ------------------------------------------------------------------ protocol
     def _verify(
@@ -183,10 +201,12 @@ class Verifier:
         built = (
             [self._snapshot(states, resolved, k) for k in range(len(states))] if parallel else []
         )
-        ahead = self._classify_ahead(built, concept_lists) if parallel else []
+        ahead = self._classify_ahead(built, concept_lists, deadline) if parallel else []
+        self._pending = ahead
         for k in range(len(states)):
+            self._step = k
             if time.monotonic() > deadline:
-                raise VerificationTimeout(f"more than {self.timeout_s:.0f}s at step {k}")
+                raise VerificationTimeout(f"more than {self.timeout_s:g}s at step {k}")
             snapshot = built[k] if parallel else self._snapshot(states, resolved, k)
             action_ind = None
             if k < len(resolved):
@@ -194,7 +214,7 @@ class Verifier:
             result = (
                 ahead[k].result()
                 if ahead
-                else self.engine.classify(snapshot.keys(), concept_lists[k])
+                else self.engine.classify(snapshot.keys(), concept_lists[k], deadline=deadline)
             )
             self._checked = k
             if not result.consistent:
@@ -228,8 +248,6 @@ class Verifier:
             if definite:
                 first_definite = min(definite)
                 break
-        for pending in ahead:  # snapshots after the first definite finding are not needed
-            pending.cancel()
         return self._report(plan, states, resolved, stop, findings, first_definite, scene.spelling)
 
     def _simulate(
@@ -269,7 +287,7 @@ class Verifier:
         return snapshot
 
     def _classify_ahead(
-        self, snapshots: list[dict[Fact, Provenance]], concepts: list[list[str]]
+        self, snapshots: list[dict[Fact, Provenance]], concepts: list[list[str]], deadline: float
     ) -> list[Future[Classification]]:
         """Start classifying every snapshot, each on a free engine of the pool."""
         if self._engines is None:
@@ -283,7 +301,7 @@ class Verifier:
         def classify(k: int) -> Classification:
             engine = engines.get()
             try:
-                return engine.classify(snapshots[k].keys(), concepts[k])
+                return engine.classify(snapshots[k].keys(), concepts[k], deadline=deadline)
             finally:
                 engines.put(engine)
 
@@ -312,11 +330,15 @@ class Verifier:
     ) -> _Finding:
         facts = minimize(
             snapshot,
-            lambda fs: self._tick() and self.engine.entails(fs, usc.name, ind),
+            lambda fs: (
+                self._tick() and self.engine.entails(fs, usc.name, ind, deadline=self._deadline)
+            ),
             {ind},
             self.vocab,
         )
-        background_ids = needed_background(self.engine, facts, usc.name, ind, self.vocab)
+        background_ids = needed_background(
+            self.engine, facts, usc.name, ind, self.vocab, deadline=self._deadline
+        )
         assumed = [f for f in facts if snapshot[f] is Provenance.ASSUMED]
         defaults = [f for f in facts if snapshot[f] is Provenance.DEFAULT]
         background = [
@@ -345,8 +367,9 @@ class Verifier:
         )
 
     def _tick(self) -> bool:
-        """Enforce the verification deadline between reasoner calls."""
-        if time.monotonic() > getattr(self, "_deadline", float("inf")):
+        """Enforce the verification deadline between reasoner calls (the calls
+        themselves stop at it too)."""
+        if time.monotonic() > self._deadline:
             raise VerificationTimeout(f"more than {self.timeout_s:g}s while explaining a finding")
         return True
 
@@ -359,7 +382,9 @@ class Verifier:
         snapshot: Mapping[Fact, Provenance],
     ) -> _Finding:
         known = [f for f, p in snapshot.items() if p is not Provenance.ASSUMED]
-        definite = usc.kind != "uncertainty" and self.engine.entails(known, usc.name, ind)
+        definite = usc.kind != "uncertainty" and self.engine.entails(
+            known, usc.name, ind, deadline=self._deadline
+        )
         if not definite:  # uncertain findings are rare; their questions need the proof
             return self._explain_full(usc, ind, step, phase, snapshot)
         message = f"{usc.trigger_reason[:1].upper()}{usc.trigger_reason[1:]} ({ind})."
@@ -378,7 +403,10 @@ class Verifier:
 
     def _inconsistency(self, snapshot: Mapping[Fact, Provenance], k: int) -> _Finding:
         facts = minimize(
-            snapshot, lambda fs: self._tick() and not self.engine.consistent(fs), set(), self.vocab
+            snapshot,
+            lambda fs: self._tick() and not self.engine.consistent(fs, deadline=self._deadline),
+            set(),
+            self.vocab,
         )
         listed = "; ".join(f.render() for f in facts)
         concept = UnsafeStateConcept(
