@@ -994,6 +994,11 @@ def _print_latency(fig: dict[str, Any]) -> None:
             "yes" if row["identical"] else "NO",
         )
     console.print(tb)
+    from virf.bench.latency import chain_markdown
+
+    # The containment-chain and deadline figures, as the Markdown report has them.
+    for line in chain_markdown(fig):
+        console.print(line, markup=False)
 
 
 def _write_atomically(path: Path, text: str) -> None:
