@@ -211,3 +211,29 @@ def test_closure_provenance_follows_closed_world(sim, tutor) -> None:
     key = Fact("CounterTop_1", "supports", "Apple_1,Knife_1,Mug_1", FactKind.CLOSURE)
     assert sim.closure_facts(sim.initial(open_scene))[key] is Provenance.ASSUMED
     assert sim.closure_facts(sim.initial(closed_scene))[key] is Provenance.SCENE
+
+
+def test_a_closed_receptacle_further_up_blocks_pick(tutor) -> None:
+    """An apple on a plate inside a closed fridge is as unreachable as one
+    directly inside it."""
+    scene = {
+        "instances": [
+            {"class_name": "Fridge", "instance_name": "Fridge_1"},
+            {"class_name": "Plate", "instance_name": "Plate_1"},
+            {"class_name": "Apple", "instance_name": "Apple_1"},
+        ],
+        "assertions": [
+            {"subject": "Fridge_1", "property": "hasState", "object": "ClosedState"},
+            {"subject": "Plate_1", "property": "isInside", "object": "Fridge_1"},
+            {"subject": "Apple_1", "property": "isOn", "object": "Plate_1"},
+        ],
+    }
+    blocked = tutor.verify(scene, ["find Apple_1", "pick Apple_1"])
+    assert (blocked.status, blocked.dangerous_step) == ("UNSAFE", 2)
+    assert blocked.violated_concept is not None
+    assert blocked.violated_concept.id == "Precondition_ReceptacleClosed"
+    facts = {(t.subject, t.predicate, t.object) for t in blocked.violations[0].triggering_facts}
+    assert ("Plate_1", "supports", "Apple_1") in facts
+    assert ("Fridge_1", "contains", "Plate_1") in facts
+    opened = ["find Fridge_1", "open Fridge_1", "find Apple_1", "pick Apple_1"]
+    assert tutor.verify(scene, [*opened, "find Fridge_1", "close Fridge_1"]).status == "SAFE"

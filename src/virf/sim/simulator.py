@@ -470,15 +470,32 @@ class Simulator:
                     f"{agent} is already holding {held}",
                     Fact(agent, "isHolding", held),
                 )
-            for box in state.subjects_of("contains", target):
-                if state.has(box, "hasState", "ClosedState"):
+            # A closed receptacle anywhere above the target blocks the reach:
+            # an apple on a plate in a closed fridge cannot be picked either.
+            path: list[Fact] = []
+            node, seen = target, {target}
+            while True:
+                outer = [
+                    Fact(box, rel, node)
+                    for rel in ("contains", "supports")
+                    for box in state.subjects_of(rel, node)
+                ]
+                if not outer or outer[0].subject in seen:
+                    break
+                link = outer[0]
+                path.append(link)
+                if link.predicate == "contains" and state.has(
+                    link.subject, "hasState", "ClosedState"
+                ):
                     return fail(
                         "Precondition_ReceptacleClosed",
-                        box,
-                        f"{target} is inside {box}, which is closed",
-                        Fact(box, "contains", target),
-                        Fact(box, "hasState", "ClosedState"),
+                        link.subject,
+                        f"{target} is inside {link.subject}, which is closed",
+                        *path,
+                        Fact(link.subject, "hasState", "ClosedState"),
                     )
+                node = link.subject
+                seen.add(node)
             unplace(target)
             drop(f for f in facts if target in (f.subject, f.object) and f.predicate == "isNear")
             add(Fact(agent, "isHolding", target))
