@@ -148,8 +148,6 @@ class PreconditionFailure:
 class Simulator:
     def __init__(self, vocab: Vocabulary) -> None:
         self.vocab = vocab
-        # canonical_class ignores only case; plans also write "dining table".
-        self._class_keys = {term_key(c): c for c in vocab.classes}
 
     # ------------------------------------------------------------------ setup
     def initial(self, scene: Scene) -> WorldState:
@@ -195,10 +193,11 @@ class Simulator:
     def class_named(self, term: str) -> str | None:
         """The class a plan term names, whatever its case and spacing
         ('dining table', 'stove-knob', 'DiningTable')."""
+        # canonical_class ignores only case; plans also write "dining table".
         cls = self.vocab.canonical_class(term)
         if cls is not None:
             return cls
-        hit = self._class_keys.get(term_key(term))
+        hit = self.vocab.term_by_key(term_key(term))
         return self.vocab.canonical_class(hit) if hit else None
 
     def spelling(self, state: WorldState, term: str) -> str | None:
