@@ -58,55 +58,42 @@ def parse_triple_text(text: str) -> Triple | None:
 def fact_question(f: Fact, step: int, vocab: Vocabulary, text: str | None = None) -> Question:
     """The question that settles one marker or open-world assumption."""
     t = f.triple()
+
+    def ask(key: str, kind: QuestionKind, default: str, options: tuple[str, ...]) -> Question:
+        return Question(
+            key=key,
+            kind=kind,
+            text=text or default,
+            subject=f.subject,
+            fact=t,
+            options=options,
+            step=step,
+        )
+
     kind = MARKERS.get((f.predicate, f.object))
     if kind == "material":
-        return Question(
-            key=f"material:{f.subject}",
-            kind="material",
-            text=text or f"What material is {f.subject} made of?",
-            subject=f.subject,
-            fact=t,
-            options=materials(vocab),
-            step=step,
+        return ask(
+            f"material:{f.subject}",
+            "material",
+            f"What material is {f.subject} made of?",
+            materials(vocab),
         )
     if kind == "fill":
-        return Question(
-            key=f"fill:{f.subject}",
-            kind="fill",
-            text=text or f"Does {f.subject} hold any liquid?",
-            subject=f.subject,
-            fact=t,
-            options=YES_NO,
-            step=step,
-        )
+        return ask(f"fill:{f.subject}", "fill", f"Does {f.subject} hold any liquid?", YES_NO)
     if f.kind is FactKind.CLOSURE:
         where = "in" if f.predicate == "contains" else "on"
         listed = ", ".join(f.members())
         claim = (
             f"only {listed} is {where} {f.subject}" if listed else f"nothing is {where} {f.subject}"
         )
-        return Question(
-            key=f"contents:{f.predicate}:{f.subject}",
-            kind="contents",
-            text=text
-            or (
-                f"Is it true that {claim}? "
-                f"The scene does not say its '{f.predicate}' list is complete."
-            ),
-            subject=f.subject,
-            fact=t,
-            options=YES_NO,
-            step=step,
+        return ask(
+            f"contents:{f.predicate}:{f.subject}",
+            "contents",
+            f"Is it true that {claim}? "
+            f"The scene does not say its '{f.predicate}' list is complete.",
+            YES_NO,
         )
-    return Question(
-        key=f"confirm:{triple_text(t)}",
-        kind="confirm",
-        text=text or f"Please confirm: {f.render()}?",
-        subject=f.subject,
-        fact=t,
-        options=YES_NO,
-        step=step,
-    )
+    return ask(f"confirm:{triple_text(t)}", "confirm", f"Please confirm: {f.render()}?", YES_NO)
 
 
 def rule_questions(
