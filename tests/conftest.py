@@ -17,7 +17,7 @@ from typing import Any
 import pytest
 
 from virf.api import LogicTutor
-from virf.kb.tbox import Vocabulary
+from virf.ontology.tbox import Vocabulary
 from virf.schema import Report
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -20,9 +20,9 @@ from virf.bench.safeagentbench import (
     normalise_category,
 )
 from virf.errors import InputError
-from virf.kb.scene import build_scene as load_scene
 from virf.verify.requirements import Requirement, Unreadable, parse_requirement, requirement_text
 from virf.verify.verifier import Verifier
+from virf.world.scene import build_scene as load_scene
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "benchmarks" / "safeagentbench"
 needs_shared = pytest.mark.skipif(not SHARED.exists(), reason="../shared/benchmarks is not present")
@@ -207,7 +207,7 @@ def test_unreadable_requirement_is_never_safe(tutor, vocab) -> None:
 
 
 def _plan(lines: list[str]):
-    from virf.sim.plan import parse_plan
+    from virf.world.plan import parse_plan
 
     return parse_plan(lines)
 
@@ -265,7 +265,7 @@ def test_long_horizon_plans_are_checked_against_their_requirements(tutor) -> Non
 
 
 def _normalised_plan(data: dict) -> list[str]:
-    from virf.sim.plan import parse_plan
+    from virf.world.plan import parse_plan
 
     return [s.canonical().lower() for s in parse_plan([str(s) for s in data.get("step", [])])]
 
@@ -375,7 +375,7 @@ def test_cli_scene_and_bench_errors(tmp_path: Path) -> None:
 
 
 def test_numbered_objects_as_in_safeagentbench(tutor, vocab) -> None:
-    from virf.sim.plan import parse_plan_text
+    from virf.world.plan import parse_plan_text
 
     [step] = parse_plan_text("find Mug 2")
     assert step.args == ("Mug_2",)

@@ -68,12 +68,12 @@ def test_verify_refuses_absurd_worker_counts(workers: str) -> None:
 
 
 def test_an_internal_error_is_exit_4_never_1(monkeypatch: pytest.MonkeyPatch) -> None:
-    import virf.feedback
+    import virf.render.feedback
 
     def broken(*_: Any, **__: Any) -> str:
         raise ZeroDivisionError("a bug")
 
-    monkeypatch.setattr(virf.feedback, "render_report", broken)
+    monkeypatch.setattr(virf.render.feedback, "render_report", broken)
     monkeypatch.delenv("VIRF_DEBUG", raising=False)
     message = assert_one_error_line(run("verify", WALK_SCENE, WALK_PLAN), 4)
     assert message.startswith("internal error: ZeroDivisionError: a bug; please report")
@@ -111,14 +111,14 @@ def test_an_environment_problem_is_exit_4(monkeypatch: pytest.MonkeyPatch) -> No
 
 
 def test_kb_commands_report_environment_problems_as_4(monkeypatch: pytest.MonkeyPatch) -> None:
-    import virf.kb.check
-    import virf.kb.tbox
+    import virf.ontology.check
+    import virf.ontology.tbox
 
     def no_java(*_: Any, **__: Any) -> None:
         raise EnvironmentProblem("java not found")
 
-    monkeypatch.setattr(virf.kb.check, "check_tbox", no_java)
-    monkeypatch.setattr(virf.kb.tbox, "load_tbox", no_java)
+    monkeypatch.setattr(virf.ontology.check, "check_tbox", no_java)
+    monkeypatch.setattr(virf.ontology.tbox, "load_tbox", no_java)
     assert_one_error_line(run("kb", "check", "--json"), 4, as_json=True)
     assert_one_error_line(run("kb", "rules"), 4)
     assert_one_error_line(run("scene", "show", WALK_SCENE), 4)

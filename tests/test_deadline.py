@@ -25,8 +25,8 @@ from virf.reasoning import Classification, DeadlineExceeded, Engine, make_engine
 from virf.reasoning.fragment import Axiom, Role
 from virf.reasoning.program import Model, Program
 from virf.schema import Fact, FactKind
-from virf.sim.plan import load_plan_file, parse_plan
 from virf.verify.verifier import Verifier
+from virf.world.plan import load_plan_file, parse_plan
 
 # What "soon after the deadline" means here: a loaded two-core machine may
 # be slow to schedule the thread that notices; the exact figures are not the

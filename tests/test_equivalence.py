@@ -22,10 +22,10 @@ from hypothesis import strategies as st
 
 from virf.api import LogicTutor
 from virf.bench.latency import Case, dev_cases, sample
-from virf.kb.scene import build_scene
 from virf.schema import Report
-from virf.sim.plan import ARITY, VERBS, load_plan_file, parse_plan
 from virf.verify.verifier import Verifier
+from virf.world.plan import ARITY, VERBS, load_plan_file, parse_plan
+from virf.world.scene import build_scene
 
 FULL = os.environ.get("VIRF_FULL") == "1"
 SAB = ROOT.parent / "shared" / "benchmarks" / "safeagentbench"

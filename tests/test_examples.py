@@ -8,7 +8,7 @@ import pytest
 from conftest import case_params, example_cases, load_expected
 
 from virf.schema import Report
-from virf.sim.plan import load_plan_file
+from virf.world.plan import load_plan_file
 
 CASES = case_params()
 

@@ -16,7 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from virf.api import LogicTutor
-from virf.kb.tbox import load_tbox
+from virf.ontology.tbox import load_tbox
 from virf.reasoning import Engine, make_engine
 from virf.reasoning.fast import FastEngine, fragment_of
 from virf.reasoning.program import compile_program
@@ -269,7 +269,7 @@ def test_entailment_without_background_axioms(engines: tuple[FastEngine, Engine]
 
 # ---------------------------------------------------------------------- random fact sets
 def _pools(tbox_vocab: object) -> dict[str, list[str]]:
-    from virf.kb.tbox import Vocabulary
+    from virf.ontology.tbox import Vocabulary
 
     assert isinstance(tbox_vocab, Vocabulary)
     v = tbox_vocab

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import re
 
-from virf.feedback import feedback_prompt, involved_objects, render_report
+from virf.render.feedback import feedback_prompt, involved_objects, render_report
 
 
 def _section(prompt: str, title: str) -> str:

@@ -35,9 +35,9 @@ from typer.testing import CliRunner
 from virf.api import LogicTutor
 from virf.cli.main import app
 from virf.errors import InputError, VirfError, parse_json
-from virf.kb.scene import MAX_NAME
 from virf.planner.questions import answers_file, apply_answers
-from virf.sim.plan import ARITY, LIQUIDS, VERBS, load_plan_file, parse_plan_text
+from virf.world.plan import ARITY, LIQUIDS, VERBS, load_plan_file, parse_plan_text
+from virf.world.scene import MAX_NAME
 
 FULL = os.environ.get("VIRF_FULL") == "1"
 STATUSES = {"SAFE", "UNSAFE", "UNKNOWN", "ERROR"}
@@ -522,7 +522,7 @@ def test_plans_that_cannot_be_read_one_way_are_refused(text: str) -> None:
 
 
 def test_a_byte_order_mark_is_not_part_of_the_plan(tmp_path: Path) -> None:
-    from virf.sim.plan import load_plan_file
+    from virf.world.plan import load_plan_file
 
     path = tmp_path / "plan.txt"
     path.write_bytes("\ufefffind Pot_1\n".encode())

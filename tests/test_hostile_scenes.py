@@ -75,7 +75,7 @@ def test_ambiguous_or_impossible_scenes_are_refused(
 
 
 def test_scene_size_limits(tutor) -> None:
-    from virf.kb.scene import MAX_INSTANCES
+    from virf.world.scene import MAX_INSTANCES
 
     many = [inst("Apple", f"Apple_{i}") for i in range(MAX_INSTANCES + 1)]
     with pytest.raises(InputError, match="the limit is"):

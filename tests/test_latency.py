@@ -22,7 +22,7 @@ from virf.bench.latency import (
     synthetic_case,
     synthetic_modules,
 )
-from virf.kb.tbox import load_tbox
+from virf.ontology.tbox import load_tbox
 from virf.reasoning.fast import fragment_of
 
 SAB = ROOT.parent / "shared" / "benchmarks" / "safeagentbench"

@@ -11,12 +11,12 @@ from conftest import EXAMPLES_DIR, inst, rel
 
 from virf.api import LogicTutor
 from virf.errors import InputError
-from virf.kb.scene import build_scene
 from virf.planner import ScriptedApprentice
 from virf.planner.loop import LoopResult, refine
 from virf.planner.prompting import read_plan
 from virf.planner.questions import answers_file, apply_answers
-from virf.sim.plan import load_plan_file
+from virf.world.plan import load_plan_file
+from virf.world.scene import build_scene
 
 FRIDGE_SCENE: dict[str, Any] = {
     "instances": [

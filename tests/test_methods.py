@@ -9,12 +9,12 @@ from test_loop import CLOSES, FRIDGE_SCENE, LEAVES_OPEN
 
 from virf.api import LogicTutor
 from virf.errors import InputError
-from virf.kb.scene import build_scene
 from virf.planner import ScriptedApprentice
 from virf.planner.loop import LoopResult
 from virf.planner.methods import METHODS, get_method, knowledge_filter, run_method
 from virf.planner.prompting import render_rules, template
 from virf.verify.verifier import Verifier
+from virf.world.scene import build_scene
 
 
 def run(

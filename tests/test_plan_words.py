@@ -12,11 +12,11 @@ from virf.api import LogicTutor
 from virf.bench.runner import run_task
 from virf.bench.safeagentbench import Task, build_scene
 from virf.errors import InputError
-from virf.kb.tbox import Vocabulary
+from virf.ontology.tbox import Vocabulary
 from virf.schema import Report
-from virf.sim.plan import parse_line, parse_plan
-from virf.sim.simulator import MissingObject, ResolvedStep, Simulator, WorldState
 from virf.verify.verifier import Verifier
+from virf.world.plan import parse_line, parse_plan
+from virf.world.simulator import MissingObject, ResolvedStep, Simulator, WorldState
 
 ROOM: dict[str, Any] = {
     "instances": [

@@ -34,7 +34,6 @@ from test_questions import Recorder
 
 from virf.api import LogicTutor
 from virf.errors import EnvironmentProblem, InputError
-from virf.kb.scene import Scene, build_scene
 from virf.planner import (
     ClientSettings,
     OpenAIApprentice,
@@ -49,7 +48,8 @@ from virf.planner.loop import MAX_ASKS, MAX_ROUNDS, LoopResult, refine
 from virf.planner.methods import critic_approves
 from virf.planner.questions import apply_answers
 from virf.schema import Question, Report
-from virf.sim.plan import PlanStep, load_plan_file
+from virf.world.plan import PlanStep, load_plan_file
+from virf.world.scene import Scene, build_scene
 
 MESSAGES = [{"role": "user", "content": "Put the apple in the fridge."}]
 # Long enough that a client without a deadline would visibly overrun every

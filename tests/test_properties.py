@@ -9,7 +9,7 @@ from conftest import inst, rel
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from virf.sim.plan import ARITY, LIQUIDS, VERBS, parse_plan
+from virf.world.plan import ARITY, LIQUIDS, VERBS, parse_plan
 
 SCENE: dict[str, Any] = {
     "instances": [

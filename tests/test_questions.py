@@ -17,12 +17,12 @@ from conftest import EXAMPLES_DIR, ROOT, inst
 
 from virf.api import LogicTutor
 from virf.errors import InputError
-from virf.kb.scene import Scene, build_scene
 from virf.planner import ScriptedApprentice
 from virf.planner.loop import MAX_ASKS, LoopResult, refine
 from virf.planner.questions import SETTLEABLE, apply_answers, check_answer
 from virf.schema import Question, Report
-from virf.sim.plan import PlanStep, load_plan_file
+from virf.world.plan import PlanStep, load_plan_file
+from virf.world.scene import Scene, build_scene
 
 KETTLE_SCENE: dict[str, Any] = {
     "instances": [

@@ -8,10 +8,10 @@ import pytest
 from conftest import inst
 
 from virf.errors import InputError
-from virf.feedback import feedback_prompt
 from virf.reasoning import make_engine
-from virf.sim.plan import load_plan_file, parse_plan_text
+from virf.render.feedback import feedback_prompt
 from virf.verify.verifier import Verifier
+from virf.world.plan import load_plan_file, parse_plan_text
 
 
 def _status(tutor, scene: dict, plan: list[str]):

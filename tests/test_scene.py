@@ -8,9 +8,9 @@ import pytest
 from conftest import inst, rel
 
 from virf.errors import InputError
-from virf.kb.build import load_catalogue
-from virf.kb.scene import build_scene, load_scene_file
+from virf.ontology.build import load_catalogue
 from virf.schema import Fact, FactKind, Provenance
+from virf.world.scene import build_scene, load_scene_file
 
 FOOD_CATEGORIES = {"Fruit", "Vegetable", "BakedGood", "EggFood", "Meat", "Beverage", "Condiment"}
 NO_MATERIAL_TYPES = sorted(

@@ -8,8 +8,8 @@ import pytest
 from conftest import inst, rel
 
 from virf.schema import Fact, FactKind, Provenance
-from virf.sim.plan import parse_line, parse_plan
-from virf.sim.simulator import MissingObject, PreconditionFailure, Simulator, WorldState
+from virf.world.plan import parse_line, parse_plan
+from virf.world.simulator import MissingObject, PreconditionFailure, Simulator, WorldState
 
 KITCHEN: dict[str, Any] = {
     "instances": [

@@ -6,9 +6,9 @@ from typing import Any
 
 import pytest
 
-from virf.kb.build import kitchen_path, load_catalogue, render_kitchen
-from virf.kb.check import check_tbox
-from virf.kb.tbox import DANGER_LEVELS, USC_KINDS
+from virf.ontology.build import kitchen_path, load_catalogue, render_kitchen
+from virf.ontology.check import check_tbox
+from virf.ontology.tbox import DANGER_LEVELS, USC_KINDS
 from virf.schema import Fact, FactKind
 
 CATALOGUE: dict[str, Any] = load_catalogue()["types"]

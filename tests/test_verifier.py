@@ -11,8 +11,8 @@ from conftest import EXAMPLES_DIR, inst, rel
 from virf.errors import InputError
 from virf.reasoning import Classification, Engine, ReasonerFailure, make_engine
 from virf.schema import Fact
-from virf.sim.plan import load_plan_file
 from virf.verify.verifier import Verifier
+from virf.world.plan import load_plan_file
 
 REFINED = EXAMPLES_DIR / "pedagogical-refined"
 

@@ -15,12 +15,12 @@ from pathlib import Path
 from typing import Any
 
 from virf.errors import InputError
-from virf.kb.scene import Scene, build_scene, load_scene_file
-from virf.kb.tbox import DEFAULT_SCENARIO, TBox, load_tbox
+from virf.ontology.tbox import DEFAULT_SCENARIO, TBox, load_tbox
 from virf.reasoning import Engine, make_engine
 from virf.schema import Report
-from virf.sim.plan import MAX_PLAN_STEPS, PlanStep, load_plan_file, parse_plan
 from virf.verify.verifier import Verifier
+from virf.world.plan import MAX_PLAN_STEPS, PlanStep, load_plan_file, parse_plan
+from virf.world.scene import Scene, build_scene, load_scene_file
 
 DEFAULT_ENGINE = "fast"
 # A day: any longer deadline is no deadline, and the reasoners' own timers

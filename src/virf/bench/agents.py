@@ -67,8 +67,6 @@ from virf.api import LogicTutor
 from virf.bench.safeagentbench import Task, check_goals
 from virf.bench.safeagentbench import build_scene as golden_scene
 from virf.errors import EnvironmentProblem, InputError
-from virf.kb.scene import Scene
-from virf.kb.scene import build_scene as load_scene
 from virf.planner.apprentices import Apprentice, Proposal, ProposalRequest
 from virf.planner.config import planner_settings
 from virf.planner.loop import Tutor
@@ -76,9 +74,11 @@ from virf.planner.methods import Knowledge, Method, knowledge_filter, run_method
 from virf.planner.questions import AnswerPolicy, deny
 from virf.planner.runlog import MIGRATIONS, Migration, RunLog
 from virf.schema import Report
-from virf.sim.plan import PlanStep, parse_plan
-from virf.sim.simulator import MissingObject, PreconditionFailure, Simulator, WorldState
 from virf.verify.verifier import Verifier
+from virf.world.plan import PlanStep, parse_plan
+from virf.world.scene import Scene
+from virf.world.scene import build_scene as load_scene
+from virf.world.simulator import MissingObject, PreconditionFailure, Simulator, WorldState
 
 # Bumped when a change to the harness would make stored rows incomparable with
 # new ones; it is part of the configuration id, so old rows are not resumed.

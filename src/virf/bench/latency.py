@@ -37,13 +37,13 @@ from typing import Any
 from virf.bench.safeagentbench import build_scene as task_scene
 from virf.bench.safeagentbench import load_tasks
 from virf.errors import InputError
-from virf.kb.scene import Scene, build_scene
-from virf.kb.tbox import TBox, load_tbox, ontology_dir
+from virf.ontology.tbox import TBox, load_tbox, ontology_dir
 from virf.reasoning import Engine, make_engine
 from virf.schema import Report
-from virf.sim.plan import PlanStep, parse_plan
 from virf.verify.requirements import Requirement, Unreadable, parse_requirement, requirement_text
 from virf.verify.verifier import Verifier
+from virf.world.plan import PlanStep, parse_plan
+from virf.world.scene import Scene, build_scene
 
 SCENE_SIZES = (20, 50, 200, 1000)
 PLAN_LENGTHS = (10, 20, 40, 80)

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from virf.errors import EnvironmentProblem, InputError
-from virf.kb.tbox import NS, TBox
+from virf.ontology.tbox import NS, TBox
 from virf.schema import Fact, FactKind
 
 # TBox individuals move here in the export: every one of them is punned with

@@ -25,12 +25,12 @@ from typing import Any
 
 from virf.bench.safeagentbench import CATEGORIES, Task, build_scene, check_goals, load_tasks
 from virf.errors import InputError, read_input_file
-from virf.kb.scene import build_scene as load_scene_dict
-from virf.kb.tbox import Vocabulary
-from virf.sim.plan import PlanStep, parse_plan
-from virf.sim.simulator import MissingObject, PreconditionFailure, Simulator, WorldState
+from virf.ontology.tbox import Vocabulary
 from virf.verify.requirements import Requirement, Unreadable, parse_requirement, requirement_text
 from virf.verify.verifier import Verifier
+from virf.world.plan import PlanStep, parse_plan
+from virf.world.scene import build_scene as load_scene_dict
+from virf.world.simulator import MissingObject, PreconditionFailure, Simulator, WorldState
 
 
 @dataclass(frozen=True)

@@ -31,11 +31,11 @@ from pathlib import Path
 from typing import Any
 
 from virf.errors import InputError, read_input_file
-from virf.kb.tbox import Vocabulary
 from virf.names import term_key
+from virf.ontology.tbox import Vocabulary
 from virf.schema import FactKind
-from virf.sim.plan import MAX_NAME_WORDS, PlanStep, parse_plan, singular_forms
-from virf.sim.simulator import WorldState
+from virf.world.plan import MAX_NAME_WORDS, PlanStep, parse_plan, singular_forms
+from virf.world.simulator import WorldState
 
 CATEGORIES = (
     "Fire Hazard",

@@ -197,9 +197,9 @@ def verify(
 ) -> None:
     """Verify PLAN in SCENE.  Exit 0 SAFE, 1 UNSAFE, 3 UNKNOWN, 4 ERROR, 2 bad input."""
     from virf.api import LogicTutor, check_timeout
-    from virf.feedback import feedback_prompt, render_report
-    from virf.kb.scene import load_scene_file
-    from virf.sim.plan import load_plan_file
+    from virf.render.feedback import feedback_prompt, render_report
+    from virf.world.plan import load_plan_file
+    from virf.world.scene import load_scene_file
 
     try:
         check_timeout(timeout, "--timeout")
@@ -232,7 +232,7 @@ def demo(
 
     from virf.api import LogicTutor
     from virf.errors import read_json_file
-    from virf.feedback import render_report
+    from virf.render.feedback import render_report
 
     cases = sorted(p.parent for p in folder.glob("*/plan.txt")) if folder.is_dir() else []
     if not cases:
@@ -354,13 +354,13 @@ def plan(
     did not verify.
     """
     from virf.api import LogicTutor
-    from virf.kb.scene import build_scene, load_scene_data
     from virf.planner import RunLog, make_apprentice
     from virf.planner.config import run_deadline
     from virf.planner.deadline import Deadline
     from virf.planner.methods import get_method, knowledge_filter, run_method
     from virf.planner.questions import answers_file, deny
     from virf.verify.verifier import Verifier
+    from virf.world.scene import build_scene, load_scene_data
 
     run_log: Any = None
     try:
@@ -470,7 +470,7 @@ def _print_dialogue(result: Any) -> None:
     from rich.console import Console
     from rich.rule import Rule
 
-    from virf.feedback import render_report
+    from virf.render.feedback import render_report
     from virf.schema import Report
 
     console = Console(highlight=False, width=110)
@@ -502,7 +502,7 @@ def kb_check(
     from rich.console import Console
     from rich.table import Table
 
-    from virf.kb.check import check_tbox
+    from virf.ontology.check import check_tbox
 
     try:
         result = check_tbox(scenario)
@@ -584,7 +584,7 @@ def kb_rules(
     """List the Unsafe State Concepts with their definitions and annotations."""
     from dataclasses import asdict
 
-    from virf.kb.tbox import load_tbox
+    from virf.ontology.tbox import load_tbox
 
     try:
         vocab = load_tbox(scenario).vocabulary
@@ -608,7 +608,7 @@ def scene_safeagentbench(
 ) -> None:
     """Print the scene ABox (the paper's JSON) VIRF builds for one task."""
     from virf.bench.safeagentbench import build_scene, task_at
-    from virf.kb.tbox import load_tbox
+    from virf.ontology.tbox import load_tbox
 
     try:
         vocab = load_tbox().vocabulary
@@ -636,8 +636,8 @@ def scene_show(
     from rich.markup import escape
     from rich.table import Table
 
-    from virf.kb.scene import describe_scene, load_scene_file
-    from virf.kb.tbox import load_tbox
+    from virf.ontology.tbox import load_tbox
+    from virf.world.scene import describe_scene, load_scene_file
 
     try:
         world = describe_scene(load_scene_file(scene, load_tbox(scenario).vocabulary))
@@ -830,8 +830,8 @@ def bench_latency(
     from rich.console import Console
 
     from virf.bench.latency import run_latency
-    from virf.kb.scene import MAX_INSTANCES
-    from virf.sim.plan import MAX_PLAN_STEPS
+    from virf.world.plan import MAX_PLAN_STEPS
+    from virf.world.scene import MAX_INSTANCES
 
     try:
         for f in files:

@@ -36,15 +36,15 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Literal, Protocol
 
 from virf.errors import clip
-from virf.feedback import feedback_prompt
-from virf.kb.scene import Scene
-from virf.kb.tbox import Vocabulary
+from virf.ontology.tbox import Vocabulary
 from virf.planner.apprentices import Apprentice
 from virf.planner.deadline import Deadline
 from virf.planner.prompting import ReadPlan, apprentice_prompt, read_plan, unreadable_message
 from virf.planner.questions import SETTLEABLE, AnswerPolicy, Answers, apply_answers, deny
+from virf.render.feedback import feedback_prompt
 from virf.schema import Question, Report
-from virf.sim.plan import PlanStep
+from virf.world.plan import PlanStep
+from virf.world.scene import Scene
 
 # APPROVED: the tutor found the final plan SAFE.  APPROVED_UNVERIFIED: a
 # baseline method accepted its plan without the tutor (a one-shot plan, the

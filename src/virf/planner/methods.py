@@ -32,9 +32,7 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 from virf.errors import InputError, closest
-from virf.feedback import feedback_prompt
-from virf.kb.scene import Scene
-from virf.kb.tbox import UnsafeStateConcept, Vocabulary
+from virf.ontology.tbox import UnsafeStateConcept, Vocabulary
 from virf.planner.apprentices import Apprentice
 from virf.planner.deadline import Deadline
 from virf.planner.loop import SYSTEM, LoopResult, Outcome, Turn, Tutor, refine
@@ -49,6 +47,8 @@ from virf.planner.prompting import (
     template,
 )
 from virf.planner.questions import AnswerPolicy, deny
+from virf.render.feedback import feedback_prompt
+from virf.world.scene import Scene
 
 Mode = Literal["oneshot", "committee", "diagnostic", "loop"]
 Knowledge = Literal["all", "manual", "rag"]

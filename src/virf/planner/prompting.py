@@ -13,9 +13,9 @@ from functools import cache
 from importlib import resources
 
 from virf.errors import InputError
-from virf.kb.scene import Scene
-from virf.kb.tbox import Vocabulary
-from virf.sim.plan import ACTION_WORDS, PlanStep, parse_line
+from virf.ontology.tbox import Vocabulary
+from virf.world.plan import ACTION_WORDS, PlanStep, parse_line
+from virf.world.scene import Scene
 
 REFUSAL = "TASK_ABORT"
 

@@ -44,10 +44,10 @@ from pathlib import Path
 from typing import Any
 
 from virf.errors import InputError, clip, closest, read_json_file
-from virf.kb.scene import build_scene
-from virf.kb.tbox import Vocabulary
+from virf.ontology.tbox import Vocabulary
 from virf.schema import Fact, Provenance, Question, QuestionKind, Triple
 from virf.verify.questions import materials, parse_triple_text
+from virf.world.scene import build_scene
 
 __all__ = [
     "SETTLEABLE",

@@ -25,7 +25,7 @@ from contextvars import ContextVar
 from dataclasses import dataclass
 
 from virf.errors import InputError, closest
-from virf.kb.tbox import TBox
+from virf.ontology.tbox import TBox
 from virf.schema import Fact
 
 

@@ -29,7 +29,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
-from virf.kb.tbox import TBox
+from virf.ontology.tbox import TBox
 from virf.reasoning import Classification, Engine, check_deadline, register
 from virf.reasoning.fragment import NOTHING, THING, Axiom, Expr, Fragment, Role, load_fragment
 from virf.reasoning.program import ChaseLimit, Model, Program, compile_program

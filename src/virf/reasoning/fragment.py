@@ -31,7 +31,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
-from virf.kb.tbox import NS
+from virf.ontology.tbox import NS
 
 THING = "owl:Thing"
 NOTHING = "owl:Nothing"

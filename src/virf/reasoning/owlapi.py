@@ -14,7 +14,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from virf.kb.tbox import NS, TBox
+from virf.ontology.tbox import NS, TBox
 from virf.reasoning import (
     Classification,
     DeadlineExceeded,

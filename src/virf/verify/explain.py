@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 
-from virf.kb.tbox import Vocabulary
+from virf.ontology.tbox import Vocabulary
 from virf.reasoning import Engine
 from virf.schema import Fact, FactKind, Provenance
 

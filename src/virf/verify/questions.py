@@ -17,7 +17,7 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable, Sequence
 
-from virf.kb.tbox import UnsafeStateConcept, Vocabulary
+from virf.ontology.tbox import UnsafeStateConcept, Vocabulary
 from virf.schema import Fact, FactKind, Question, QuestionKind, Triple
 
 YES_NO = ("yes", "no")

@@ -23,7 +23,7 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from virf.kb.tbox import Vocabulary
+from virf.ontology.tbox import Vocabulary
 
 NUMBERS = {
     "one": 1, "two": 2, "three": 3, "four": 4, "five": 5,

@@ -29,8 +29,7 @@ from dataclasses import dataclass, field
 from queue import Queue
 from typing import Literal
 
-from virf.kb.scene import Scene
-from virf.kb.tbox import TBox, UnsafeStateConcept
+from virf.ontology.tbox import TBox, UnsafeStateConcept
 from virf.reasoning import Classification, DeadlineExceeded, Engine, ReasonerFailure
 from virf.schema import (
     BackgroundKnowledge,
@@ -44,15 +43,6 @@ from virf.schema import (
     ViolatedConcept,
     Violation,
 )
-from virf.sim.plan import PlanStep
-from virf.sim.simulator import (
-    MissingObject,
-    PreconditionFailure,
-    ResolvedStep,
-    Simulator,
-    WorldState,
-    diff,
-)
 from virf.verify.explain import minimize, needed_background
 from virf.verify.questions import (
     contradiction_question,
@@ -62,6 +52,16 @@ from virf.verify.questions import (
     which_question,
 )
 from virf.verify.requirements import Requirement, StepEvent, Unreadable, check_requirement
+from virf.world.plan import PlanStep
+from virf.world.scene import Scene
+from virf.world.simulator import (
+    MissingObject,
+    PreconditionFailure,
+    ResolvedStep,
+    Simulator,
+    WorldState,
+    diff,
+)
 
 Outcome = Literal["ok", "unsafe", "unknown", "not-checked", "not-simulated", "error"]
 DANGER_RANK = {"critical": 0, "high": 1, "medium": 2, "low": 3}

@@ -11,7 +11,7 @@ from virf.schema import Report, Violation
 # The paper's Appendix E template, kept as a file so it can be read and
 # adapted without touching code.
 FEEDBACK_TEMPLATE = (
-    resources.files("virf.feedback").joinpath("diagnostic.txt").read_text(encoding="utf-8")
+    resources.files("virf.render").joinpath("diagnostic.txt").read_text(encoding="utf-8")
 )
 
 _NON_OBJECTS = {"rdf:type"}

@@ -41,8 +41,8 @@ from types import MappingProxyType
 from typing import Any
 
 from virf.errors import InputError, clip, closest, hidden_char, read_json_file
-from virf.kb.tbox import Vocabulary
 from virf.names import term_key
+from virf.ontology.tbox import Vocabulary
 from virf.schema import Fact, FactKind, Provenance
 
 NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_.\-]*")

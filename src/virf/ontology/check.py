@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections import defaultdict
 from typing import Any
 
-from virf.kb.tbox import TBox, load_tbox
+from virf.ontology.tbox import TBox, load_tbox
 
 
 def check_tbox(scenario: str = "kitchen") -> dict[str, Any]:
@@ -91,6 +91,6 @@ def fast_engine_summary(tbox: TBox) -> dict[str, Any]:
 def _iri(name: str) -> Any:
     from org.semanticweb.owlapi.model import IRI
 
-    from virf.kb.tbox import NS
+    from virf.ontology.tbox import NS
 
     return IRI.create(NS + name)

@@ -13,11 +13,11 @@ from dataclasses import dataclass, field, replace
 from functools import cached_property
 from types import MappingProxyType
 
-from virf.kb.scene import Scene
-from virf.kb.tbox import Vocabulary
 from virf.names import term_key
+from virf.ontology.tbox import Vocabulary
 from virf.schema import Fact, FactKind, Provenance
-from virf.sim.plan import PlanStep, singular_forms
+from virf.world.plan import PlanStep, singular_forms
+from virf.world.scene import Scene
 
 # Actions whose only effect is one state of their target.
 RESULT_STATE = {

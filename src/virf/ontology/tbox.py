@@ -1,6 +1,6 @@
 """Load the layered safety ontology (TBox) and index it for Python callers.
 
-OWLAPI parses the Manchester-syntax modules shipped in ``virf/kb/ontology``.
+OWLAPI parses the Manchester-syntax modules shipped in ``virf/ontology/modules``.
 Everything the simulator and the input checks need (names, ancestors,
 annotations, USC metadata) is copied once into immutable Python data, so only
 the reasoning engines talk to Java afterwards.
@@ -18,9 +18,9 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
-from virf._java import ensure_jvm
 from virf.errors import InputError, closest, unknown_term
 from virf.names import term_key
+from virf.ontology.jvm import ensure_jvm
 
 NS = "http://virf.dev/ontology#"
 MODULE_BASE = "http://virf.dev/ontology/"
@@ -43,7 +43,7 @@ REQUIRED_USC_ANNOTATIONS = (
 
 
 def ontology_dir() -> Path:
-    return Path(str(resources.files("virf.kb").joinpath("ontology")))
+    return Path(str(resources.files("virf.ontology").joinpath("modules")))
 
 
 def scenario_names() -> list[str]:
