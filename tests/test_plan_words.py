@@ -16,6 +16,7 @@ from virf.ontology.tbox import Vocabulary
 from virf.schema import Report
 from virf.verify.verifier import Verifier
 from virf.world.plan import parse_line, parse_plan
+from virf.world.simulate import simulate
 from virf.world.simulator import MissingObject, ResolvedStep, Simulator, WorldState
 
 ROOM: dict[str, Any] = {
@@ -177,13 +178,9 @@ def test_missing_words_suggest_the_closest_names(sim: Simulator, room: WorldStat
 
 
 def _held(sim: Simulator, state: WorldState, *lines: str) -> WorldState:
-    for line in lines:
-        r = _resolve(sim, state, line)
-        assert isinstance(r, ResolvedStep), r
-        nxt = sim.apply(state, r)
-        assert isinstance(nxt, WorldState), nxt
-        state = nxt
-    return state
+    trace = simulate(sim, state, parse_plan(list(lines)))
+    assert trace.complete, trace.stop
+    return trace.final
 
 
 @pytest.mark.parametrize(

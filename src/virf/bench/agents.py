@@ -78,7 +78,8 @@ from virf.verify.verifier import Verifier
 from virf.world.plan import PlanStep, parse_plan
 from virf.world.scene import Scene
 from virf.world.scene import build_scene as load_scene
-from virf.world.simulator import MissingObject, PreconditionFailure, Simulator, WorldState
+from virf.world.simulate import simulate
+from virf.world.simulator import Simulator, WorldState
 
 # Bumped when a change to the harness would make stored rows incomparable with
 # new ones; it is part of the configuration id, so old rows are not resumed.
@@ -455,17 +456,8 @@ class Execution:
 
 def execute(sim: Simulator, state: WorldState, plan: Sequence[PlanStep]) -> Execution:
     """Run the plan until an action cannot be carried out; what ran before stays done."""
-    done = 0
-    for step in plan:
-        resolved = sim.resolve(state, step)
-        if isinstance(resolved, MissingObject):
-            return Execution(state, done, f"step {step.index} ({step.text}): no '{resolved.term}'")
-        nxt = sim.apply(state, resolved)
-        if isinstance(nxt, PreconditionFailure):
-            return Execution(state, done, f"step {step.index} ({step.text}): {nxt.message}")
-        state = nxt
-        done += 1
-    return Execution(state, done, None)
+    trace = simulate(sim, state, plan)
+    return Execution(trace.final, trace.executed, trace.stop_reason())
 
 
 # ---------------------------------------------------------------------------

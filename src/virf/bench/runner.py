@@ -30,7 +30,8 @@ from virf.verify.requirements import Requirement, Unreadable, parse_requirement,
 from virf.verify.verifier import Verifier
 from virf.world.plan import PlanStep, parse_plan
 from virf.world.scene import build_scene as load_scene_dict
-from virf.world.simulator import MissingObject, PreconditionFailure, Simulator, WorldState
+from virf.world.simulate import simulate
+from virf.world.simulator import Simulator, WorldState
 
 
 @dataclass(frozen=True)
@@ -105,16 +106,7 @@ def load_plans(path: str | Path | None) -> dict[tuple[str, int], list[str]]:
 
 
 def final_world(sim: Simulator, scene_state: WorldState, plan: Sequence[PlanStep]) -> WorldState:
-    state = scene_state
-    for step in plan:
-        r = sim.resolve(state, step)
-        if isinstance(r, MissingObject):
-            break
-        nxt = sim.apply(state, r)
-        if isinstance(nxt, PreconditionFailure):
-            break
-        state = nxt
-    return state
+    return simulate(sim, scene_state, plan).final
 
 
 def run_task(

@@ -209,7 +209,7 @@ def named_types(task: Task, vocab: Vocabulary, plan: list[str] | None = None) ->
     for word in words:
         word = word.split("|", 1)[0]
         cls = vocab.canonical_class(word)
-        if cls is None or not _is_catalogue_type(vocab, cls) or cls in out:
+        if cls is None or cls not in vocab.catalogue_types or cls in out:
             continue
         out.append(cls)
     # Slices and cracked eggs are made by the plan's own actions, not found in the
@@ -218,11 +218,6 @@ def named_types(task: Task, vocab: Vocabulary, plan: list[str] | None = None) ->
         d for t in out for key in ("slicedType", "crackedType") for d in vocab.annotation(t, key)
     }
     return [t for t in out if t not in derived]
-
-
-def _is_catalogue_type(vocab: Vocabulary, cls: str) -> bool:
-    comment = vocab.annotation(cls, "comment")
-    return bool(comment) and comment[0].startswith("AI2-THOR object type")
 
 
 def _step_tokens(step: str) -> list[str]:

@@ -16,6 +16,8 @@ from pathlib import Path
 from typing import Any
 
 CATALOGUE_SOURCE = "AI2-THOR object types documentation, via the VIRF kitchen catalogue"
+# The object-type catalogue a generated class comes from (its `:catalogue` value).
+CATALOGUE = "AI2-THOR"
 COMMON_SENSE = "VIRF kitchen catalogue (common-sense modelling decision)"
 
 # Category -> parent classes.  Food categories sit under FoodItem; the rest are
@@ -202,7 +204,10 @@ def _axiom(ident: str, comment: str, source: str, expr: str) -> str:
 
 
 def _type_frame(name: str, info: dict[str, Any]) -> str:
-    annotations = [f"rdfs:comment {_quote('AI2-THOR object type ' + name + '.')}"]
+    annotations = [
+        f"rdfs:comment {_quote('AI2-THOR object type ' + name + '.')}",
+        f":catalogue {_quote(CATALOGUE)}",
+    ]
     for material in info.get("typical_materials", []):
         annotations.append(f":typicalMaterial {_quote(material)}")
     for state in info.get("default_states", []):

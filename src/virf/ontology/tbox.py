@@ -128,6 +128,8 @@ class Vocabulary:
     # state -> the states it excludes (declared disjoint), plus the epistemic
     # markers it settles (UnknownFillState is settled by a known fill state)
     exclusive_states: Mapping[str, frozenset[str]] = field(default_factory=dict)
+    # object types generated from an object-type catalogue (a `:catalogue` annotation)
+    catalogue_types: frozenset[str] = frozenset()
 
     def is_a(self, cls: str, ancestor: str) -> bool:
         return cls == ancestor or ancestor in self.ancestors.get(cls, frozenset())
@@ -481,6 +483,9 @@ class TBox:
             material_classes=MappingProxyType(dict(sorted(material_classes.items()))),
             exclusive_states=MappingProxyType(
                 {k: frozenset(v) for k, v in sorted(exclusive.items())}
+            ),
+            catalogue_types=frozenset(
+                c for c, props in frozen_ann.items() if c in classes and props.get("catalogue")
             ),
         )
         return vocab, self._stats(uscs, usc_module)

@@ -54,6 +54,7 @@ from virf.verify.questions import (
 from virf.verify.requirements import Requirement, StepEvent, Unreadable, check_requirement
 from virf.world.plan import PlanStep
 from virf.world.scene import Scene
+from virf.world.simulate import simulate
 from virf.world.simulator import (
     MissingObject,
     PreconditionFailure,
@@ -254,21 +255,8 @@ class Verifier:
         self, scene: Scene, plan: Sequence[PlanStep]
     ) -> tuple[list[WorldState], list[ResolvedStep], MissingObject | PreconditionFailure | None]:
         """States S0..Sn, stopping at an unknown object or a failed precondition."""
-        states: list[WorldState] = [self.sim.initial(scene)]
-        resolved: list[ResolvedStep] = []
-        stop: MissingObject | PreconditionFailure | None = None
-        for step in plan:
-            r = self.sim.resolve(states[-1], step)
-            if isinstance(r, MissingObject):
-                stop = r
-                break
-            resolved.append(r)
-            nxt = self.sim.apply(states[-1], r)
-            if isinstance(nxt, PreconditionFailure):
-                stop = nxt
-                break
-            states.append(nxt)
-        return states, resolved, stop
+        trace = simulate(self.sim, self.sim.initial(scene), plan)
+        return list(trace.states), list(trace.resolved), trace.stop
 
     def snapshots(self, scene: Scene, plan: Sequence[PlanStep]) -> list[dict[Fact, Provenance]]:
         """The ABox the reasoner sees for each step (for baselines and tools)."""

@@ -177,13 +177,9 @@ class Simulator:
         return any(
             self.vocab.annotation(c, "compatibleReceptacle")
             or self.vocab.is_a(c, "Receptacle")
-            or self._has_kitchen_axioms(c)
+            or c in self.vocab.catalogue_types
             for c in classes
         )
-
-    def _has_kitchen_axioms(self, cls: str) -> bool:
-        comment = self.vocab.annotation(cls, "comment")
-        return bool(comment) and comment[0].startswith("AI2-THOR object type")
 
     def lacks(self, obj: str, state: WorldState, affordance: str) -> bool:
         classes = state.objects.get(obj, frozenset())
