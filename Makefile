@@ -10,7 +10,7 @@ STAMP  := $(VENV)/.virf-installed
 
 SAB    ?= ../shared/benchmarks/safeagentbench
 
-.PHONY: demo test test-full lint java install clean bench-report bench-latency
+.PHONY: demo test test-full lint java install clean bench-report bench-latency kb
 
 demo: $(STAMP)
 	$(BIN)/virf demo examples
@@ -33,6 +33,13 @@ test-full: $(STAMP)
 	VIRF_FULL=1 $(BIN)/pytest
 
 install: $(STAMP)
+
+# Recompiles the knowledge artifacts (src/virf/ontology/compiled/*.json) from
+# the .omn modules with OWLAPI and HermiT.  Run it after editing a module or
+# the catalogue; tests/test_compiled_kb.py fails until the artifacts match.
+kb: $(STAMP)
+	$(BIN)/python -m virf.ontology.build
+	$(BIN)/python -m virf.ontology.compile
 
 # Regenerates docs/benchmarks/safeagentbench.md from a run over the benchmark files.
 bench-report: $(STAMP)

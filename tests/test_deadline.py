@@ -21,8 +21,8 @@ from conftest import EXAMPLES_DIR, inst, rel
 
 from virf.api import LogicTutor
 from virf.bench.latency import chain_case, chain_markdown, deadline_row
+from virf.ontology.fragment import Axiom, Role
 from virf.reasoning import Classification, DeadlineExceeded, Engine, make_engine
-from virf.reasoning.fragment import Axiom, Role
 from virf.reasoning.program import Model, Program
 from virf.schema import Fact, FactKind
 from virf.verify.verifier import Verifier
@@ -228,7 +228,7 @@ def test_long_chain_answers_are_the_reference_engines(
         assert fast.entails(rest, "UnsafeMicrowaveUsage", "Microwave_1") is False
         assert ref.entails(rest, "UnsafeMicrowaveUsage", "Microwave_1") is False
     # "Box_10 encloses nothing" contradicts the chain below it.
-    closed = [*facts, Fact("Box_10", "encloses", "", FactKind.CLOSURE)]
+    closed = [*facts, Fact.closure("Box_10", "encloses", [])]
     assert fast.consistent(closed) is ref.consistent(closed) is False
 
 

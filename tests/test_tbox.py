@@ -68,8 +68,8 @@ def _notes(ax: Any) -> dict[str, str]:
 def _axioms(tutor, keep) -> list[tuple[str, str, Any, dict[str, str]]]:
     """(module, axiom type, axiom, annotations) for modules accepted by ``keep``."""
     out = []
-    for ont in tutor.tbox.closure:
-        module = tutor.tbox.module_name(ont)
+    for ont in tutor.tbox.owl.closure:
+        module = tutor.tbox.owl.module_name(ont)
         if keep(module):
             for ax in ont.getLogicalAxioms():
                 out.append((module, str(ax.getAxiomType()), ax, _notes(ax)))

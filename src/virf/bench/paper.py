@@ -20,7 +20,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from virf.errors import EnvironmentProblem, InputError
+from virf.errors import EnvironmentProblem, InputError, VirfError
 from virf.ontology.tbox import NS, TBox
 from virf.schema import Fact, FactKind
 
@@ -50,41 +50,16 @@ def export_tbox(tbox: TBox, path: str | Path, individual_ns: str | None = INDIVI
     class its own superclass and fails.  In OWL 2 DL a punned class and
     individual are unrelated, so the renaming leaves every entailment as is.
     """
-    from java.io import File
-    from java.util import HashMap, HashSet
-    from org.semanticweb.owlapi.apibinding import OWLManager
-    from org.semanticweb.owlapi.formats import RDFXMLDocumentFormat
-    from org.semanticweb.owlapi.model import IRI
-    from org.semanticweb.owlapi.util import OWLObjectDuplicator
-
-    manager = OWLManager.createOWLOntologyManager()
-    df = manager.getOWLDataFactory()
-    renames = HashMap()
-    if individual_ns is not None:
-        for ont in tbox.closure:
-            for ind in ont.getIndividualsInSignature():
-                if ind.isNamed():
-                    name = str(ind.getIRI().getShortForm())
-                    renames.put(ind, IRI.create(individual_ns + name))
-    copy = OWLObjectDuplicator(renames, manager)
-    axioms = HashSet()
-    for ont in tbox.closure:
-        for entity in ont.getSignature():
-            if not entity.isBuiltIn():
-                axioms.add(copy.duplicateObject(df.getOWLDeclarationAxiom(entity)))
-        for ax in ont.getLogicalAxioms():
-            axioms.add(copy.duplicateObject(ax.getAxiomWithoutAnnotations()))
-    merged = manager.createOntology(IRI.create(NS.rstrip("#")))
-    manager.addAxioms(merged, axioms)
-    fmt = RDFXMLDocumentFormat()
-    fmt.setDefaultPrefix(NS)
     target = Path(path).resolve()
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
-        manager.saveOntology(merged, fmt, IRI.create(File(str(target))))
-    except Exception as exc:  # OWLAPI wraps an I/O failure in its own exception
+        return tbox.owl.export_rdfxml(target, individual_ns)
+    except OSError as exc:
         raise EnvironmentProblem(f"cannot write the TBox to {target}: {exc}") from None
-    return int(merged.getLogicalAxiomCount())
+    except Exception as exc:  # OWLAPI wraps an I/O failure in its own exception
+        if isinstance(exc, VirfError):
+            raise
+        raise EnvironmentProblem(f"cannot write the TBox to {target}: {exc}") from None
 
 
 def ensure_paper_env(root: str | Path) -> Path:
@@ -140,7 +115,10 @@ def fact_json(fact: Fact) -> dict[str, Any]:
         "kind": str(fact.kind),
     }
     if fact.kind is FactKind.CLOSURE:
-        out["members"] = list(fact.members())
+        # Job files keep their old "o" (the members comma-joined) so they do
+        # not change; the script reads "members".
+        out["o"] = ",".join(fact.members)
+        out["members"] = list(fact.members)
     return out
 
 

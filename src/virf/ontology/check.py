@@ -6,30 +6,28 @@ from __future__ import annotations
 from collections import defaultdict
 from typing import Any
 
+from virf.ontology.owlapi import make_reasoner
 from virf.ontology.tbox import TBox, load_tbox
 
 
 def check_tbox(scenario: str = "kitchen") -> dict[str, Any]:
-    tbox = load_tbox(scenario)  # starts the JVM
-    from org.semanticweb.HermiT import Configuration, Reasoner
-
+    tbox = load_tbox(scenario)
+    owl = tbox.owl  # starts the JVM
     vocab = tbox.vocabulary
-    config = Configuration()
-    config.throwInconsistentOntologyException = False
-    reasoner = Reasoner(config, tbox.root)
+    reasoner = make_reasoner("hermit", owl.root)
     try:
         consistent = bool(reasoner.isConsistent())
         unsat = []
         if consistent:
             for name in sorted(vocab.uscs):
-                cls = tbox.factory.getOWLClass(_iri(name))
+                cls = owl.owl_class(name)
                 if not reasoner.isSatisfiable(cls):
                     unsat.append(vocab.uscs[name].id)
             unsat_classes = sorted(
                 name
                 for name in vocab.classes
                 if name not in vocab.class_synonyms
-                and not reasoner.isSatisfiable(tbox.factory.getOWLClass(_iri(name)))
+                and not reasoner.isSatisfiable(owl.owl_class(name))
             )
         else:
             unsat = sorted(u.id for u in vocab.uscs.values())
@@ -86,11 +84,3 @@ def fast_engine_summary(tbox: TBox) -> dict[str, Any]:
         "compiled_axioms": len(frag.kb) - len(prog.checks),
         "model_checked_axioms": len(prog.checks),
     }
-
-
-def _iri(name: str) -> Any:
-    from org.semanticweb.owlapi.model import IRI
-
-    from virf.ontology.tbox import NS
-
-    return IRI.create(NS + name)

@@ -6,68 +6,39 @@ entailed (optionally with some background axioms left out).  The verifier
 builds diagnoses from nothing else, so any engine that answers these exactly
 gives the same reports.
 
-Every question takes an optional ``deadline`` (a :func:`time.monotonic`
-instant).  Once it passes, the engine stops where it is and raises
-:class:`DeadlineExceeded`, a :class:`ReasonerFailure`, so the caller fails
-closed.  The deadline is held in a context variable for the duration of the
-call: an engine that asks another engine (the fast engine's fallback, a
-wrapper that delegates) passes it on without having to thread it through,
-and an engine's inner loops read it with :func:`check_deadline`.
+Every question takes an optional ``deadline``; see :mod:`virf.deadlines`.
 """
 
 from __future__ import annotations
 
-import time
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Collection, Iterable, Iterator, Sequence
-from contextlib import contextmanager
-from contextvars import ContextVar
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from importlib import import_module
 
+from virf.deadlines import (
+    DeadlineExceeded,
+    ReasonerFailure,
+    check_deadline,
+    current_deadline,
+    until,
+)
 from virf.errors import InputError, closest
 from virf.ontology.tbox import TBox
 from virf.schema import Fact
 
-
-class ReasonerFailure(Exception):
-    """The engine could not answer (crash, timeout).  Verification fails closed."""
-
-
-class DeadlineExceeded(ReasonerFailure):
-    """The caller's deadline passed before the engine had an answer."""
-
-
-_DEADLINE: ContextVar[float | None] = ContextVar("virf_deadline", default=None)
-
-
-def current_deadline() -> float | None:
-    """The deadline in force for the engine call running in this context."""
-    return _DEADLINE.get()
-
-
-def check_deadline(where: str = "") -> None:
-    """Raise :class:`DeadlineExceeded` when the deadline in force has passed.
-
-    Cheap enough for an inner loop that calls it every few thousand
-    iterations, not on every one."""
-    deadline = _DEADLINE.get()
-    if deadline is not None and time.monotonic() > deadline:
-        raise DeadlineExceeded(f"the deadline passed{' ' + where if where else ''}")
-
-
-@contextmanager
-def until(deadline: float | None) -> Iterator[None]:
-    """Engine calls inside the block stop at ``deadline``.  An earlier deadline
-    already in force is kept: a nested call may not extend its caller's time."""
-    outer = _DEADLINE.get()
-    if deadline is None or (outer is not None and outer <= deadline):
-        yield
-        return
-    token = _DEADLINE.set(deadline)
-    try:
-        yield
-    finally:
-        _DEADLINE.reset(token)
+__all__ = [
+    "Classification",
+    "DeadlineExceeded",
+    "Engine",
+    "ReasonerFailure",
+    "check_deadline",
+    "current_deadline",
+    "engine_names",
+    "make_engine",
+    "register",
+    "until",
+]
 
 
 @dataclass(frozen=True)
@@ -83,6 +54,12 @@ class Engine(ABC):
     def __init__(self, tbox: TBox, timeout_s: float = 30.0) -> None:
         self.tbox = tbox
         self.timeout_s = timeout_s
+
+    def stats(self) -> Mapping[str, int]:
+        """Counters of how the engine answered so far (``calls``, ``fallbacks``
+        and one ``fallback: <why>`` per reason for an engine that can hand a
+        question to another); empty for an engine that keeps none."""
+        return {}
 
     def fork(self) -> Engine:
         """An independent engine of the same kind, for another thread."""
@@ -131,29 +108,38 @@ class Engine(ABC):
     def _consistent(self, facts: list[Fact], without: frozenset[str]) -> bool: ...
 
 
+# The built-in engines, named by where they live: a module is imported only
+# when its engine is asked for, so choosing the fast engine never loads the
+# Java bridge, and the engine modules can import this one without a cycle.
+BUILTIN: dict[str, str] = {
+    "fast": "virf.reasoning.fast:FastEngine",
+    "hermit": "virf.reasoning.reference:HermitEngine",
+    "pellet": "virf.reasoning.reference:PelletEngine",
+}
+ALIASES = {"reference": "hermit", "openllet": "pellet"}
 _REGISTRY: dict[str, Callable[[TBox, float], Engine]] = {}
-_ALIASES = {"reference": "hermit", "openllet": "pellet"}
 
 
 def register(name: str, factory: Callable[[TBox, float], Engine]) -> None:
+    """Add an engine beyond the built-in ones (a plugin, a test double)."""
     _REGISTRY[name] = factory
 
 
 def engine_names() -> list[str]:
-    _load_builtin()
-    return sorted(set(_REGISTRY) | set(_ALIASES))
+    return sorted(set(BUILTIN) | set(_REGISTRY) | set(ALIASES))
+
+
+def engine_factory(name: str) -> Callable[[TBox, float], Engine]:
+    key = ALIASES.get(name, name)
+    if key in _REGISTRY:
+        return _REGISTRY[key]
+    if key not in BUILTIN:
+        near = closest(name, engine_names()) or engine_names()
+        raise InputError(f"unknown engine '{name}'; choose from {', '.join(near)}")
+    module, _, attr = BUILTIN[key].partition(":")
+    factory: Callable[[TBox, float], Engine] = getattr(import_module(module), attr)
+    return factory
 
 
 def make_engine(name: str, tbox: TBox, timeout_s: float = 30.0) -> Engine:
-    _load_builtin()
-    key = _ALIASES.get(name, name)
-    if key not in _REGISTRY:
-        near = closest(name, engine_names()) or engine_names()
-        raise InputError(f"unknown engine '{name}'; choose from {', '.join(near)}")
-    return _REGISTRY[key](tbox, timeout_s)
-
-
-def _load_builtin() -> None:
-    # Imported here, not at the top: they import this module.  Importing is
-    # idempotent, and each registers its engines.
-    from virf.reasoning import fast, owlapi  # noqa: F401
+    return engine_factory(name)(tbox, timeout_s)

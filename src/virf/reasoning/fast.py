@@ -17,39 +17,32 @@ When the bounds meet, the answer is exact.  When they do not (the candidate
 is not a model, or no falsifying extension is found), or when the TBox uses a
 construct outside the fragment (detected when the engine is built), or the
 input asserts a query or sink class, the question goes to the reference
-engine.  Every fallback is counted in :attr:`FastEngine.stats`.
+engine.  Every fallback is counted in :meth:`FastEngine.stats`.
 """
 
 from __future__ import annotations
 
 import threading
-import weakref
 from collections import Counter
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
+from virf.errors import VirfError
+from virf.ontology.fragment import NOTHING, THING, Axiom, Expr, Fragment, Role
 from virf.ontology.tbox import TBox
-from virf.reasoning import Classification, Engine, check_deadline, register
-from virf.reasoning.fragment import NOTHING, THING, Axiom, Expr, Fragment, Role, load_fragment
+from virf.reasoning import Classification, Engine, ReasonerFailure, check_deadline, make_engine
 from virf.reasoning.program import ChaseLimit, Model, Program, compile_program
 from virf.schema import Fact, FactKind
 
-_FRAGMENTS: weakref.WeakKeyDictionary[TBox, Fragment] = weakref.WeakKeyDictionary()
-_LOCK = threading.Lock()
 # Names the engine uses for itself; an input name starting like one of these
 # could be confused with them, so such an input goes to the reference engine.
 _INTERNAL = ("owl:", "aux:", "{", "undefined:", "_:")
 
 
 def fragment_of(tbox: TBox) -> Fragment:
-    """The TBox converted once per loaded TBox."""
-    with _LOCK:
-        frag = _FRAGMENTS.get(tbox)
-        if frag is None:
-            frag = load_fragment(tbox.logical_axioms(), tbox.render)
-            _FRAGMENTS[tbox] = frag
-        return frag
+    """The TBox as fast-engine terms (compiled with the knowledge artifact)."""
+    return tbox.fragment
 
 
 class Fallback(Exception):
@@ -385,7 +378,7 @@ class FastEngine(Engine):
         self.fragment = fragment_of(tbox)
         self._programs: dict[frozenset[str], Program] = {}
         self._reference: Engine | None = None
-        self.stats: Counter[str] = Counter()
+        self._counts: Counter[str] = Counter()
         self._lock = threading.Lock()
         self._guards = {
             q: g
@@ -397,9 +390,14 @@ class FastEngine(Engine):
     @property
     def reference(self) -> Engine:
         if self._reference is None:
-            from virf.reasoning.owlapi import HermitEngine
-
-            self._reference = HermitEngine(self.tbox, self.timeout_s)
+            try:
+                self._reference = make_engine("reference", self.tbox, self.timeout_s)
+            except VirfError as exc:
+                # No Java here (or the modules would not load): the question
+                # has no answer, which the verifier reports as ERROR.
+                raise ReasonerFailure(
+                    f"the fast engine needed the reference reasoner, which cannot start: {exc}"
+                ) from None
         return self._reference
 
     def program(self, without: frozenset[str]) -> tuple[Program, frozenset[str]]:
@@ -429,7 +427,7 @@ class FastEngine(Engine):
         # One pass: facts are only queued here; the rules (and the closure
         # checks) run afterwards, over all of them.
         for f in facts:
-            members = f.members() if f.kind is FactKind.CLOSURE else ()
+            members = f.members
             names = (f.subject, f.predicate, *(members or (f.object,)))
             if any(n.startswith(_INTERNAL) for n in names):
                 raise Fallback(f"the input name in '{f.render()}' looks like an internal name")
@@ -496,12 +494,12 @@ class FastEngine(Engine):
 
     def _answer(self, exact: Callable[[], Any], fallback: Callable[[], Any]) -> Any:
         with self._lock:
-            self.stats["calls"] += 1
+            self._counts["calls"] += 1
             try:
                 return exact()
             except (Fallback, ChaseLimit) as why:
-                self.stats["fallbacks"] += 1
-                self.stats[f"fallback: {why}"] += 1
+                self._counts["fallbacks"] += 1
+                self._counts[f"fallback: {why}"] += 1
         return fallback()
 
     # ------------------------------------------------------------------ engine API
@@ -570,16 +568,17 @@ class FastEngine(Engine):
         result: bool = self._answer(exact, lambda: self.reference._consistent(facts, without))
         return result
 
+    def stats(self) -> dict[str, int]:
+        with self._lock:
+            return dict(self._counts)
+
     @contextmanager
     def counting(self) -> Iterator[Counter[str]]:
         """Stats of the calls made inside the block."""
-        before = Counter(self.stats)
+        before = Counter(self._counts)
         delta: Counter[str] = Counter()
         try:
             yield delta
         finally:
-            delta.update(self.stats)
+            delta.update(self._counts)
             delta.subtract(before)
-
-
-register("fast", FastEngine)

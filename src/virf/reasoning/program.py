@@ -26,8 +26,8 @@ from dataclasses import dataclass, field
 from itertools import count
 from typing import Any
 
+from virf.ontology.fragment import NOTHING, THING, Axiom, Expr, Fragment, Role
 from virf.reasoning import DeadlineExceeded, current_deadline
-from virf.reasoning.fragment import NOTHING, THING, Axiom, Expr, Fragment, Role
 
 
 def nominal(individual: str) -> str:

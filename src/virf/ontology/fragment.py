@@ -31,10 +31,9 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
-from virf.ontology.tbox import NS
+from virf.ontology.iri import NOTHING, THING, iri_short
 
-THING = "owl:Thing"
-NOTHING = "owl:Nothing"
+__all__ = ["NOTHING", "THING"]
 
 Role = tuple[str, bool]  # (object property, inverted)
 # Class expressions are nested tuples:
@@ -57,22 +56,11 @@ class Axiom:
     text: str
 
 
-def short(iri: Any) -> str:
-    text = str(iri.toString())
-    if text.startswith(NS):
-        return text[len(NS) :]
-    if text == "http://www.w3.org/2002/07/owl#Thing":
-        return THING
-    if text == "http://www.w3.org/2002/07/owl#Nothing":
-        return NOTHING
-    return text
-
-
 def _role(pe: Any) -> Role:
     pe = pe.getSimplified()
     if pe.isAnonymous():
-        return (short(pe.getInverse().asOWLObjectProperty().getIRI()), True)
-    return (short(pe.asOWLObjectProperty().getIRI()), False)
+        return (iri_short(pe.getInverse().asOWLObjectProperty().getIRI()), True)
+    return (iri_short(pe.asOWLObjectProperty().getIRI()), False)
 
 
 def _bool_literal(lit: Any) -> bool:
@@ -89,7 +77,7 @@ def expr(ce: Any) -> Expr:
     """OWLAPI class expression -> Python term."""
     kind = str(ce.getClassExpressionType().toString())
     if kind == "Class":
-        return ("C", short(ce.asOWLClass().getIRI()))
+        return ("C", iri_short(ce.asOWLClass().getIRI()))
     if kind == "ObjectIntersectionOf":
         return ("and", tuple(sorted(expr(c) for c in ce.getOperandsAsList())))
     if kind == "ObjectUnionOf":
@@ -104,7 +92,7 @@ def expr(ce: Any) -> Expr:
         ind = ce.getFiller()
         if ind.isAnonymous():
             raise Unsupported("anonymous individual")
-        return ("value", _role(ce.getProperty()), short(ind.asOWLNamedIndividual().getIRI()))
+        return ("value", _role(ce.getProperty()), iri_short(ind.asOWLNamedIndividual().getIRI()))
     if kind in ("ObjectMinCardinality", "ObjectMaxCardinality", "ObjectExactCardinality"):
         n = int(ce.getCardinality())
         role = _role(ce.getProperty())
@@ -119,10 +107,10 @@ def expr(ce: Any) -> Expr:
         for i in ce.getIndividualsAsList():
             if i.isAnonymous():
                 raise Unsupported("anonymous individual")
-            inds.append(short(i.asOWLNamedIndividual().getIRI()))
+            inds.append(iri_short(i.asOWLNamedIndividual().getIRI()))
         return ("oneof", tuple(sorted(inds)))
     if kind == "DataHasValue":
-        prop = short(ce.getProperty().asOWLDataProperty().getIRI())
+        prop = iri_short(ce.getProperty().asOWLDataProperty().getIRI())
         return ("dvalue", prop, _bool_literal(ce.getFiller()))
     raise Unsupported(f"class expression {kind}")
 
@@ -130,7 +118,7 @@ def expr(ce: Any) -> Expr:
 def _named_ind(i: Any) -> str:
     if i.isAnonymous():
         raise Unsupported("anonymous individual")
-    return short(i.asOWLNamedIndividual().getIRI())
+    return iri_short(i.asOWLNamedIndividual().getIRI())
 
 
 def convert(ax: Any, ident: str | None, text: str) -> Axiom:
@@ -156,7 +144,7 @@ def convert(ax: Any, ident: str | None, text: str) -> Axiom:
             _named_ind(ax.getObject()),
         )
     if kind == "DataPropertyAssertion":
-        prop = short(ax.getProperty().asOWLDataProperty().getIRI())
+        prop = iri_short(ax.getProperty().asOWLDataProperty().getIRI())
         return make("dassert", prop, _named_ind(ax.getSubject()), _bool_literal(ax.getObject()))
     if kind == "SubObjectPropertyOf":
         return make("subprop", _role(ax.getSubProperty()), _role(ax.getSuperProperty()))
@@ -178,17 +166,19 @@ def convert(ax: Any, ident: str | None, text: str) -> Axiom:
     if kind == "ObjectPropertyRange":
         return make("range", _role(ax.getProperty()), expr(ax.getRange()))
     if kind == "FunctionalDataProperty":
-        return make("dfunc", short(ax.getProperty().asOWLDataProperty().getIRI()))
+        return make("dfunc", iri_short(ax.getProperty().asOWLDataProperty().getIRI()))
     if kind == "DataPropertyRange":
         rng = ax.getRange()
         if not rng.isOWLDatatype() or not str(rng.asOWLDatatype().getIRI().toString()).endswith(
             "#boolean"
         ):
             raise Unsupported("data property range other than xsd:boolean")
-        return make("drange", short(ax.getProperty().asOWLDataProperty().getIRI()))
+        return make("drange", iri_short(ax.getProperty().asOWLDataProperty().getIRI()))
     if kind == "DataPropertyDomain":
         return make(
-            "ddomain", short(ax.getProperty().asOWLDataProperty().getIRI()), expr(ax.getDomain())
+            "ddomain",
+            iri_short(ax.getProperty().asOWLDataProperty().getIRI()),
+            expr(ax.getDomain()),
         )
     if kind == "DifferentIndividuals":
         # Candidate models interpret distinct names as distinct elements, so
@@ -244,20 +234,25 @@ class Fragment:
 
 
 def load_fragment(owl_axioms: Iterable[Any], render: Any) -> Fragment:
+    """OWLAPI logical axioms -> the partitioned fragment (Java side)."""
+    from virf.ontology.owlapi import annotations_of
+
     axioms: list[Axiom] = []
     problems: list[str] = []
     for ax in owl_axioms:
-        ident = None
-        for ann in ax.getAnnotations():
-            if str(ann.getProperty().getIRI().toString()) == NS + "id":
-                ident = str(ann.getValue().asLiteral().get().getLiteral())
+        ident = annotations_of(ax).get("id")
         text = render(ax)
         try:
             axioms.append(convert(ax, ident, text))
         except Unsupported as exc:
             problems.append(f"{exc} in '{text}'")
-    axioms.sort(key=lambda a: (a.kind, repr(a.args)))
-    frag = Fragment(axioms, sorted(set(problems)))
+    return fragment_from(axioms, problems)
+
+
+def fragment_from(axioms: list[Axiom], problems: list[str]) -> Fragment:
+    """The partitioned fragment of converted axioms (also what the compiled
+    knowledge artifact is read back into)."""
+    frag = Fragment(sorted(axioms, key=lambda a: (a.kind, repr(a.args))), sorted(set(problems)))
     _partition(frag)
     return frag
 

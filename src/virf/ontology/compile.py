@@ -1,0 +1,524 @@
+"""Compile the ontology modules into the knowledge artifact the fast path loads.
+
+For each scenario, OWLAPI parses the Manchester-syntax modules and HermiT
+classifies them once; what the Python side needs (names, the inferred class
+hierarchy, annotations, USC metadata, background axioms, module statistics and
+the TBox as fast-engine terms) is written to ``compiled/<scenario>.json``.
+``virf verify`` with the fast engine then answers without starting Java.
+
+The artifact names a digest of the module files it came from; a module edited
+since is noticed when the knowledge base loads, and the modules are compiled
+in-process instead (see :func:`virf.ontology.tbox.load_tbox`).
+
+    python -m virf.ontology.compile          # rewrite every artifact
+    python -m virf.ontology.compile --check  # exit 1 when one is out of date
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import sys
+from collections import defaultdict
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+from virf.errors import InputError
+from virf.ontology.fragment import Axiom, Fragment, fragment_from, load_fragment
+from virf.ontology.iri import MODULE_BASE, NS, THING, iri_short
+from virf.ontology.owlapi import (
+    OwlModules,
+    annotations_of,
+    axiom_type,
+    literal,
+    make_reasoner,
+)
+from virf.ontology.tbox import (
+    BackgroundAxiom,
+    ModuleStats,
+    UnsafeStateConcept,
+    Vocabulary,
+    lower_index,
+    ontology_dir,
+    scenario_names,
+)
+
+# Bumped whenever the artifact's layout or the compiler's output changes, so
+# an artifact written by an older compiler counts as out of date.
+FORMAT = 1
+
+
+@dataclass(frozen=True)
+class CompiledKB:
+    """Everything the Python side knows of one scenario's ontology."""
+
+    scenario: str
+    digest: str
+    vocabulary: Vocabulary
+    module_stats: tuple[ModuleStats, ...]
+    fragment: Fragment
+
+
+def artifact_dir() -> Path:
+    return Path(__file__).with_name("compiled")
+
+
+def artifact_path(scenario: str) -> Path:
+    return artifact_dir() / f"{scenario}.json"
+
+
+def source_digest(module_dir: Path | None = None) -> str:
+    """A digest of every module file (any edit may change any scenario's
+    closure) and of the artifact format."""
+    h = hashlib.sha256(f"virf-kb-format-{FORMAT}\n".encode())
+    for path in sorted((module_dir or ontology_dir()).glob("*.omn")):
+        h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+def compile_kb(owl: OwlModules, digest: str) -> CompiledKB:
+    vocabulary, stats = _index(owl)
+    fragment = load_fragment(owl.logical_axioms(), owl.render)
+    return CompiledKB(owl.scenario, digest, vocabulary, stats, fragment)
+
+
+def _index(owl: OwlModules) -> tuple[Vocabulary, tuple[ModuleStats, ...]]:
+    classes: set[str] = set()
+    oprops: set[str] = set()
+    dprops: set[str] = set()
+    individuals: set[str] = set()
+    annotations: dict[str, dict[str, list[str]]] = defaultdict(lambda: defaultdict(list))
+    background: dict[str, BackgroundAxiom] = {}
+    definitions: dict[str, tuple[str, str]] = {}
+    direct_materials: dict[str, set[str]] = defaultdict(set)
+    inverses: dict[str, str] = {}
+    defined_by_material: dict[str, str] = {}
+    told_elsewhere: set[str] = set()  # classes with axioms beyond a material definition
+    disjoint_pairs: set[tuple[str, str]] = set()
+    for ont in owl.closure:
+        module = owl.module_name(ont)
+        for c in ont.getClassesInSignature():
+            if str(c.getIRI().toString()).startswith(NS):
+                classes.add(iri_short(c.getIRI()))
+        for p in ont.getObjectPropertiesInSignature():
+            if str(p.getIRI().toString()).startswith(NS):
+                oprops.add(iri_short(p.getIRI()))
+        for p in ont.getDataPropertiesInSignature():
+            if str(p.getIRI().toString()).startswith(NS):
+                dprops.add(iri_short(p.getIRI()))
+        for i in ont.getIndividualsInSignature():
+            if i.isNamed():
+                individuals.add(iri_short(i.asOWLNamedIndividual().getIRI()))
+        for ax in ont.axioms(axiom_type("ANNOTATION_ASSERTION")).toArray():
+            subject = ax.getSubject()
+            if subject.isIRI():
+                key = iri_short(subject.asIRI().get())
+                prop = iri_short(ax.getProperty().getIRI())
+                annotations[key][prop].append(literal(ax.getValue()))
+        for ax in ont.axioms(axiom_type("SUBCLASS_OF")).toArray():
+            sub, sup = ax.getSubClass(), ax.getSuperClass()
+            if (
+                sub.isAnonymous()
+                or str(sup.getClassExpressionType().toString()) != "ObjectHasValue"
+            ):
+                continue
+            if iri_short(sup.getProperty().asOWLObjectProperty().getIRI()) == "hasMaterial":
+                value = sup.getFiller()
+                if value.isNamed():
+                    direct_materials[iri_short(sub.asOWLClass().getIRI())].add(
+                        iri_short(value.asOWLNamedIndividual().getIRI())
+                    )
+        for ax in ont.axioms(axiom_type("INVERSE_OBJECT_PROPERTIES")).toArray():
+            first, second = ax.getFirstProperty(), ax.getSecondProperty()
+            if first.isNamed() and second.isNamed():
+                a = iri_short(first.asOWLObjectProperty().getIRI())
+                b = iri_short(second.asOWLObjectProperty().getIRI())
+                inverses[a], inverses[b] = b, a
+        for ax in ont.axioms(axiom_type("EQUIVALENT_CLASSES")).toArray():
+            named = [c for c in ax.getClassExpressionsAsList() if not c.isAnonymous()]
+            other = [c for c in ax.getClassExpressionsAsList() if c.isAnonymous()]
+            if len(named) == 1 and len(other) == 1:
+                material = _material_definition(other[0])
+                if material is not None:
+                    defined_by_material[iri_short(named[0].asOWLClass().getIRI())] = material
+                    continue
+            told_elsewhere.update(iri_short(c.asOWLClass().getIRI()) for c in named)
+        for ax in ont.axioms(axiom_type("SUBCLASS_OF")).toArray():
+            if not ax.getSubClass().isAnonymous():
+                told_elsewhere.add(iri_short(ax.getSubClass().asOWLClass().getIRI()))
+        for ax in ont.axioms(axiom_type("DISJOINT_CLASSES")).toArray():
+            named_ops = [
+                iri_short(c.asOWLClass().getIRI())
+                for c in ax.getClassExpressionsAsList()
+                if not c.isAnonymous()
+            ]
+            disjoint_pairs.update((a, b) for a in named_ops for b in named_ops if a != b)
+        for ax in ont.getLogicalAxioms():
+            notes = annotations_of(ax)
+            if "id" not in notes:
+                continue
+            ident = notes["id"]
+            text = owl.render(ax)
+            if ident.endswith("-def"):
+                definitions[ident[: -len("-def")]] = (text, module)
+            if notes.get("kind") == "background":
+                sig = frozenset(iri_short(e.getIRI()) for e in ax.getSignature())
+                background[ident] = BackgroundAxiom(
+                    id=ident,
+                    description=notes.get("comment", ""),
+                    source=notes.get("source", ""),
+                    text=text,
+                    module=module,
+                    signature=sig,
+                )
+
+    # Classify once so that ancestors include inferred ones (a Pot is a
+    # MetallicObject because every pot is made of metal).
+    reasoner = make_reasoner("hermit", owl.root)
+    try:
+        from org.semanticweb.owlapi.reasoner import InferenceType
+
+        reasoner.precomputeInferences(InferenceType.CLASS_HIERARCHY)
+        if not reasoner.isConsistent():
+            raise InputError(f"the {owl.scenario} TBox is inconsistent")
+        ancestors: dict[str, frozenset[str]] = {}
+        for name in sorted(classes):
+            cls = owl.owl_class(name)
+            sup = reasoner.getSuperClasses(cls, False).getFlattened()
+            eq = reasoner.getEquivalentClasses(cls).getEntities()
+            found = {iri_short(s.getIRI()) for s in list(sup) + list(eq)}
+            found.discard(THING)
+            found.discard(name)
+            ancestors[name] = frozenset(a for a in found if a in classes)
+    finally:
+        reasoner.dispose()
+
+    frozen_ann = {
+        # Repeated values sorted: OWLAPI hands them over in hash order.
+        k: MappingProxyType({p: tuple(sorted(v)) for p, v in props.items()})
+        for k, props in annotations.items()
+    }
+    uscs: dict[str, UnsafeStateConcept] = {}
+    preconditions: dict[str, UnsafeStateConcept] = {}
+    usc_module: dict[str, str] = {}
+    for name in sorted(classes):
+        anc = ancestors.get(name, frozenset())
+        ann = frozen_ann.get(name, MappingProxyType({}))
+        is_usc = "UnsafeStateConcept" in anc
+        is_pre = "PreconditionViolation" in anc
+        if not (is_usc or is_pre) or "id" not in ann:
+            continue
+        ident = ann["id"][0]
+        text, module = definitions.get(ident, ("", ""))
+        usc = UnsafeStateConcept(
+            id=ident,
+            name=name,
+            kind=_one(ann, "kind"),
+            category=_one(ann, "category"),
+            danger_level=_one(ann, "dangerLevel"),
+            description=_one(ann, "comment"),
+            safety_warning=_one(ann, "safetyWarning"),
+            trigger_reason=_one(ann, "triggerReason"),
+            suggestion=_one(ann, "suggestion"),
+            source=_one(ann, "source"),
+            check_at=_one(ann, "checkAt") or "always",
+            definition=text,
+            module=module,
+            question=_one(ann, "question"),
+            generalizes=_one(ann, "generalizes"),
+        )
+        (uscs if is_usc else preconditions)[name] = usc
+        usc_module[name] = module
+
+    prop_syn: dict[str, str] = {}
+    cls_syn: dict[str, str] = {}
+    for term, props in frozen_ann.items():
+        for alias in props.get("synonym", ()):
+            if term in oprops or term in dprops:
+                if alias in oprops:
+                    continue  # a declared equivalent property, not just a word
+                prop_syn[alias] = term
+            elif term in classes:
+                cls_syn[alias] = term
+    # Equivalent named properties (isMadeOf == hasMaterial) act as synonyms too.
+    prop_syn.setdefault("isMadeOf", "hasMaterial")
+    prop_syn.setdefault("hasActor", "hasAgent")
+    for alias, target in list(cls_syn.items()):
+        if alias in classes:
+            continue
+        classes.add(alias)
+        ancestors[alias] = ancestors.get(target, frozenset()) | {target}
+    lower = lower_index(classes)
+
+    def is_state(c: str) -> bool:
+        return "State" in ancestors.get(c, frozenset()) and c in individuals
+
+    exclusive: dict[str, set[str]] = defaultdict(set)
+    for a, b in disjoint_pairs:
+        if is_state(a) and is_state(b):
+            exclusive[a].add(b)
+    for marker, props in frozen_ann.items():
+        for settled_by in props.get("settledBy", ()):
+            exclusive[settled_by].add(marker)
+    material_classes = {
+        c: m for c, m in defined_by_material.items() if c not in told_elsewhere and m in individuals
+    }
+
+    vocab = Vocabulary(
+        classes=frozenset(classes),
+        object_properties=frozenset(oprops),
+        data_properties=frozenset(dprops),
+        individuals=frozenset(individuals),
+        ancestors=MappingProxyType(ancestors),
+        annotations=MappingProxyType(frozen_ann),
+        uscs=MappingProxyType(uscs),
+        preconditions=MappingProxyType(preconditions),
+        background=MappingProxyType(background),
+        property_synonyms=MappingProxyType(prop_syn),
+        class_synonyms=MappingProxyType(cls_syn),
+        class_materials=MappingProxyType(
+            {k: frozenset(v) for k, v in sorted(direct_materials.items())}
+        ),
+        _lower=MappingProxyType(lower),
+        inverses=MappingProxyType(dict(sorted(inverses.items()))),
+        material_classes=MappingProxyType(dict(sorted(material_classes.items()))),
+        exclusive_states=MappingProxyType({k: frozenset(v) for k, v in sorted(exclusive.items())}),
+        catalogue_types=frozenset(
+            c for c, props in frozen_ann.items() if c in classes and props.get("catalogue")
+        ),
+    )
+    return vocab, _stats(owl, uscs, usc_module)
+
+
+def _stats(
+    owl: OwlModules, uscs: Mapping[str, UnsafeStateConcept], usc_module: Mapping[str, str]
+) -> tuple[ModuleStats, ...]:
+    out = []
+    for ont in owl.closure:
+        name = owl.module_name(ont)
+        imports = tuple(sorted(iri_short(d.getIRI()) for d in ont.getImportsDeclarations()))
+        mine = [u for n, u in uscs.items() if usc_module.get(n) == name]
+        by_cat: dict[str, int] = defaultdict(int)
+        by_kind: dict[str, int] = defaultdict(int)
+        for u in mine:
+            by_cat[u.category] += 1
+            by_kind[u.kind] += 1
+        out.append(
+            ModuleStats(
+                name=name,
+                iri=MODULE_BASE + name,
+                label=annotations_of(ont).get("label", name),
+                imports=imports,
+                classes=int(ont.getClassesInSignature().size()),
+                object_properties=int(ont.getObjectPropertiesInSignature().size()),
+                data_properties=int(ont.getDataPropertiesInSignature().size()),
+                individuals=int(ont.getIndividualsInSignature().size()),
+                logical_axioms=int(ont.getLogicalAxiomCount()),
+                uscs=len(mine),
+                usc_by_category=MappingProxyType(dict(sorted(by_cat.items()))),
+                usc_by_kind=MappingProxyType(dict(sorted(by_kind.items()))),
+            )
+        )
+    order = {"core": 0, "kitchen": 1}
+    out.sort(key=lambda m: (order.get(m.name, 3 if m.name.startswith("scenario") else 2), m.name))
+    return tuple(out)
+
+
+def _one(ann: Mapping[str, tuple[str, ...]], key: str) -> str:
+    values = ann.get(key, ())
+    return values[0] if values else ""
+
+
+def _material_definition(expr: Any) -> str | None:
+    """M when ``expr`` is exactly ``PhysicalObject and (hasMaterial some M)``."""
+    if str(expr.getClassExpressionType().toString()) != "ObjectIntersectionOf":
+        return None
+    ops = list(expr.getOperandsAsList())
+    if len(ops) != 2:
+        return None
+    named = [o for o in ops if not o.isAnonymous()]
+    some = [o for o in ops if str(o.getClassExpressionType().toString()) == "ObjectSomeValuesFrom"]
+    if (
+        len(named) != 1
+        or len(some) != 1
+        or iri_short(named[0].asOWLClass().getIRI()) != "PhysicalObject"
+    ):
+        return None
+    prop, filler = some[0].getProperty(), some[0].getFiller()
+    if prop.isAnonymous() or filler.isAnonymous():
+        return None
+    if iri_short(prop.asOWLObjectProperty().getIRI()) != "hasMaterial":
+        return None
+    return iri_short(filler.asOWLClass().getIRI())
+
+
+# ---------------------------------------------------------------------------
+# The artifact as JSON, written canonically so that compiling the same modules
+# twice gives the same bytes: OWLAPI hands axioms over in hash order, so every
+# mapping is written with sorted keys, and sets and repeated annotation
+# values sorted.  (No reader depends on the order the JVM happened to use.)
+
+
+def to_json(kb: CompiledKB) -> str:
+    v = kb.vocabulary
+    vocab: dict[str, Any] = {}
+    for f in fields(Vocabulary):
+        if f.name == "_lower":  # derived from the classes when loaded
+            continue
+        vocab[f.name] = _plain(getattr(v, f.name))
+
+    doc = {
+        "format": FORMAT,
+        "scenario": kb.scenario,
+        "digest": kb.digest,
+        "vocabulary": vocab,
+        "module_stats": [_plain(vars(m)) for m in kb.module_stats],
+        "fragment": {
+            "problems": list(kb.fragment.problems),
+            "axioms": [[a.kind, _plain(a.args), a.id, a.text] for a in kb.fragment.axioms],
+        },
+    }
+    return json.dumps(doc, indent=1, ensure_ascii=False, sort_keys=True) + "\n"
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, UnsafeStateConcept | BackgroundAxiom):
+        return {f.name: _plain(getattr(value, f.name)) for f in fields(value)}
+    if isinstance(value, Mapping):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, frozenset | set):
+        return sorted(value)
+    if isinstance(value, tuple | list):
+        return [_plain(v) for v in value]
+    return value
+
+
+def from_json(text: str) -> CompiledKB:
+    doc = json.loads(text)
+    if doc.get("format") != FORMAT:
+        raise ValueError(f"knowledge artifact format {doc.get('format')}, expected {FORMAT}")
+    raw = doc["vocabulary"]
+    classes = frozenset(raw["classes"])
+    vocabulary = Vocabulary(
+        classes=classes,
+        object_properties=frozenset(raw["object_properties"]),
+        data_properties=frozenset(raw["data_properties"]),
+        individuals=frozenset(raw["individuals"]),
+        ancestors=_sets(raw["ancestors"]),
+        annotations=MappingProxyType(
+            {
+                k: MappingProxyType({p: tuple(vs) for p, vs in props.items()})
+                for k, props in raw["annotations"].items()
+            }
+        ),
+        uscs=MappingProxyType({k: UnsafeStateConcept(**u) for k, u in raw["uscs"].items()}),
+        preconditions=MappingProxyType(
+            {k: UnsafeStateConcept(**u) for k, u in raw["preconditions"].items()}
+        ),
+        background=MappingProxyType(
+            {
+                k: BackgroundAxiom(**{**b, "signature": frozenset(b["signature"])})
+                for k, b in raw["background"].items()
+            }
+        ),
+        property_synonyms=MappingProxyType(dict(raw["property_synonyms"])),
+        class_synonyms=MappingProxyType(dict(raw["class_synonyms"])),
+        class_materials=_sets(raw["class_materials"]),
+        _lower=MappingProxyType(lower_index(classes)),
+        inverses=MappingProxyType(dict(raw["inverses"])),
+        material_classes=MappingProxyType(dict(raw["material_classes"])),
+        exclusive_states=_sets(raw["exclusive_states"]),
+        catalogue_types=frozenset(raw["catalogue_types"]),
+    )
+    stats = tuple(
+        ModuleStats(
+            **{
+                **m,
+                "imports": tuple(m["imports"]),
+                "usc_by_category": MappingProxyType(m["usc_by_category"]),
+                "usc_by_kind": MappingProxyType(m["usc_by_kind"]),
+            }
+        )
+        for m in doc["module_stats"]
+    )
+    axioms = [
+        Axiom(kind, _tuples(args), ident, text)
+        for kind, args, ident, text in doc["fragment"]["axioms"]
+    ]
+    fragment = fragment_from(axioms, list(doc["fragment"]["problems"]))
+    return CompiledKB(doc["scenario"], doc["digest"], vocabulary, stats, fragment)
+
+
+def _sets(mapping: Mapping[str, list[str]]) -> Mapping[str, frozenset[str]]:
+    return MappingProxyType({k: frozenset(v) for k, v in mapping.items()})
+
+
+def _tuples(value: Any) -> Any:
+    """JSON arrays back into the tuples fast-engine terms are made of."""
+    if isinstance(value, list):
+        return tuple(_tuples(v) for v in value)
+    return value
+
+
+# ---------------------------------------------------------------------------
+
+
+def write_artifacts(scenarios: list[str] | None = None) -> list[Path]:
+    digest = source_digest()
+    written = []
+    artifact_dir().mkdir(exist_ok=True)
+    for scenario in scenarios or scenario_names():
+        kb = compile_kb(OwlModules(scenario, ontology_dir()), digest)
+        path = artifact_path(scenario)
+        tmp = path.with_suffix(".json.tmp")
+        tmp.write_text(to_json(kb), encoding="utf-8")
+        tmp.replace(path)
+        written.append(path)
+    return written
+
+
+def stale_artifacts() -> list[str]:
+    """Scenarios whose artifact is missing or was compiled from other modules."""
+    digest = source_digest()
+    out = []
+    for scenario in scenario_names():
+        path = artifact_path(scenario)
+        try:
+            found = json.loads(path.read_text(encoding="utf-8")).get("digest")
+        except (OSError, ValueError):
+            found = None
+        if found != digest:
+            out.append(scenario)
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m virf.ontology.compile",
+        description="Compile the ontology modules into the knowledge artifacts the fast "
+        "engine loads without Java.",
+    )
+    parser.add_argument(
+        "--check", action="store_true", help="only report artifacts that are out of date"
+    )
+    args = parser.parse_args(argv)
+    if args.check:
+        stale = stale_artifacts()
+        for scenario in stale:
+            print(f"out of date: {artifact_path(scenario)} (run 'make kb')", file=sys.stderr)
+        return 1 if stale else 0
+    try:
+        for path in write_artifacts():
+            print(f"wrote {path}")
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

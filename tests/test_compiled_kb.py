@@ -1,0 +1,143 @@
+"""The compiled knowledge artifact: rebuilt from the modules it is the same,
+it loads without Java, and a stale one is never used."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from virf.ontology import compile as kbc
+from virf.ontology.owlapi import OwlModules
+from virf.ontology.tbox import load_tbox, ontology_dir, scenario_names
+
+ROOT = Path(__file__).resolve().parent.parent
+WALKTHROUGH = ROOT / "examples" / "walkthrough"
+
+
+def test_every_artifact_was_compiled_from_the_modules_as_they_are() -> None:
+    assert kbc.stale_artifacts() == [], "run 'make kb' and commit src/virf/ontology/compiled"
+
+
+@pytest.mark.parametrize("scenario", scenario_names())
+def test_rebuilding_an_artifact_with_the_jvm_gives_the_same_bytes(scenario: str) -> None:
+    rebuilt = kbc.to_json(kbc.compile_kb(OwlModules(scenario, ontology_dir()), kbc.source_digest()))
+    shipped = kbc.artifact_path(scenario).read_text(encoding="utf-8")
+    assert rebuilt == shipped, f"run 'make kb': the {scenario} artifact is out of date"
+
+
+def test_the_loaded_artifact_is_the_knowledge_the_compiler_built() -> None:
+    built = kbc.compile_kb(OwlModules("kitchen", ontology_dir()), kbc.source_digest())
+    loaded = kbc.from_json(kbc.artifact_path("kitchen").read_text(encoding="utf-8"))
+    assert loaded.vocabulary == built.vocabulary
+    assert loaded.module_stats == built.module_stats
+    assert loaded.fragment.axioms == built.fragment.axioms
+    assert loaded.fragment.query_defs == built.fragment.query_defs
+    assert loaded.fragment.sinks == built.fragment.sinks
+    assert loaded.fragment.kb == built.fragment.kb
+
+
+def test_the_default_knowledge_base_comes_from_the_artifact() -> None:
+    assert load_tbox().source == "artifact"
+
+
+def test_a_module_edited_after_compiling_is_compiled_again(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(kbc, "source_digest", lambda module_dir=None: "edited")
+    tbox = load_tbox.__wrapped__("kitchen")
+    assert tbox.source == "modules"
+    assert tbox.vocabulary == load_tbox().vocabulary
+
+
+def test_an_artifact_of_another_format_is_refused() -> None:
+    doc = json.loads(kbc.artifact_path("kitchen").read_text(encoding="utf-8"))
+    doc["format"] = kbc.FORMAT + 1
+    with pytest.raises(ValueError, match="format"):
+        kbc.from_json(json.dumps(doc))
+
+
+def _without_java(tmp_path: Path) -> dict[str, str]:
+    """An environment in which no Java runtime can be found."""
+    env = {k: v for k, v in os.environ.items() if k not in ("JAVA_HOME", "VIRF_JARS")}
+    env["PATH"] = str(tmp_path)  # nothing there; the tools below are called by full path
+    return env
+
+
+def test_the_fast_engine_verifies_without_java(tmp_path: Path) -> None:
+    virf = Path(sys.executable).with_name("virf")
+    run = subprocess.run(
+        [str(virf), "verify", str(WALKTHROUGH / "scene.json"), str(WALKTHROUGH / "plan.txt")],
+        capture_output=True,
+        text=True,
+        env=_without_java(tmp_path),
+        timeout=120,
+    )
+    assert run.returncode == 1, run.stderr  # UNSAFE, as with Java
+    assert "Verdict: UNSAFE at step 7" in run.stdout
+    probe = (
+        "import jpype; from virf.api import LogicTutor; "
+        f"r = LogicTutor().verify_files({str(WALKTHROUGH / 'scene.json')!r}, "
+        f"{str(WALKTHROUGH / 'plan.txt')!r}); "
+        "print(r.status, jpype.isJVMStarted())"
+    )
+    run = subprocess.run(
+        [sys.executable, "-c", probe],
+        capture_output=True,
+        text=True,
+        env=_without_java(tmp_path),
+        timeout=120,
+    )
+    assert run.stdout.split() == ["UNSAFE", "False"], run.stderr
+
+
+def test_without_java_a_question_the_fast_engine_cannot_answer_is_an_error(
+    tmp_path: Path,
+) -> None:
+    # A name shaped like one of the engine's own goes to the reference reasoner.
+    probe = (
+        "from virf.ontology.tbox import load_tbox; from virf.reasoning import make_engine, "
+        "ReasonerFailure; from virf.schema import Fact, FactKind\n"
+        "fast = make_engine('fast', load_tbox())\n"
+        "try:\n"
+        "    fast.classify([Fact('_:x', 'type', 'Fridge', FactKind.TYPE)], ['FridgeLeftOpenDanger'])\n"
+        "except ReasonerFailure as exc:\n"
+        "    print('failure:', exc)\n"
+    )
+    run = subprocess.run(
+        [sys.executable, "-c", probe],
+        capture_output=True,
+        text=True,
+        env=_without_java(tmp_path),
+        timeout=120,
+    )
+    assert run.stdout.startswith("failure: the fast engine needed the reference reasoner"), (
+        run.stdout + run.stderr
+    )
+    assert "java not found" in run.stdout
+
+
+def test_a_java_only_feature_without_java_names_what_to_install(tmp_path: Path) -> None:
+    virf = Path(sys.executable).with_name("virf")
+    run = subprocess.run(
+        [
+            str(virf),
+            "verify",
+            "--engine",
+            "reference",
+            str(WALKTHROUGH / "scene.json"),
+            str(WALKTHROUGH / "plan.txt"),
+        ],
+        capture_output=True,
+        text=True,
+        env=_without_java(tmp_path),
+        timeout=120,
+    )
+    assert run.returncode == 4
+    lines = run.stderr.strip().splitlines()
+    assert len(lines) == 1 and "openjdk-17-jre-headless" in lines[0], run.stderr
+    assert "Traceback" not in run.stderr
