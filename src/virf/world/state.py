@@ -1,0 +1,124 @@
+"""World states and what the simulator says about one step.
+
+A :class:`WorldState` is immutable: the simulator builds a new one per step,
+so every state of a run stays available to the reasoner and the report.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from functools import cached_property
+from types import MappingProxyType
+
+from virf.names import term_key
+from virf.schema import Fact, FactKind, Provenance
+from virf.world.plan import PlanStep
+
+
+@dataclass(frozen=True)
+class WorldState:
+    objects: Mapping[str, frozenset[str]]
+    order: tuple[str, ...]
+    facts: Mapping[Fact, Provenance]
+    agent: str
+    closed_world: frozenset[str]
+    unknown_contents: frozenset[str] = frozenset()
+    found: tuple[str, ...] = ()  # objects found so far, most recent last
+    # The user's answers to ambiguity questions: term_key(word) -> instance.
+    referents: Mapping[str, str] = field(default_factory=lambda: MappingProxyType({}))
+
+    @property
+    def last_found(self) -> str | None:
+        return self.found[-1] if self.found else None
+
+    def has(self, subject: str, predicate: str, obj: str) -> bool:
+        return Fact(subject, predicate, obj) in self.facts
+
+    # States are immutable, so the relation indexes are built once, on first
+    # use; scanning every fact per lookup made big scenes quadratic.
+    @cached_property
+    def _forward(self) -> dict[tuple[str, str], list[str]]:
+        index: dict[tuple[str, str], list[str]] = {}
+        for f in self.facts:
+            if f.kind is FactKind.OBJECT:
+                index.setdefault((f.subject, f.predicate), []).append(f.object)
+        return index
+
+    @cached_property
+    def _backward(self) -> dict[tuple[str, str], list[str]]:
+        index: dict[tuple[str, str], list[str]] = {}
+        for f in self.facts:
+            if f.kind is FactKind.OBJECT:
+                index.setdefault((f.predicate, f.object), []).append(f.subject)
+        return index
+
+    @cached_property
+    def _by_lower(self) -> dict[str, str]:
+        index: dict[str, str] = {}
+        for ind in self.order + tuple(sorted(set(self.objects) - set(self.order))):
+            index.setdefault(ind.lower(), ind)
+        return index
+
+    @cached_property
+    def _by_key(self) -> dict[str, list[str]]:
+        index: dict[str, list[str]] = {}
+        for ind in self.order + tuple(sorted(set(self.objects) - set(self.order))):
+            index.setdefault(term_key(ind), []).append(ind)
+        return index
+
+    def named(self, term: str) -> list[str]:
+        """The individuals ``term`` spells: itself, else the first that differs
+        only in case, else all that differ only in case and separators."""
+        if term in self.objects:
+            return [term]
+        same_case = self._by_lower.get(term.lower())
+        if same_case is not None:
+            return [same_case]
+        return list(self._by_key.get(term_key(term), ()))
+
+    def objects_of(self, subject: str, predicate: str) -> list[str]:
+        return sorted(self._forward.get((subject, predicate), ()))
+
+    def subjects_of(self, predicate: str, obj: str) -> list[str]:
+        return sorted(self._backward.get((predicate, obj), ()))
+
+    def held(self) -> str | None:
+        held = self.objects_of(self.agent, "isHolding")
+        return held[0] if held else None
+
+
+@dataclass(frozen=True)
+class ResolvedStep:
+    step: PlanStep
+    target: str | None = None  # the object acted on / receptacle / pour destination
+    patient: str | None = None  # the object moved or transformed besides the target
+    liquid: str | None = None  # liquid individual created by fillLiquid
+    instrument: str | None = None  # held tool used
+
+
+@dataclass(frozen=True)
+class MissingObject:
+    """The plan names something the simulator cannot act on: absent from the
+    scene, ambiguous between several instances, or a person or agent."""
+
+    step: PlanStep
+    term: str
+    near: tuple[str, ...]
+    ambiguous: bool = False
+    agent: bool = False
+
+
+@dataclass(frozen=True)
+class PreconditionFailure:
+    step: PlanStep
+    precondition: str  # a PreconditionViolation class in the ontology
+    subject: str
+    message: str
+    facts: tuple[Fact, ...] = field(default_factory=tuple)
+
+
+def diff(before: WorldState, after: WorldState) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    added = tuple(f.render() for f in sorted(set(after.facts) - set(before.facts)))
+    removed = tuple(f.render() for f in sorted(set(before.facts) - set(after.facts)))
+    return added, removed
