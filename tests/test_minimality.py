@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 from conftest import case_params, inst, load_expected
 
-from virf.schema import Fact, Violation
+from virf.schema import Fact, Report, Violation
 
 NO_PROOF_PHASES = {"precondition", "inconsistency", "missing-object"}
 NO_PROOF_CONCEPTS = {"MissingObject", "InconsistentWorldModel"}
@@ -72,6 +72,16 @@ def test_minimal_proof_with_catalogue_default(tutor) -> None:
     # Defaults are background, not scene facts: they are not triggering facts.
     assert all(t.predicate != "hasMaterial" for t in v.triggering_facts)
     _assert_minimal_proof(tutor, v)
+
+
+def test_a_proof_read_back_from_json_is_the_same_proof(tutor, example_report) -> None:
+    # Its proof holds an open-world closure: nothing is on the burner.
+    report = example_report("burner-left-on-open-world")
+    back = Report.model_validate_json(report.to_json()).violations[0]
+    facts = proof_facts(back)
+    assert facts == proof_facts(report.violations[0])
+    assert Fact.closure("StoveBurner_1", "supports", []) in facts
+    _assert_minimal_proof(tutor, back)
 
 
 def test_contradiction_is_minimal(tutor, example_report) -> None:

@@ -10,7 +10,8 @@ from conftest import EXAMPLES_DIR, inst, rel
 
 from virf.errors import InputError
 from virf.reasoning import Classification, Engine, ReasonerFailure, make_engine
-from virf.schema import Fact
+from virf.render.feedback import involved_objects
+from virf.schema import Fact, Report
 from virf.verify.verifier import Verifier
 from virf.world.plan import load_plan_file
 
@@ -268,3 +269,26 @@ def test_engine_aliases(tutor) -> None:
 def test_unknown_concept_is_rejected(tutor) -> None:
     with pytest.raises(InputError, match="NoSuchConcept"):
         tutor.engine.classify([], ["NoSuchConcept"])
+
+
+# ---------------------------------------------------------------- structured facts
+
+
+def test_closures_reach_the_report_with_their_members(tutor) -> None:
+    # Nothing says the microwave holds only the mug, nor that the mug is empty.
+    scene = {"instances": [inst("Mug", "Mug_1"), inst("Microwave", "Microwave_1")]}
+    plan = ["find Mug_1", "pick Mug_1", "find Microwave_1", "open Microwave_1"]
+    plan += ["put Microwave_1", "close Microwave_1", "turn_on Microwave_1"]
+    report = tutor.verify(scene, plan)
+    assert report.status == "UNKNOWN"
+    v = report.violations[0]
+    closures = {
+        (t.subject, t.relation, t.members) for t in v.triggering_facts if t.members is not None
+    }
+    assert closures == {("Microwave_1", "contains", ("Mug_1",)), ("Mug_1", "contains", ())}
+    assert involved_objects(v) == ["Microwave_1", "Mug_1"]
+    contents = next(q for q in report.questions if q.key == "contents:contains:Microwave_1")
+    assert contents.fact is not None
+    assert Fact.from_triple(contents.fact) == Fact.closure("Microwave_1", "contains", ["Mug_1"])
+    # The JSON keeps the notation; reading it back restores the structure.
+    assert Report.model_validate_json(report.to_json()) == report

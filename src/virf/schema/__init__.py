@@ -8,11 +8,14 @@ deterministically.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import builtins
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Literal
+from functools import total_ordering
+from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 TYPE = "type"
 
@@ -31,24 +34,56 @@ class Provenance(StrEnum):
     ASSUMED = "assumed"  # a hypothesis under the open world: needs confirmation
 
 
-@dataclass(frozen=True, order=True)
+@total_ordering
+@dataclass(frozen=True)
 class Fact:
-    """One ABox assertion.  For CLOSURE facts ``object`` is a comma-joined,
-    sorted member list ('' for none)."""
+    """One ABox assertion.
+
+    A CLOSURE fact says that the subject's ``predicate``-successors are
+    exactly ``members`` (sorted; none at all when empty).  It has no single
+    ``object`` (it is ``''``); build it with :meth:`closure`.  Every other
+    kind has an ``object`` and no members.
+    """
 
     subject: str
     predicate: str
     object: str
     kind: FactKind = FactKind.OBJECT
+    members: tuple[str, ...] = ()
+    # Closures sort as if their members, comma-joined, were the object: the
+    # order explanations are minimised in and reports list facts in was
+    # fixed by that spelling, and reports must not change.  Kept, not
+    # recomputed, because engines sort facts on every call.
+    _order: tuple[str, str, str, str] = field(init=False, repr=False, compare=False)
 
-    def members(self) -> tuple[str, ...]:
-        return tuple(m for m in self.object.split(",") if m)
+    def __post_init__(self) -> None:
+        if self.kind is FactKind.CLOSURE:
+            if self.object or list(self.members) != sorted(set(self.members)):
+                raise ValueError(
+                    f"a closure fact has sorted, distinct members and no object: {self!r}"
+                )
+            shown = ",".join(self.members)
+        elif self.members:
+            raise ValueError(f"only a closure fact has members: {self!r}")
+        else:
+            shown = self.object
+        object.__setattr__(self, "_order", (self.subject, self.predicate, shown, self.kind))
+
+    @classmethod
+    def closure(cls, subject: str, predicate: str, members: Iterable[str]) -> Fact:
+        """``subject predicate only {members}``: the list is complete."""
+        return cls(subject, predicate, "", FactKind.CLOSURE, tuple(sorted(set(members))))
+
+    def __lt__(self, other: builtins.object) -> bool:  # `object` is a field here
+        if not isinstance(other, Fact):
+            return NotImplemented
+        return self._order < other._order
 
     def render(self) -> str:
         if self.kind is FactKind.TYPE:
             return f"{self.subject} is a {self.object}"
         if self.kind is FactKind.CLOSURE:
-            inside = ", ".join(self.members())
+            inside = ", ".join(self.members)
             return (
                 f"{self.subject} {self.predicate} only {{{inside}}}"
                 if inside
@@ -59,11 +94,10 @@ class Fact:
     @classmethod
     def from_triple(cls, t: Triple) -> Fact:
         """Inverse of :meth:`triple`."""
+        if t.members is not None:
+            return cls.closure(t.subject, t.relation, t.members)
         if t.predicate == "rdf:type":
             return cls(t.subject, "type", t.object, FactKind.TYPE)
-        if t.predicate.endswith(" only"):
-            members = ",".join(m.strip() for m in t.object.strip("{}").split(",") if m.strip())
-            return cls(t.subject, t.predicate.removesuffix(" only"), members, FactKind.CLOSURE)
         if t.object in ("true", "false"):
             return cls(t.subject, t.predicate, t.object, FactKind.DATA)
         return cls(t.subject, t.predicate, t.object, FactKind.OBJECT)
@@ -72,10 +106,7 @@ class Fact:
         if self.kind is FactKind.TYPE:
             return Triple(subject=self.subject, predicate="rdf:type", object=self.object)
         if self.kind is FactKind.CLOSURE:
-            inside = ", ".join(self.members())
-            return Triple(
-                subject=self.subject, predicate=f"{self.predicate} only", object=f"{{{inside}}}"
-            )
+            return Triple.closure(self.subject, self.predicate, self.members)
         return Triple(subject=self.subject, predicate=self.predicate, object=self.object)
 
 
@@ -83,10 +114,69 @@ class _Frozen(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
 
+_ONLY = " only"
+
+
 class Triple(_Frozen):
+    """A fact as a report shows it: ``subject predicate object``.
+
+    A closure is written in the paper's notation, predicate ``<relation> only``
+    and object ``{a, b}`` (``{}`` for none), and its JSON holds only that.
+    Its structure travels beside the notation, so no consumer reads it back
+    out of the strings: ``relation`` is the property (for any triple, the
+    predicate without notation) and ``members`` the listed individuals
+    (``None`` when the triple is not a closure).  Neither is serialised, so
+    reports keep their JSON; a triple built from its three strings alone (a
+    report read back from JSON, an option's text) gets them from the
+    notation: this class is the one reader of it.
+    """
+
     subject: str
     predicate: str
     object: str
+    relation: str = Field(default="", exclude=True, repr=False)
+    members: tuple[str, ...] | None = Field(default=None, exclude=True, repr=False)
+
+    @classmethod
+    def closure(cls, subject: str, relation: str, members: Sequence[str]) -> Triple:
+        """``subject relation only {members}``, structure and notation."""
+        return cls(
+            subject=subject,
+            predicate=relation + _ONLY,
+            object="{" + ", ".join(members) + "}",
+            relation=relation,
+            members=tuple(members),
+        )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _read_notation(cls, data: Any) -> Any:
+        if not isinstance(data, dict) or "relation" in data or "members" in data:
+            return data
+        predicate, obj = data.get("predicate"), data.get("object")
+        if not (isinstance(predicate, str) and isinstance(obj, str)):
+            return data  # field validation reports what is wrong
+        if predicate.endswith(_ONLY) and obj.startswith("{") and obj.endswith("}"):
+            listed = (m.strip() for m in obj[1:-1].split(","))
+            return {
+                **data,
+                "relation": predicate.removesuffix(_ONLY),
+                "members": tuple(m for m in listed if m),
+            }
+        return {**data, "relation": predicate}
+
+    @model_validator(mode="after")
+    def _structure_matches_notation(self) -> Triple:
+        if self.members is None:
+            expected = (self.relation, self.object)
+        else:
+            expected = (self.relation + _ONLY, "{" + ", ".join(self.members) + "}")
+        if (self.predicate, self.object) != expected:
+            raise ValueError(
+                f"triple '{self.subject} {self.predicate} {self.object}' does not match "
+                f"its relation '{self.relation}' and members {self.members}"
+            )
+        return self
 
 
 class BackgroundKnowledge(_Frozen):
@@ -204,6 +294,34 @@ class Report(_Frozen):
     trace: tuple[StepTrace, ...]
     engine: str
     scenario: str
+
+    @model_validator(mode="after")
+    def _status_matches_findings(self) -> Report:
+        """A verdict its own findings contradict is refused when it is built.
+
+        These are the invariants every report the verifier makes satisfies
+        (ERROR reports are unconstrained: they fail closed whatever they say)."""
+        if self.status == "SAFE":
+            if self.violations:
+                raise ValueError(f"a SAFE report has no violations, got {len(self.violations)}")
+            if self.questions:
+                raise ValueError(f"a SAFE report has no questions, got {len(self.questions)}")
+            if self.dangerous_step is not None:
+                raise ValueError(
+                    f"a SAFE report has no dangerous step, got step {self.dangerous_step}"
+                )
+        elif self.status == "UNSAFE":
+            definite = sorted({v.step for v in self.violations if v.definite})
+            if not definite:
+                raise ValueError("an UNSAFE report needs at least one definite violation")
+            if self.dangerous_step not in definite:
+                raise ValueError(
+                    f"an UNSAFE report's dangerous step must be the step of a definite "
+                    f"violation ({', '.join(map(str, definite))}), got {self.dangerous_step}"
+                )
+        elif self.status == "UNKNOWN" and not self.questions:
+            raise ValueError("an UNKNOWN report needs at least one question saying what is open")
+        return self
 
     def to_json(self) -> str:
         return self.model_dump_json(indent=2)

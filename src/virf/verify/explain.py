@@ -5,15 +5,25 @@ classified individual, drop each fact in a fixed order and keep it out if the
 finding is still entailed.  The result is minimal (every fact is needed) and
 deterministic.  Assumptions and defaults are tried for removal first, so a
 proof that can do without them does.
+
+:class:`Explainer` turns a reasoner's answer into a
+:class:`~virf.verify.findings.Finding`: the proof, the background it needs,
+whether it is definite, the causal message and the questions an uncertain
+finding raises.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 
-from virf.ontology.tbox import Vocabulary
+from virf.ontology.tbox import UnsafeStateConcept, Vocabulary
 from virf.reasoning import Engine
-from virf.schema import Fact, FactKind, Provenance
+from virf.schema import BackgroundKnowledge, Fact, FactKind, Phase, Provenance
+from virf.verify.findings import Finding, inconsistency
+from virf.verify.questions import rule_questions
+from virf.world.simulator import Simulator
+from virf.world.state import WorldState
 
 _DROP_FIRST = {
     Provenance.ASSUMED: 0,
@@ -40,7 +50,7 @@ def _component(
             links.setdefault(f.subject, set()).add(f.object)
             links.setdefault(f.object, set()).add(f.subject)
         elif f.kind is FactKind.CLOSURE:
-            members.setdefault(f.subject, set()).update(f.members())
+            members.setdefault(f.subject, set()).update(f.members)
     reach = set(start)
     todo = list(start)
     while todo:
@@ -95,7 +105,7 @@ def needed_background(
     names: set[str] = {concept}
     for f in facts:
         names.update((f.subject, f.predicate))
-        names.update(f.members() if f.kind is FactKind.CLOSURE else (f.object,))
+        names.update(f.members if f.kind is FactKind.CLOSURE else (f.object,))
         if f.kind is FactKind.TYPE:
             names.update(vocab.ancestors.get(f.object, ()))
     for usc in vocab.uscs.values():
@@ -119,3 +129,112 @@ def needed_background(
         if engine.entails(facts, concept, individual, without=removed | {ident}, deadline=deadline):
             removed.add(ident)
     return sorted(set(candidates) - removed)
+
+
+def background_knowledge(
+    ids: Sequence[str], defaults: Sequence[Fact], vocab: Vocabulary
+) -> list[BackgroundKnowledge]:
+    """The background axioms ``ids``, then the catalogue ``defaults`` a proof used."""
+    return [
+        BackgroundKnowledge(id=b, text=vocab.background[b].text, source=vocab.background[b].source)
+        for b in ids
+    ] + [
+        BackgroundKnowledge(
+            id=f"DEFAULT-{f.subject}-{f.object}",
+            text=f"{f.render()} (typical material of its class; the scene states none)",
+            source="VIRF kitchen catalogue (typicalMaterial)",
+        )
+        for f in defaults
+    ]
+
+
+@dataclass(frozen=True)
+class Explainer:
+    """Explains findings with one verification's reasoner and deadline.
+
+    Every engine call stops at ``deadline``; ``tick`` is called between the
+    calls of a minimisation and raises once the verification is out of time
+    (the verifier decides how a timeout is reported)."""
+
+    engine: Engine
+    vocab: Vocabulary
+    deadline: float
+    tick: Callable[[], object]
+
+    def finding(
+        self,
+        usc: UnsafeStateConcept,
+        ind: str,
+        step: int,
+        phase: Phase,
+        snapshot: Mapping[Fact, Provenance],
+        *,
+        full: bool = True,
+    ) -> Finding:
+        """``ind`` is an instance of ``usc`` in ``snapshot``.  Without ``full``,
+        a definite finding is only confirmed (one entailment test without the
+        assumed facts) and carries no triggering facts."""
+        if full:
+            return self._explained(usc, ind, step, phase, snapshot)
+        known = [f for f, p in snapshot.items() if p is not Provenance.ASSUMED]
+        definite = usc.kind != "uncertainty" and self.engine.entails(
+            known, usc.name, ind, deadline=self.deadline
+        )
+        if not definite:  # uncertain findings are rare; their questions need the proof
+            return self._explained(usc, ind, step, phase, snapshot)
+        message = f"{usc.trigger_reason[:1].upper()}{usc.trigger_reason[1:]} ({ind})."
+        return Finding(usc, step, phase, ind, definite, [], dict(snapshot), [], message)
+
+    def _explained(
+        self,
+        usc: UnsafeStateConcept,
+        ind: str,
+        step: int,
+        phase: Phase,
+        snapshot: Mapping[Fact, Provenance],
+    ) -> Finding:
+        def holds(fs: list[Fact]) -> bool:
+            self.tick()
+            return self.engine.entails(fs, usc.name, ind, deadline=self.deadline)
+
+        facts = minimize(snapshot, holds, {ind}, self.vocab)
+        background_ids = needed_background(
+            self.engine, facts, usc.name, ind, self.vocab, deadline=self.deadline
+        )
+        assumed = [f for f in facts if snapshot[f] is Provenance.ASSUMED]
+        defaults = [f for f in facts if snapshot[f] is Provenance.DEFAULT]
+        background = background_knowledge(background_ids, defaults, self.vocab)
+        definite = usc.kind != "uncertainty" and not assumed
+        questions = [] if definite else rule_questions(usc, ind, facts, assumed, step, self.vocab)
+        chain = "; ".join(f.render() for f in facts if snapshot[f] is not Provenance.DEFAULT)
+        extra = "; ".join(b.text for b in background)
+        message = f"{usc.trigger_reason[:1].upper()}{usc.trigger_reason[1:]}: {chain}"
+        if extra:
+            message += f"; background knowledge: {extra}"
+        message += f". Hence {ind} is an instance of {usc.name}."
+        return Finding(
+            usc, step, phase, ind, definite, facts, dict(snapshot), background, message, questions
+        )
+
+    def inconsistency(self, snapshot: Mapping[Fact, Provenance], k: int) -> Finding:
+        """Snapshot ``k`` is inconsistent: find a minimal contradiction in it."""
+
+        def contradicts(fs: list[Fact]) -> bool:
+            self.tick()
+            return not self.engine.consistent(fs, deadline=self.deadline)
+
+        return inconsistency(minimize(snapshot, contradicts, set(), self.vocab), snapshot, k)
+
+
+def note_onset(f: Finding, states: Sequence[WorldState], sim: Simulator) -> None:
+    """Say in a final-state finding's message since when it has held: the
+    earliest step from which its facts hold in every state to the end."""
+    n = len(states) - 1
+    onset = n
+    for k in range(n, -1, -1):
+        present = set(states[k].facts) | set(sim.closure_facts(states[k]))
+        if all(x in present for x in f.facts):
+            onset = k
+        else:
+            break
+    f.message += f" It holds from step {onset} until the plan ends."

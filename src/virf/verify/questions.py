@@ -82,7 +82,7 @@ def fact_question(f: Fact, step: int, vocab: Vocabulary, text: str | None = None
         return ask(f"fill:{f.subject}", "fill", f"Does {f.subject} hold any liquid?", YES_NO)
     if f.kind is FactKind.CLOSURE:
         where = "in" if f.predicate == "contains" else "on"
-        listed = ", ".join(f.members())
+        listed = ", ".join(f.members)
         claim = (
             f"only {listed} is {where} {f.subject}" if listed else f"nothing is {where} {f.subject}"
         )

@@ -24,6 +24,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from virf.ontology.tbox import Vocabulary
+from virf.world.state import ResolvedStep, WorldState
 
 NUMBERS = {
     "one": 1, "two": 2, "three": 3, "four": 4, "five": 5,
@@ -310,6 +311,19 @@ class StepEvent:
     verb: str
     obj_types: frozenset[str]  # types of the object acted on / moved (and what it controls)
     place_types: frozenset[str]  # types of the receptacle, for put
+
+
+def step_event(r: ResolvedStep, state: WorldState) -> StepEvent:
+    """What a resolved plan step does, as requirements see it, in the state
+    it starts from."""
+    verb = r.step.verb
+    acted = r.patient if verb == "put" else (r.target or r.patient)
+    types: set[str] = set(state.objects.get(acted, frozenset())) if acted else set()
+    if acted:  # a knob stands for the burner it controls
+        for device in state.objects_of(acted, "controls"):
+            types |= state.objects.get(device, frozenset())
+    place = set(state.objects.get(r.target, frozenset())) if verb == "put" and r.target else set()
+    return StepEvent(r.step.index, verb, frozenset(types), frozenset(place))
 
 
 @dataclass(frozen=True)
