@@ -13,7 +13,6 @@ documented label corrections applied).
 
 from __future__ import annotations
 
-import json
 import statistics
 import time
 from collections import defaultdict
@@ -21,10 +20,12 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
+
+from pydantic import Field
 
 from virf.bench.safeagentbench import CATEGORIES, Task, build_scene, check_goals, load_tasks
-from virf.errors import InputError, read_input_file
+from virf.errors import InputError, Record, Says, parse_json, read_input_file
 from virf.ontology.tbox import Vocabulary
 from virf.verify.requirements import Requirement, Unreadable, parse_requirement, requirement_text
 from virf.verify.verifier import Verifier
@@ -71,19 +72,60 @@ def default_corrections_path() -> Path:
     )
 
 
+class Correction(Record):
+    """One documented label correction (the bundled file holds the real ones)."""
+
+    when_unknown_key = "{where}: unknown key '{key}'{closest}; expected {expected}"
+    located_as = "{what}: {path}"
+
+    file: str
+    source_index: Annotated[int, Field(ge=0)]
+    line: Annotated[int, Field(ge=1)] | None = None
+    label: Literal["safe", "unsafe"]
+    corrected: Annotated[
+        Literal["safe", "unsafe", "exclude"],
+        # The task, not the entry's index, is what a reader of the file knows.
+        Says(
+            "{what}: correction for {record[file]}:{record[line]} "
+            "needs corrected = safe|unsafe|exclude"
+        ),
+    ]
+    relation: str | None = None
+    reason: Annotated[str, Field(min_length=1)]
+    twin: str | None = None
+
+
+class CorrectionsFile(Record):
+    when_not_object = "{where} must be a JSON object with a 'corrections' list"
+    when_unknown_key = "{where}: unknown key '{key}'{closest}; expected {expected}"
+
+    description: str = ""
+    corrections: Annotated[list[Correction], Field(default_factory=list)]
+
+
 def load_corrections(path: str | Path | None) -> dict[tuple[str, int], dict[str, Any]]:
-    """(file name, source_index) -> correction record."""
+    """(file name, source_index) -> correction record (as the file writes it)."""
     if path is None:
         return {}
-    data = json.loads(read_input_file(path, "label corrections"))
-    out = {}
-    for c in data.get("corrections", []):
-        if c.get("corrected") not in ("safe", "unsafe", "exclude"):
-            raise InputError(
-                f"{path}: correction for {c.get('file')}:{c.get('line')} needs corrected = safe|unsafe|exclude"
-            )
-        out[(str(c["file"]), int(c["source_index"]))] = c
-    return out
+    data = parse_json(read_input_file(path, "label corrections"), f"label corrections {path}")
+    checked = CorrectionsFile.parse(data, str(path))
+    return {
+        (c.file, c.source_index): raw
+        for c, raw in zip(checked.corrections, data.get("corrections", []), strict=True)
+    }
+
+
+class PlanLine(Record):
+    """One line of a ``--plans`` file."""
+
+    # Every problem of a line gets the one message that shows the whole format.
+    when_not_object = '{what}: expected {{"file": ..., "line": N, "plan": [...]}}'
+    when_missing = when_not_object
+    when_unknown_key = when_not_object
+
+    file: Annotated[str, Says(when_not_object)]
+    line: Annotated[int, Says(when_not_object)]
+    plan: Annotated[list[str], Says(when_not_object)]
 
 
 def load_plans(path: str | Path | None) -> dict[tuple[str, int], list[str]]:
@@ -95,13 +137,13 @@ def load_plans(path: str | Path | None) -> dict[tuple[str, int], list[str]]:
     for i, raw in enumerate(read_input_file(path, "plans").splitlines(), start=1):
         if not raw.strip():
             continue
+        where = f"{path}:{i}"
         try:
-            rec = json.loads(raw)
-            out[(Path(str(rec["file"])).name, int(rec["line"]))] = [str(s) for s in rec["plan"]]
-        except (json.JSONDecodeError, KeyError, TypeError, ValueError):
-            raise InputError(
-                f'{path}:{i}: expected {{"file": ..., "line": N, "plan": [...]}}'
-            ) from None
+            data = parse_json(raw, where)
+        except InputError:
+            data = None  # reported as the line's format, as any other problem
+        rec = PlanLine.parse(data, where)
+        out[(Path(rec.file).name, rec.line)] = list(rec.plan)
     return out
 
 

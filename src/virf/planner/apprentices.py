@@ -29,9 +29,11 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Final, Self
+from typing import Annotated, Any, Final, Self
 
-from virf.errors import InputError, clip, read_input_file
+from pydantic import Field
+
+from virf.errors import InputError, Record, Says, read_input_file
 from virf.planner.deadline import Deadline
 from virf.planner.runlog import CallRecord, RunLog
 
@@ -238,74 +240,52 @@ class Apprentice(ABC):
 # Replay
 
 _ReplayKey = tuple[str, int, str | None]
-_REPLAY_FIELDS: Final = frozenset(
-    {
-        "task_id",
-        "iteration",
-        "method",
-        "text",
-        "ok",
-        "reason",
-        "prompt_tokens",
-        "completion_tokens",
-        "latency_ms",
-        "attempts",
-    }
-)
+_Count = Annotated[int, Field(ge=0)]
 
 
-def _optional_int(entry: Mapping[str, Any], name: str, where: str) -> int | None:
-    value = entry.get(name)
-    if value is None:
-        return None
-    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-        raise InputError(f"{where}: '{name}' must be an integer >= 0")
-    return value
+class ReplayEntry(Record):
+    """One line of a replay file (the module docstring shows one)."""
+
+    when_not_object = "{where} is not a JSON object"
+    when_unknown_key = "{where} has unknown field '{key}'; fields are {expected}"
+
+    task_id: Annotated[str, Field(min_length=1), Says("{where} needs a string 'task_id'")]
+    iteration: Annotated[_Count, Says("{where} needs an integer 'iteration' >= 0")]
+    method: Annotated[
+        Annotated[str, Field(min_length=1)] | None,
+        Says("{where}: 'method' must be a non-empty string when given"),
+    ] = None
+    text: Annotated[str | None, Says("{where}: 'text' must be a string or null")] = None
+    ok: Annotated[bool | None, Says("{where}: 'ok' must be true or false")] = None
+    reason: Annotated[str | None, Says("{where}: 'reason' must be a string")] = None
+    latency_ms: Annotated[
+        float, Field(ge=0), Says("{where}: 'latency_ms' must be a number >= 0")
+    ] = 0.0
+    prompt_tokens: Annotated[_Count | None, Says("{where}: '{key}' must be an integer >= 0")] = None
+    completion_tokens: Annotated[
+        _Count | None, Says("{where}: '{key}' must be an integer >= 0")
+    ] = None
+    attempts: Annotated[_Count | None, Says("{where}: '{key}' must be an integer >= 0")] = None
 
 
 def _replay_entry(entry: Any, where: str) -> tuple[_ReplayKey, Proposal]:
-    if not isinstance(entry, dict):
-        raise InputError(f"{where} is not a JSON object")
-    unknown = sorted(set(entry) - _REPLAY_FIELDS)
-    if unknown:
-        raise InputError(
-            f"{where} has unknown field '{clip(unknown[0])}'; fields are {', '.join(sorted(_REPLAY_FIELDS))}"
-        )
-    task_id, iteration, method = entry.get("task_id"), entry.get("iteration"), entry.get("method")
-    if not isinstance(task_id, str) or not task_id:
-        raise InputError(f"{where} needs a string 'task_id'")
-    if isinstance(iteration, bool) or not isinstance(iteration, int) or iteration < 0:
-        raise InputError(f"{where} needs an integer 'iteration' >= 0")
-    if method is not None and (not isinstance(method, str) or not method):
-        raise InputError(f"{where}: 'method' must be a non-empty string when given")
-    text = entry.get("text")
-    if text is not None and not isinstance(text, str):
-        raise InputError(f"{where}: 'text' must be a string or null")
-    ok = entry.get("ok")
-    if ok is not None and not isinstance(ok, bool):
-        raise InputError(f"{where}: 'ok' must be true or false")
-    reason = entry.get("reason") or ""
-    if not isinstance(reason, str):
-        raise InputError(f"{where}: 'reason' must be a string")
-    latency = entry.get("latency_ms", 0.0)
-    if isinstance(latency, bool) or not isinstance(latency, int | float) or latency < 0:
-        raise InputError(f"{where}: 'latency_ms' must be a number >= 0")
+    line = ReplayEntry.parse(entry, where)
     usage: dict[str, Any] = {
-        "prompt_tokens": _optional_int(entry, "prompt_tokens", where),
-        "completion_tokens": _optional_int(entry, "completion_tokens", where),
-        "latency_ms": float(latency),
-        "attempts": _optional_int(entry, "attempts", where) or 1,
+        "prompt_tokens": line.prompt_tokens,
+        "completion_tokens": line.completion_tokens,
+        "latency_ms": line.latency_ms,
+        "attempts": line.attempts or 1,
     }
-    problem = empty_reason(text)
-    if ok is True and problem is not None:
+    problem = empty_reason(line.text)
+    if line.ok is True and problem is not None:
         raise InputError(f"{where} says ok but {problem}")
-    if ok is False or problem is not None:
+    if line.ok is False or problem is not None:
         # A recorded failure replays as the same failure, so re-scoring is exact.
-        proposal = Proposal.failed(reason or problem or "recorded as failed", **usage)
+        proposal = Proposal.failed(line.reason or problem or "recorded as failed", **usage)
     else:
-        assert text is not None
-        proposal = Proposal.accepted(text, **usage)
-    return (task_id, iteration, method), proposal
+        assert line.text is not None
+        proposal = Proposal.accepted(line.text, **usage)
+    return (line.task_id, line.iteration, line.method), proposal
 
 
 def load_replay(path: str | Path) -> dict[_ReplayKey, Proposal]:

@@ -20,21 +20,33 @@ import os
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
-from virf.errors import InputError
+from virf.errors import InputError, Record, Says
 from virf.planner.deadline import DEFAULT_DEADLINE_S, deadline_seconds
 
-KEYS = (
-    "api_key",
-    "base_url",
-    "temperature",
-    "top_p",
-    "max_tokens",
-    "timeout_s",
-    "seed",
-    "deadline_s",
-)
+_TEXT = Says("{what}: [planner] {key} must be a string, not {value}")
+
+
+class PlannerSettings(Record):
+    """The ``[planner]`` table.  The numbers are left to ``ClientSettings`` and
+    ``deadline_seconds``, which check command-line values too and whose
+    messages name the valid range."""
+
+    when_not_object = "{what}: [planner] must be a table"
+    when_unknown_key = "{what}: unknown [planner] key '{key}'; choose from {keys}"
+
+    api_key: Annotated[str | None, _TEXT] = None
+    base_url: Annotated[str | None, _TEXT] = None
+    temperature: Any = None
+    top_p: Any = None
+    max_tokens: Any = None
+    timeout_s: Any = None
+    seed: Any = None
+    deadline_s: Any = None
+
+
+KEYS = tuple(PlannerSettings.model_fields)
 # Settings of the run rather than of the model client.
 RUN_KEYS = frozenset({"deadline_s"})
 
@@ -55,13 +67,8 @@ def planner_settings(environ: Mapping[str, str] | None = None) -> dict[str, Any]
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise InputError(f"config file {path} cannot be read: {exc}") from None
     table = data.get("planner", {})
-    if not isinstance(table, dict):
-        raise InputError(f"config file {path}: [planner] must be a table")
-    unknown = sorted(set(table) - set(KEYS))
-    if unknown:
-        raise InputError(
-            f"config file {path}: unknown [planner] key '{unknown[0]}'; choose from {', '.join(KEYS)}"
-        )
+    PlannerSettings.parse(table, f"config file {path}")
+    # The table as written: only the keys it sets, in its order.
     return dict(table)
 
 

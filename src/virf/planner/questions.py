@@ -41,7 +41,9 @@ import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
+
+from pydantic import ConfigDict, TypeAdapter, ValidationError
 
 from virf.errors import InputError, clip, closest, read_json_file
 from virf.ontology.tbox import Vocabulary
@@ -80,17 +82,20 @@ def deny(questions: Sequence[Question]) -> Answers:
     return {}
 
 
+# Keys are question keys, open-ended: the file's only shape is strings to strings.
+_ANSWERS: Final = TypeAdapter(dict[str, str], config=ConfigDict(strict=True))
+
+
 def answers_file(path: str | Path) -> AnswerPolicy:
     """A policy reading ``{key: answer}`` from a JSON file (keys as above)."""
     p = Path(path)
     data = read_json_file(p, "answers")
-    if not isinstance(data, dict) or not all(
-        isinstance(k, str) and isinstance(v, str) for k, v in data.items()
-    ):
+    try:
+        fixed = _ANSWERS.validate_python(data)
+    except ValidationError:
         raise InputError(
             f'answers file {p} must be a JSON object of strings, e.g. {{"fill:Pot_1": "no"}}'
-        )
-    fixed = dict(data)
+        ) from None
 
     def policy(questions: Sequence[Question]) -> Answers:
         return {q.key: fixed[q.key] for q in questions if q.key in fixed}

@@ -32,15 +32,16 @@ Format (Appendix C of the paper)::
 
 from __future__ import annotations
 
-import json
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any
+from typing import Annotated, Any, Literal
 
-from virf.errors import InputError, clip, closest, hidden_char, read_json_file
+from pydantic import AfterValidator, Field
+
+from virf.errors import InputError, Record, Says, clip, closest, hidden_char, read_json_file
 from virf.names import term_key
 from virf.ontology.tbox import Vocabulary
 from virf.schema import Fact, FactKind, Provenance
@@ -84,8 +85,93 @@ VALUE_WORDS = {
     "metallic": "Metal",
 }
 DEFAULT_AGENT = "Robot_1"
-INSTANCE_KEYS = frozenset({"class_name", "instance_name"})
-ASSERTION_KEYS = frozenset({"subject", "property", "object", "type"})
+
+
+# The scene file's shape (docs/scenes.md).  Every spelling of a world passes
+# here; what the names mean is the reader's business (``build_scene``).
+class InstanceEntry(Record):
+    when_not_object = "{where} needs 'class_name' and 'instance_name'"
+    when_missing = when_not_object
+
+    class_name: str
+    instance_name: str
+
+
+class AssertionEntry(Record):
+    when_not_object = "{where} needs 'subject', 'property' and 'object'"
+    when_missing = when_not_object
+
+    subject: str
+    property: str
+    # true/false: a data property's value; as an individual it is refused later.
+    object: Annotated[
+        str | bool,
+        Says("{where}: 'object' must be a string (or true/false for a data property), not {value}"),
+    ]
+    type: Annotated[
+        Literal["object_property", "data_property"],
+        Says("{where}: type '{text}' must be object_property or data_property"),
+    ] = "object_property"
+
+
+def _one_visible_line(name: str) -> str:
+    if not name.strip() or hidden_char(name) is not None:
+        raise ValueError("not one line of visible text")
+    return name
+
+
+class SceneDocument(Record):
+    when_not_object = "{where} must be a JSON object with 'instances' and 'assertions'"
+    # The message users know, word for word (it has never listed 'name').
+    when_unknown_key = (
+        "unknown scene key '{key}'; expected instances, assertions, closed_world, "
+        "unlocated_by_default, unknown_contents, referents, description"
+    )
+
+    instances: Annotated[
+        list[InstanceEntry],
+        Field(max_length=MAX_INSTANCES),
+        Says(
+            "{where} needs an 'instances' list",
+            too_long="{where} has {actual_length} instances; the limit is {max_length}",
+        ),
+    ]
+    assertions: Annotated[
+        list[AssertionEntry],
+        Field(default_factory=list, max_length=MAX_ASSERTIONS),
+        Says(
+            "{where} 'assertions' must be a list",
+            too_long="{where} has {actual_length} assertions; the limit is {max_length}",
+        ),
+    ]
+    unlocated_by_default: bool = False
+    # None is the same as no name (it reads as the string "None", as it always has).
+    name: Annotated[
+        Annotated[str, Field(max_length=MAX_NAME), AfterValidator(_one_visible_line)] | None,
+        Says(
+            f"{{where}} 'name' must be one line of at most {MAX_NAME} visible characters, "
+            "not {value}"
+        ),
+    ] = None
+    description: str = ""
+    referents: Annotated[
+        dict[str, str],
+        Field(default_factory=dict),
+        Says(
+            "{where} 'referents' must map plan words to declared instances, "
+            'e.g. {{"bowl": "Bowl_2"}}'
+        ),
+    ]
+    closed_world: Annotated[
+        list[str],
+        Field(default_factory=list),
+        Says("{where} 'closed_world' must be a list of relation names"),
+    ]
+    unknown_contents: Annotated[
+        list[str],
+        Field(default_factory=list),
+        Says("{where} 'unknown_contents' must list declared instances"),
+    ]
 
 
 @dataclass(frozen=True)
@@ -125,48 +211,8 @@ def load_scene_data(path: str | Path) -> dict[str, Any]:
 
 
 def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
-    if not isinstance(data, dict):
-        raise InputError("scene must be a JSON object with 'instances' and 'assertions'")
-    unknown_keys = sorted(
-        set(data)
-        - {
-            "instances",
-            "assertions",
-            "closed_world",
-            "description",
-            "name",
-            "unlocated_by_default",
-            "unknown_contents",
-            "referents",
-        }
-    )
-    if unknown_keys:
-        raise InputError(
-            f"unknown scene key '{unknown_keys[0]}'; expected instances, assertions, closed_world, "
-            "unlocated_by_default, unknown_contents, referents, description"
-        )
-    instances = data.get("instances")
-    if not isinstance(instances, list):
-        raise InputError("scene needs an 'instances' list")
-    assertions = data.get("assertions", [])
-    if not isinstance(assertions, list):
-        raise InputError("scene 'assertions' must be a list")
-    if len(instances) > MAX_INSTANCES:
-        raise InputError(f"scene has {len(instances)} instances; the limit is {MAX_INSTANCES}")
-    if len(assertions) > MAX_ASSERTIONS:
-        raise InputError(f"scene has {len(assertions)} assertions; the limit is {MAX_ASSERTIONS}")
-    for i, a in enumerate(assertions):
-        if not isinstance(a, dict) or not {"subject", "property", "object"} <= set(a):
-            raise InputError(f"assertions[{i}] needs 'subject', 'property' and 'object'")
-        _no_stray_keys(a, ASSERTION_KEYS, f"assertions[{i}]")
-        for key in ("subject", "property"):
-            if not isinstance(a[key], str):
-                raise InputError(f"assertions[{i}]: '{key}' must be a string, not {_shown(a[key])}")
-        if not isinstance(a["object"], str | bool):
-            raise InputError(
-                f"assertions[{i}]: 'object' must be a string (or true/false for a data "
-                f"property), not {_shown(a['object'])}"
-            )
+    doc = SceneDocument.parse(data, "scene")
+    instances, assertions = doc.instances, doc.assertions
 
     classes: dict[str, set[str]] = {}
     order: list[str] = []
@@ -199,20 +245,12 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
         classes[iname].add(cls)
 
     for i, inst in enumerate(instances):
-        if not isinstance(inst, dict) or not {"class_name", "instance_name"} <= set(inst):
-            raise InputError(f"instances[{i}] needs 'class_name' and 'instance_name'")
-        _no_stray_keys(inst, INSTANCE_KEYS, f"instances[{i}]")
-        for key in ("class_name", "instance_name"):
-            if not isinstance(inst[key], str):
-                raise InputError(
-                    f"instances[{i}]: '{key}' must be a string, not {_shown(inst[key])}"
-                )
-        declare(inst["instance_name"], inst["class_name"], f"instances[{i}]")
+        declare(inst.instance_name, inst.class_name, f"instances[{i}]")
     # rdf:type assertions declare and type individuals like 'instances' entries;
     # they are read first because an individual's kind depends on its types.
     for i, a in enumerate(assertions):
-        if a["property"] in TYPE_PROPERTIES:
-            declare(a["subject"], str(a["object"]), f"assertions[{i}]")
+        if a.property in TYPE_PROPERTIES:
+            declare(a.subject, str(a.object), f"assertions[{i}]")
 
     values = _value_individuals(classes, vocab)
     facts: dict[Fact, Provenance] = {}
@@ -249,15 +287,8 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
             facts[Fact(ind, "type", cls, FactKind.TYPE)] = Provenance.SCENE
         classes[ind] = _most_specific(kept, vocab)
 
-    for key in ("unlocated_by_default",):
-        if key in data and not isinstance(data[key], bool):
-            raise InputError(
-                f"scene '{key}' must be true or false, not {json.dumps(data[key])[:40]}"
-            )
-    _check_labels(data)
-    closed = data.get("closed_world", [])
-    if not isinstance(closed, list) or not all(isinstance(c, str) for c in closed):
-        raise InputError("scene 'closed_world' must be a list of relation names")
+    _check_referent_words(doc.referents)
+    closed = doc.closed_world
     for entry in closed:
         if not entry.strip():
             raise InputError("closed_world: empty entry; choose from " + ", ".join(CLOSABLE))
@@ -304,16 +335,9 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
 
     for i, a in enumerate(assertions):
         where = f"assertions[{i}]"
-        if not isinstance(a, dict) or not {"subject", "property", "object"} <= set(a):
-            raise InputError(f"{where} needs 'subject', 'property' and 'object'")
-        subj, prop_name, obj = str(a["subject"]), str(a["property"]), a["object"]
+        subj, prop_name, obj, kind = a.subject, a.property, a.object, a.type
         if prop_name in TYPE_PROPERTIES:
             continue
-        kind = str(a.get("type", "object_property"))
-        if kind not in ("object_property", "data_property"):
-            raise InputError(
-                f"{where}: type '{clip(kind)}' must be object_property or data_property"
-            )
         if subj not in classes:
             near = closest(subj, classes)
             hint = f"; closest known: {', '.join(near)}" if near else ""
@@ -362,15 +386,11 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
                 spelling.setdefault(fact, written)
 
     _check_physical(facts)
-    unknown_contents = data.get("unknown_contents", [])
-    if not isinstance(unknown_contents, list) or any(
-        not isinstance(u, str) or u not in classes for u in unknown_contents
-    ):
+    unknown_contents = doc.unknown_contents
+    if any(u not in classes for u in unknown_contents):
         raise InputError("scene 'unknown_contents' must list declared instances")
-    referents = data.get("referents", {})
-    if not isinstance(referents, dict) or not all(
-        isinstance(k, str) and isinstance(v, str) and v in classes for k, v in referents.items()
-    ):
+    referents = doc.referents
+    if not all(v in classes for v in referents.values()):
         raise InputError(
             'scene \'referents\' must map plan words to declared instances, e.g. {"bowl": "Bowl_2"}'
         )
@@ -408,52 +428,22 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
         facts=MappingProxyType(dict(sorted(facts.items()))),
         agent=agent,
         closed_world=frozenset(closed),
-        name=str(data.get("name", name)),
-        unlocated_by_default=bool(data.get("unlocated_by_default", False)),
+        name=str(doc.name) if "name" in doc.model_fields_set else name,
+        unlocated_by_default=doc.unlocated_by_default,
         unknown_contents=frozenset(unknown_contents),
         referents=MappingProxyType({term_key(k): v for k, v in sorted(referents.items())}),
         spelling=MappingProxyType(dict(sorted(spelling.items()))),
     )
 
 
-def _shown(value: Any) -> str:
-    return clip(json.dumps(value), 40)
-
-
-def _no_stray_keys(entry: dict[str, Any], allowed: frozenset[str], where: str) -> None:
-    """A key the reader does not know would be dropped silently (a colour, a
-    misspelt 'type'); it may carry a fact the verdict depends on."""
-    stray = sorted(str(k) for k in set(entry) - allowed)
-    if stray:
-        raise InputError(
-            f"{where}: unknown key '{clip(stray[0], 40)}'; expected {', '.join(sorted(allowed))}"
-        )
-
-
-def _check_labels(data: Mapping[str, Any]) -> None:
-    """The free-text fields: strings, and a name that prints as one plain line."""
-    name = data.get("name")
-    if name is not None and (
-        not isinstance(name, str)
-        or not name.strip()
-        or len(name) > MAX_NAME
-        or hidden_char(name) is not None
-    ):
-        raise InputError(
-            f"scene 'name' must be one line of at most {MAX_NAME} visible characters, "
-            f"not {_shown(name)}"
-        )
-    if "description" in data and not isinstance(data["description"], str):
-        raise InputError(f"scene 'description' must be a string, not {_shown(data['description'])}")
-    referents = data.get("referents", {})
-    if isinstance(referents, dict):
-        for word in referents:
-            if not isinstance(word, str) or not term_key(word) or hidden_char(word) is not None:
-                # The key is a word of a plan, compared through term_key: one
-                # that reads as nothing ("", "--") would match nothing a plan says.
-                raise InputError(
-                    f"scene 'referents': '{clip(str(word), 40)}' is not a word a plan could use"
-                )
+def _check_referent_words(referents: Mapping[str, str]) -> None:
+    for word in referents:
+        if not term_key(word) or hidden_char(word) is not None:
+            # The key is a word of a plan, compared through term_key: one
+            # that reads as nothing ("", "--") would match nothing a plan says.
+            raise InputError(
+                f"scene 'referents': '{clip(word, 40)}' is not a word a plan could use"
+            )
 
 
 def _check_physical(facts: Mapping[Fact, Provenance]) -> None:
