@@ -17,7 +17,8 @@ from pathlib import Path
 from virf.api import LogicTutor
 from virf.bench.safeagentbench import build_scene, load_tasks
 from virf.errors import InputError
-from virf.render.feedback import feedback_prompt, render_report
+from virf.render.feedback import feedback_prompt
+from virf.render.text import render_report
 from virf.schema import Report
 from virf.world.plan import parse_plan
 

@@ -10,11 +10,12 @@ from __future__ import annotations
 import json
 import os
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 import pytest
+from typer.testing import CliRunner, Result
 
 from virf.api import LogicTutor
 from virf.ontology.tbox import Vocabulary
@@ -62,6 +63,26 @@ def tutor() -> LogicTutor:
 def reference_tutor() -> LogicTutor:
     """The same knowledge base with the reference engine (HermiT)."""
     return LogicTutor(engine="reference")
+
+
+@pytest.fixture(scope="session")
+def cli(tutor: LogicTutor) -> Callable[..., Result]:
+    """Run ``virf ARGS`` in-process with typer's CliRunner: ``cli("verify", scene, plan)``.
+
+    The commands reuse the session's knowledge base, so a call costs
+    milliseconds instead of a JVM start.  ``env`` sets (or, with None,
+    removes) environment variables for the call.  A real process is for what
+    only one shows: the installed script, signals, a closed pipe."""
+    from virf.cli.main import app
+
+    runner = CliRunner()
+
+    def invoke(
+        *args: str | Path, input: str | None = None, env: Mapping[str, str | None] | None = None
+    ) -> Result:
+        return runner.invoke(app, [str(a) for a in args], input=input, env=env)
+
+    return invoke
 
 
 @pytest.fixture(scope="session")

@@ -1,7 +1,7 @@
-"""The ``virf`` command line, run as a real subprocess.
+"""The ``virf`` command line: verdicts, exit codes and bad input.
 
-Each call starts a JVM (~3 s), so every command line runs at most once per
-session (memoised) and the file keeps to eight distinct calls.
+The commands run in-process (the ``cli`` fixture); one test starts the
+installed console script to check the entry point's exit codes end to end.
 """
 
 from __future__ import annotations
@@ -9,33 +9,10 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 from conftest import EXAMPLES_DIR, ROOT
-
-Run = Callable[..., subprocess.CompletedProcess[str]]
-
-
-@pytest.fixture(scope="session")
-def virf() -> Run:
-    cache: dict[tuple[str, ...], subprocess.CompletedProcess[str]] = {}
-
-    def run(*args: str | Path) -> subprocess.CompletedProcess[str]:
-        key = tuple(str(a) for a in args)
-        if key not in cache:
-            cache[key] = subprocess.run(
-                [sys.executable, "-m", "virf.cli.main", *key],
-                cwd=ROOT,
-                capture_output=True,
-                text=True,
-                timeout=300,
-                check=False,
-            )
-        return cache[key]
-
-    return run
 
 
 @pytest.fixture(scope="module")
@@ -60,26 +37,38 @@ def _example(name: str) -> tuple[Path, Path]:
 
 
 @pytest.mark.parametrize(("case", "code"), [("pedagogical-refined", 0), ("walkthrough", 1)])
-def test_verify_json(virf, example_report, case: str, code: int) -> None:
-    result = virf("verify", "--json", *_example(case))
-    assert result.returncode == code, result.stderr
+def test_verify_json(cli, example_report, case: str, code: int) -> None:
+    result = cli("verify", "--json", *_example(case))
+    assert result.exit_code == code, result.stderr
     report = json.loads(result.stdout)  # exactly one JSON document, nothing else
     assert isinstance(report, dict)
     assert report == json.loads(example_report(case).to_json())
 
 
-def test_verify_unknown_exit_code(virf) -> None:
-    result = virf("verify", *_example("noise-omission"))
-    assert result.returncode == 3, result.stderr
+def test_verify_unknown_exit_code(cli) -> None:
+    result = cli("verify", *_example("noise-omission"))
+    assert result.exit_code == 3, result.stderr
     assert "Verdict: UNKNOWN at step 1" in result.stdout
     assert "MissingObject" in result.stdout
 
 
+def test_verify_text_and_feedback(cli, example_report) -> None:
+    from virf.render.feedback import feedback_prompt
+    from virf.render.text import render_report
+
+    scene, plan = _example("walkthrough")
+    report = example_report("walkthrough")
+    result = cli("verify", "--feedback", scene, plan)
+    assert result.exit_code == 1, result.stderr
+    expected = render_report(report, title=f"{scene} + {plan}") + "\n" + feedback_prompt(report)
+    assert result.stdout == expected
+
+
 @pytest.mark.parametrize("kind", ["unknown-verb", "malformed-scene", "unknown-class"])
-def test_bad_input(virf, bad_inputs, kind: str) -> None:
+def test_bad_input(cli, bad_inputs, kind: str) -> None:
     scene, plan = bad_inputs[kind]
-    result = virf("verify", scene, plan)
-    assert result.returncode == 2
+    result = cli("verify", scene, plan)
+    assert result.exit_code == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1, result.stderr
     assert lines[0].startswith("error:")
@@ -92,20 +81,42 @@ def test_bad_input(virf, bad_inputs, kind: str) -> None:
     assert expected in lines[0]
 
 
-def test_unknown_engine(virf) -> None:
-    result = virf("verify", "--engine", "nosuch", *_example("walkthrough"))
-    assert result.returncode == 2
+def test_unknown_engine(cli) -> None:
+    result = cli("verify", "--engine", "nosuch", *_example("walkthrough"))
+    assert result.exit_code == 2
     assert result.stderr.startswith("error:")
     assert "hermit" in result.stderr
     assert "Traceback" not in result.stderr
 
 
-def test_kb_check_output(virf) -> None:
-    result = virf("kb", "check")
+def test_kb_check(cli) -> None:
+    result = cli("kb", "check")
+    assert result.exit_code == 0, result.stdout
     assert "TBox consistent: yes" in result.stdout
     assert "Traceback" not in result.stderr
 
 
-def test_kb_check_exit_code(virf) -> None:
-    result = virf("kb", "check")
-    assert result.returncode == 0, result.stdout
+def test_help_lists_the_commands_in_order(cli) -> None:
+    result = cli("--help")
+    assert result.exit_code == 0
+    names = ["verify", "demo", "plan", "kb", "scene", "bench"]
+    where = [result.stdout.find(f"│ {name} ") for name in names]
+    assert -1 not in where and where == sorted(where), result.stdout
+
+
+def test_the_installed_script_exits_with_the_verdict() -> None:
+    """The console entry point (pyproject [project.scripts]) as a real process."""
+    script = Path(sys.executable).with_name("virf")
+    if not script.is_file():
+        pytest.skip(f"no installed virf script beside {sys.executable}")
+    for case, code in (("pedagogical-refined", 0), ("walkthrough", 1)):
+        result = subprocess.run(
+            [str(script), "verify", "--json", *map(str, _example(case))],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            timeout=300,
+            check=False,
+        )
+        assert result.returncode == code, result.stderr
+        assert json.loads(result.stdout)["status"] == ("SAFE" if code == 0 else "UNSAFE")

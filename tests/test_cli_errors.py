@@ -1,9 +1,9 @@
 """Every failure of every ``virf`` command: a documented exit code, one line on
 stderr, one JSON error object on stdout under ``--json``, never a traceback.
 
-Most cases run in-process (typer's CliRunner, sharing the session's knowledge
-base); the few that need a real process (the JVM under a memory limit, a
-closed stdout, errors before any command runs) start one each.
+Most cases run in-process (the ``cli`` fixture, sharing the session's
+knowledge base); the few that need a real process (the JVM under a memory
+limit, a closed stdout, errors before any command runs) start one each.
 """
 
 from __future__ import annotations
@@ -12,23 +12,19 @@ import json
 import os
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import pytest
 from conftest import EXAMPLES_DIR, ROOT
-from typer.testing import CliRunner
+from typer.testing import Result
 
-from virf.cli.main import app
 from virf.errors import EnvironmentProblem
 
-runner = CliRunner()
+Cli = Callable[..., Result]
 WALK_SCENE = str(EXAMPLES_DIR / "walkthrough" / "scene.json")
 WALK_PLAN = str(EXAMPLES_DIR / "walkthrough" / "plan.txt")
-
-
-def run(*args: str) -> Any:
-    return runner.invoke(app, list(args))
 
 
 def assert_one_error_line(result: Any, code: int, *, as_json: bool = False) -> str:
@@ -48,45 +44,42 @@ def assert_one_error_line(result: Any, code: int, *, as_json: bool = False) -> s
     return message
 
 
-@pytest.fixture(autouse=True)
-def _loaded(tutor: Any) -> None:
-    """The in-process commands reuse the session's knowledge base."""
-
-
 @pytest.mark.parametrize("value", ["nan", "inf", "-inf", "-1", "0", "1e999", "86401"])
 @pytest.mark.parametrize("as_json", [False, True])
-def test_verify_refuses_a_timeout_that_is_no_deadline(value: str, as_json: bool) -> None:
+def test_verify_refuses_a_timeout_that_is_no_deadline(cli: Cli, value: str, as_json: bool) -> None:
     args = ["verify", WALK_SCENE, WALK_PLAN, "--timeout", value]
-    result = run(*args, *(["--json"] if as_json else []))
+    result = cli(*args, *(["--json"] if as_json else []))
     assert "--timeout" in assert_one_error_line(result, 2, as_json=as_json)
 
 
 @pytest.mark.parametrize("workers", ["0", "65", "100000"])
-def test_verify_refuses_absurd_worker_counts(workers: str) -> None:
+def test_verify_refuses_absurd_worker_counts(cli: Cli, workers: str) -> None:
     # 100000 engines would be forked before the deadline is ever checked.
-    assert_one_error_line(run("verify", WALK_SCENE, WALK_PLAN, "--workers", workers), 2)
+    assert_one_error_line(cli("verify", WALK_SCENE, WALK_PLAN, "--workers", workers), 2)
 
 
-def test_an_internal_error_is_exit_4_never_1(monkeypatch: pytest.MonkeyPatch) -> None:
-    import virf.render.feedback
+def test_an_internal_error_is_exit_4_never_1(cli: Cli, monkeypatch: pytest.MonkeyPatch) -> None:
+    import virf.render.text
 
     def broken(*_: Any, **__: Any) -> str:
         raise ZeroDivisionError("a bug")
 
-    monkeypatch.setattr(virf.render.feedback, "render_report", broken)
+    monkeypatch.setattr(virf.render.text, "render_report", broken)
     monkeypatch.delenv("VIRF_DEBUG", raising=False)
-    message = assert_one_error_line(run("verify", WALK_SCENE, WALK_PLAN), 4)
+    message = assert_one_error_line(cli("verify", WALK_SCENE, WALK_PLAN), 4)
     assert message.startswith("internal error: ZeroDivisionError: a bug; please report")
     assert "VIRF_DEBUG=1" in message
 
     monkeypatch.setenv("VIRF_DEBUG", "1")
-    result = run("verify", WALK_SCENE, WALK_PLAN)
+    result = cli("verify", WALK_SCENE, WALK_PLAN)
     assert result.exit_code == 4
     assert "Traceback" in result.stderr
     assert result.stderr.strip().splitlines()[-1].startswith("error: internal error:")
 
 
-def test_an_internal_error_under_json_is_one_error_object(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_an_internal_error_under_json_is_one_error_object(
+    cli: Cli, monkeypatch: pytest.MonkeyPatch
+) -> None:
     import virf.api
 
     def broken(self: Any, *_: Any, **__: Any) -> None:
@@ -94,10 +87,10 @@ def test_an_internal_error_under_json_is_one_error_object(monkeypatch: pytest.Mo
 
     monkeypatch.setattr(virf.api.LogicTutor, "__init__", broken)
     monkeypatch.delenv("VIRF_DEBUG", raising=False)
-    assert_one_error_line(run("verify", "--json", WALK_SCENE, WALK_PLAN), 4, as_json=True)
+    assert_one_error_line(cli("verify", "--json", WALK_SCENE, WALK_PLAN), 4, as_json=True)
 
 
-def test_an_environment_problem_is_exit_4(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_an_environment_problem_is_exit_4(cli: Cli, monkeypatch: pytest.MonkeyPatch) -> None:
     import virf.api
 
     def no_java(self: Any, *_: Any, **__: Any) -> None:
@@ -105,12 +98,14 @@ def test_an_environment_problem_is_exit_4(monkeypatch: pytest.MonkeyPatch) -> No
 
     monkeypatch.setattr(virf.api.LogicTutor, "__init__", no_java)
     for args in (["verify", WALK_SCENE, WALK_PLAN], ["demo", str(EXAMPLES_DIR)]):
-        assert "Java VM" in assert_one_error_line(run(*args), 4)
-    result = run("verify", WALK_SCENE, WALK_PLAN, "--json")
+        assert "Java VM" in assert_one_error_line(cli(*args), 4)
+    result = cli("verify", WALK_SCENE, WALK_PLAN, "--json")
     assert_one_error_line(result, 4, as_json=True)
 
 
-def test_kb_commands_report_environment_problems_as_4(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_kb_commands_report_environment_problems_as_4(
+    cli: Cli, monkeypatch: pytest.MonkeyPatch
+) -> None:
     import virf.ontology.check
     import virf.ontology.tbox
 
@@ -119,9 +114,9 @@ def test_kb_commands_report_environment_problems_as_4(monkeypatch: pytest.Monkey
 
     monkeypatch.setattr(virf.ontology.check, "check_tbox", no_java)
     monkeypatch.setattr(virf.ontology.tbox, "load_tbox", no_java)
-    assert_one_error_line(run("kb", "check", "--json"), 4, as_json=True)
-    assert_one_error_line(run("kb", "rules"), 4)
-    assert_one_error_line(run("scene", "show", WALK_SCENE), 4)
+    assert_one_error_line(cli("kb", "check", "--json"), 4, as_json=True)
+    assert_one_error_line(cli("kb", "rules"), 4)
+    assert_one_error_line(cli("scene", "show", WALK_SCENE), 4)
 
 
 @pytest.fixture(scope="module")
@@ -166,14 +161,19 @@ def junk(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 )
 @pytest.mark.parametrize("as_json", [False, True])
 def test_verify_refuses_hostile_files(
-    junk: dict[str, Path], scene: str | None, plan: str | None, expected: str, as_json: bool
+    cli: Cli,
+    junk: dict[str, Path],
+    scene: str | None,
+    plan: str | None,
+    expected: str,
+    as_json: bool,
 ) -> None:
     args = [
         "verify",
         str(junk[scene]) if scene else WALK_SCENE,
         str(junk[plan]) if plan else WALK_PLAN,
     ]
-    result = run(*args, *(["--json"] if as_json else []))
+    result = cli(*args, *(["--json"] if as_json else []))
     message = assert_one_error_line(result, 2, as_json=as_json)
     assert expected in message
     assert "\x1b" not in result.stderr  # the escape is shown escaped, not sent to the terminal
@@ -199,20 +199,42 @@ def test_verify_refuses_hostile_files(
         (["nosuch"], False),
     ],
 )
-def test_every_command_fails_with_one_line(args: list[str], as_json: bool) -> None:
-    assert_one_error_line(run(*args), 2, as_json=as_json)
+def test_every_command_fails_with_one_line(cli: Cli, args: list[str], as_json: bool) -> None:
+    assert_one_error_line(cli(*args), 2, as_json=as_json)
 
 
-def test_a_file_named_json_after_double_dash_is_not_the_option(tmp_path: Path) -> None:
-    result = run("verify", "--", str(tmp_path / "--json"), WALK_PLAN)
+def test_a_file_named_json_after_double_dash_is_not_the_option(cli: Cli, tmp_path: Path) -> None:
+    result = cli("verify", "--", str(tmp_path / "--json"), WALK_PLAN)
     assert_one_error_line(result, 2, as_json=False)
 
 
-def test_demo_reports_a_broken_expected_file_as_a_mismatch(junk: dict[str, Path]) -> None:
-    result = run("demo", str(junk["examples"]))
+def test_demo_reports_a_broken_expected_file_as_a_mismatch(cli: Cli, junk: dict[str, Path]) -> None:
+    result = cli("demo", str(junk["examples"]))
     assert result.exit_code == 1  # demo: an example did not give its expected verdict
     assert "Traceback" not in result.stdout + result.stderr
     assert "NaN" in result.stdout
+
+
+def test_user_text_is_never_read_as_terminal_markup(cli: Cli, tmp_path: Path) -> None:
+    # rich reads '[/red]' as a closing tag: a scene name or a plan word like it
+    # once crashed 'scene show' and 'demo' with a MarkupError.
+    scene = tmp_path / "scene.json"
+    scene.write_text(
+        json.dumps(
+            {"instances": [{"class_name": "Pot", "instance_name": "Pot_1"}], "name": "[/red]"}
+        ),
+        encoding="utf-8",
+    )
+    result = cli("scene", "show", str(scene))
+    assert result.exit_code == 0, result.stderr
+    assert "Scene [/red]" in result.stdout
+    case = tmp_path / "examples" / "a"
+    case.mkdir(parents=True)
+    (case / "scene.json").write_text(scene.read_text(encoding="utf-8"), encoding="utf-8")
+    (case / "plan.txt").write_text("find [/red]\n", encoding="utf-8")
+    result = cli("demo", str(tmp_path / "examples"))
+    assert result.exit_code == 0, result.stderr
+    assert "find [/red]" in result.stdout
 
 
 # ---------------------------------------------------------------- real processes
@@ -229,9 +251,11 @@ def virf(*args: str, limit_kb: int | None = None, **kw: Any) -> subprocess.Compl
 @pytest.mark.parametrize("as_json", [False, True])
 def test_a_jvm_that_cannot_start_is_an_environment_problem(as_json: bool) -> None:
     # HotSpot cannot reserve its class space in 600 MB and ends the process
-    # itself (status 1, the UNSAFE code), printing to stdout.
+    # itself (status 1, the UNSAFE code), printing to stdout.  The reference
+    # engine: the fast one verifies this plan without starting Java at all.
     extra = ["--json"] if as_json else []
-    result = virf("verify", WALK_SCENE, WALK_PLAN, *extra, limit_kb=600_000)
+    args = ["verify", "--engine", "reference", WALK_SCENE, WALK_PLAN, *extra]
+    result = virf(*args, limit_kb=600_000)
     assert result.returncode == 4, (result.stdout, result.stderr)
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "Java VM could not start" in lines[0], result.stderr
@@ -268,25 +292,3 @@ def test_a_closed_stdout_is_not_a_verdict() -> None:
     assert proc.wait(timeout=300) == 4, stderr
     assert "Traceback" not in stderr
     assert len(stderr.strip().splitlines()) == 1, stderr
-
-
-def test_user_text_is_never_read_as_terminal_markup(tmp_path: Path) -> None:
-    # rich reads '[/red]' as a closing tag: a scene name or a plan word like it
-    # once crashed 'scene show' and 'demo' with a MarkupError.
-    scene = tmp_path / "scene.json"
-    scene.write_text(
-        json.dumps(
-            {"instances": [{"class_name": "Pot", "instance_name": "Pot_1"}], "name": "[/red]"}
-        ),
-        encoding="utf-8",
-    )
-    result = run("scene", "show", str(scene))
-    assert result.exit_code == 0, result.stderr
-    assert "Scene [/red]" in result.stdout
-    case = tmp_path / "examples" / "a"
-    case.mkdir(parents=True)
-    (case / "scene.json").write_text(scene.read_text(encoding="utf-8"), encoding="utf-8")
-    (case / "plan.txt").write_text("find [/red]\n", encoding="utf-8")
-    result = run("demo", str(tmp_path / "examples"))
-    assert result.exit_code == 0, result.stderr
-    assert "find [/red]" in result.stdout

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import re
 
-from virf.render.feedback import feedback_prompt, involved_objects, render_report
+from virf.render.feedback import feedback_prompt, involved_objects
+from virf.render.text import render_report
 
 
 def _section(prompt: str, title: str) -> str:

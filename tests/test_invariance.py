@@ -23,7 +23,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from virf.render.feedback import render_report
+from virf.render.text import render_report
 from virf.schema import Triple
 
 FULL = os.environ.get("VIRF_FULL") == "1"

@@ -1,53 +1,51 @@
 """``virf plan``: the whole loop from the command line, offline (replay) and
-through the real HTTP client against a scripted server on 127.0.0.1."""
+through the real HTTP client against a scripted server on 127.0.0.1.
+
+The command runs in-process (the ``cli`` fixture); the planner's own hangs
+and signals are tested on real processes in test_planner_hangs.py."""
 
 from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import ROOT
 from test_loop import CLOSES, FRIDGE_SCENE, LEAVES_OPEN
 from test_planner_clients import FAST_RETRY, ChatServer, completion, error, server  # noqa: F401
+from typer.testing import Result
 
 from virf.errors import InputError
 
+PlanRun = Callable[..., Result]
 
-def virf_plan(
-    tmp_path: Path, *args: str, env: dict[str, str] | None = None
-) -> subprocess.CompletedProcess[str]:
+
+@pytest.fixture
+def virf_plan(cli: Callable[..., Result], tmp_path: Path) -> PlanRun:
+    """``virf plan`` on the fridge scene, without the caller's model settings."""
     scene = tmp_path / "scene.json"
     scene.write_text(json.dumps(FRIDGE_SCENE), encoding="utf-8")
-    environ = {k: v for k, v in os.environ.items() if not k.startswith("OPENAI_")}
-    environ["XDG_CONFIG_HOME"] = str(tmp_path / "config")  # no user config unless a test writes one
-    environ.update(env or {})
-    return subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "virf.cli.main",
+    # No OPENAI_* variables, and no user config unless a test writes one.
+    isolated: dict[str, str | None] = {k: None for k in os.environ if k.startswith("OPENAI_")}
+    isolated["XDG_CONFIG_HOME"] = str(tmp_path / "config")
+
+    def run(*args: str) -> Result:
+        return cli(
             "plan",
             "--scene",
-            str(scene),
+            scene,
             "--instruction",
             "Put the apple in the fridge.",
             *args,
-        ],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=False,
-        env=environ,
-    )
+            env=isolated,
+        )
+
+    return run
 
 
-def test_replayed_run(tmp_path: Path) -> None:
+def test_replayed_run(tmp_path: Path, virf_plan: PlanRun) -> None:
     replay = tmp_path / "run.jsonl"
     replay.write_text(
         "\n".join(
@@ -58,30 +56,49 @@ def test_replayed_run(tmp_path: Path) -> None:
     )
     log = tmp_path / "log.sqlite"
     result = virf_plan(
-        tmp_path, "--planner", f"replay:{replay}", "--task-id", "t1", "--json", "--log", str(log)
+        "--planner", f"replay:{replay}", "--task-id", "t1", "--json", "--log", str(log)
     )
-    assert result.returncode == 0, result.stderr
+    assert result.exit_code == 0, result.stderr
     out: dict[str, Any] = json.loads(result.stdout)
     assert out["outcome"] == "APPROVED"
     assert out["iterations"] == 2
     assert out["plan"] == CLOSES.splitlines()
     assert [t["status"] for t in out["transcript"] if t["kind"] == "report"] == ["UNSAFE", "SAFE"]
     assert log.is_file()
-    readable = virf_plan(tmp_path, "--planner", f"replay:{replay}", "--task-id", "t1")
-    assert readable.returncode == 0
+    readable = virf_plan("--planner", f"replay:{replay}", "--task-id", "t1")
+    assert readable.exit_code == 0
     assert "APPROVED after 2 iteration(s)" in readable.stdout
 
 
-def test_http_run_with_a_rate_limit_and_a_repair(tmp_path: Path, server: ChatServer) -> None:  # noqa: F811
+@pytest.mark.parametrize(("method", "iterations"), [("virf-manual", 2), ("virf-rag", 1)])
+def test_an_ablation_checks_only_its_own_rules(
+    tmp_path: Path, virf_plan: PlanRun, method: str, iterations: int
+) -> None:
+    # FridgeLeftOpenDanger is a manual rule: VIRF-RAG's tutor does not know it
+    # and approves the plan that leaves the fridge open.
+    replay = tmp_path / "run.jsonl"
+    replay.write_text(
+        "\n".join(
+            json.dumps({"task_id": "t1", "iteration": i, "text": text})
+            for i, text in enumerate([LEAVES_OPEN, CLOSES])
+        ),
+        encoding="utf-8",
+    )
+    result = virf_plan("--planner", f"replay:{replay}", "--task-id", "t1", "--json", "-m", method)
+    assert result.exit_code == 0, result.stderr
+    out = json.loads(result.stdout)
+    assert out["outcome"] == "APPROVED" and out["iterations"] == iterations
+    assert out["plan"] == (CLOSES if iterations == 2 else LEAVES_OPEN).splitlines()
+
+
+def test_http_run_with_a_rate_limit_and_a_repair(virf_plan: PlanRun, server: ChatServer) -> None:  # noqa: F811
     server.queue(
         completion(f"Here is my plan:\n```\n{LEAVES_OPEN}\n```"),
         error(429, "slow down", FAST_RETRY),
         completion(CLOSES),
     )
-    result = virf_plan(
-        tmp_path, "--planner", "openai:test-model", "--base-url", server.base_url, "--json"
-    )
-    assert result.returncode == 0, result.stderr
+    result = virf_plan("--planner", "openai:test-model", "--base-url", server.base_url, "--json")
+    assert result.exit_code == 0, result.stderr
     out = json.loads(result.stdout)
     assert out["outcome"] == "APPROVED" and out["iterations"] == 2
     assert len(server.seen) == 3  # the 429 was retried by the client
@@ -89,29 +106,27 @@ def test_http_run_with_a_rate_limit_and_a_repair(tmp_path: Path, server: ChatSer
     assert "DIAGNOSTIC REPORT" in repair_prompt and "FridgeLeftOpenDanger" in repair_prompt
 
 
-def test_http_refusal_and_malformed_reply(tmp_path: Path, server: ChatServer) -> None:  # noqa: F811
+def test_http_refusal_and_malformed_reply(virf_plan: PlanRun, server: ChatServer) -> None:  # noqa: F811
     server.queue(completion(""), completion("TASK_ABORT"))
-    result = virf_plan(
-        tmp_path, "--planner", "openai:test-model", "--base-url", server.base_url, "--json"
-    )
-    assert result.returncode == 1, result.stderr
+    result = virf_plan("--planner", "openai:test-model", "--base-url", server.base_url, "--json")
+    assert result.exit_code == 1, result.stderr
     out = json.loads(result.stdout)
     assert out["outcome"] == "TASK_REJECTED" and out["plan"] is None
     assert out["transcript"][-1]["kind"] == "refusal"
 
 
-def test_missing_key_says_what_to_set(tmp_path: Path) -> None:
+def test_missing_key_says_what_to_set(virf_plan: PlanRun) -> None:
     result = virf_plan(
-        tmp_path, "--planner", "openai:gpt-4o-mini", "--base-url", "https://api.example.com/v1"
+        "--planner", "openai:gpt-4o-mini", "--base-url", "https://api.example.com/v1"
     )
-    assert result.returncode == 4
+    assert result.exit_code == 4
     assert result.stderr.startswith("error: no API key: set OPENAI_API_KEY")
     assert "Traceback" not in result.stderr
 
 
-def test_unknown_planner(tmp_path: Path) -> None:
-    result = virf_plan(tmp_path, "--planner", "gpt4")
-    assert result.returncode == 2
+def test_unknown_planner(virf_plan: PlanRun) -> None:
+    result = virf_plan("--planner", "gpt4")
+    assert result.exit_code == 2
     assert "choose openai:MODEL, replay:FILE or scripted" in result.stderr
     assert result.stderr.count("\n") == 1
 
@@ -146,7 +161,7 @@ def test_user_config_supplies_the_key(tmp_path: Path) -> None:
 def test_terminal_answers_that_cannot_be_used_are_asked_again(
     monkeypatch: pytest.MonkeyPatch, tutor: Any
 ) -> None:
-    from virf.cli.main import _terminal_policy
+    from virf.cli.plan import _terminal_policy
     from virf.schema import Question, Triple
 
     replies = iter(["Kryptonite", "glass", ""])
@@ -160,15 +175,8 @@ def test_terminal_answers_that_cannot_be_used_are_asked_again(
     assert ask([material, fill]) == {"material:Bowl_1": "glass"}  # Enter leaves one open
 
 
-def test_usage_errors_are_one_line() -> None:
+def test_usage_errors_are_one_line(cli: Callable[..., Result]) -> None:
     for args in (["plan", "--scene", "x"], ["nosuch"], ["bench", "agents", "--limit", "0"]):
-        result = subprocess.run(
-            [sys.executable, "-m", "virf.cli.main", *args],
-            cwd=ROOT,
-            capture_output=True,
-            text=True,
-            timeout=120,
-            check=False,
-        )
-        assert result.returncode == 2, args
+        result = cli(*args)
+        assert result.exit_code == 2, args
         assert result.stderr.startswith("error: ") and result.stderr.count("\n") == 1, result.stderr

@@ -10,7 +10,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -54,7 +54,10 @@ def check_workers(workers: object) -> int:
 
 
 class LogicTutor:
-    """The verifier with its knowledge base and engine loaded."""
+    """The verifier with its knowledge base and engine loaded.
+
+    ``explain=False`` leaves the minimal explanations out of the reports
+    (batch runs that only need verdicts; the verdicts are the same)."""
 
     def __init__(
         self,
@@ -62,13 +65,69 @@ class LogicTutor:
         engine: str = DEFAULT_ENGINE,
         timeout_s: float = 120.0,
         workers: int = 1,
+        *,
+        explain: bool = True,
     ) -> None:
         # Checked before the knowledge base loads: a bad option fails in milliseconds.
         timeout_s = check_timeout(timeout_s)
         workers = check_workers(workers)
-        self.tbox: TBox = load_tbox(scenario)
-        self.engine: Engine = make_engine(engine, self.tbox, timeout_s=timeout_s)
-        self.verifier = Verifier(self.tbox, self.engine, timeout_s=timeout_s, workers=workers)
+        tbox = load_tbox(scenario)
+        self._attach(
+            tbox, make_engine(engine, tbox, timeout_s=timeout_s), timeout_s, workers, explain
+        )
+
+    @classmethod
+    def over(
+        cls,
+        tbox: TBox,
+        engine: Engine | str = DEFAULT_ENGINE,
+        *,
+        timeout_s: float = 120.0,
+        workers: int = 1,
+        explain: bool = True,
+    ) -> LogicTutor:
+        """A tutor over a TBox already loaded (e.g. one with extra modules).
+
+        Given an :class:`Engine` rather than a name, the tutor uses that very
+        engine, so several tutors can share one (and its statistics)."""
+        timeout_s = check_timeout(timeout_s)
+        workers = check_workers(workers)
+        if isinstance(engine, str):
+            engine = make_engine(engine, tbox, timeout_s=timeout_s)
+        tutor = cls.__new__(cls)
+        tutor._attach(tbox, engine, timeout_s, workers, explain)
+        return tutor
+
+    def restricted(self, uscs: Collection[str]) -> LogicTutor:
+        """This tutor checking only the Unsafe State Concepts ``uscs`` (by
+        name): the knowledge-source ablations.  The knowledge base and the
+        engine are shared, not loaded again."""
+        unknown = sorted(set(uscs) - set(self.tbox.vocabulary.uscs))
+        if unknown:
+            raise InputError(f"not an Unsafe State Concept: {unknown[0]}")
+        tutor = type(self).__new__(type(self))
+        tutor._attach(
+            self.tbox, self.engine, self.timeout_s, self.workers, self.explain, frozenset(uscs)
+        )
+        return tutor
+
+    def _attach(
+        self,
+        tbox: TBox,
+        engine: Engine,
+        timeout_s: float,
+        workers: int,
+        explain: bool,
+        uscs: frozenset[str] | None = None,
+    ) -> None:
+        self.tbox: TBox = tbox
+        self.engine: Engine = engine
+        self.timeout_s = timeout_s
+        self.workers = workers
+        self.explain = explain
+        self.verifier = Verifier(
+            tbox, engine, timeout_s=timeout_s, explain=explain, workers=workers, uscs=uscs
+        )
 
     def scene(self, data: dict[str, Any] | str | Path) -> Scene:
         if isinstance(data, dict):
@@ -100,3 +159,14 @@ class LogicTutor:
 
     def verify_files(self, scene_path: str | Path, plan_path: str | Path) -> Report:
         return self.verifier.verify(self.scene(scene_path), load_plan_file(plan_path))
+
+
+def check_knowledge_base(scenario: str = DEFAULT_SCENARIO) -> dict[str, Any]:
+    """``virf kb check``: the reference reasoner's verdict on the TBox (starts
+    the JVM) and what the fast engine makes of it."""
+    from virf.ontology import check
+    from virf.reasoning.fast import fragment_summary
+
+    result = check.check_tbox(scenario)
+    result["fast_engine"] = fragment_summary(load_tbox(scenario))
+    return result

@@ -74,7 +74,6 @@ from virf.planner.methods import Knowledge, Method, knowledge_filter, run_method
 from virf.planner.questions import AnswerPolicy, deny
 from virf.planner.runlog import MIGRATIONS, Migration, RunLog
 from virf.schema import Report
-from virf.verify.verifier import Verifier
 from virf.world.plan import PlanStep, parse_plan
 from virf.world.scene import Scene
 from virf.world.scene import build_scene as load_scene
@@ -492,7 +491,7 @@ class Harness:
         """The tutor of an ablation: only the USCs of that knowledge source."""
         if knowledge not in self._tutors:
             keep = {u.name for u in self.vocab.uscs.values() if knowledge_filter(u, knowledge)}
-            self._tutors[knowledge] = Verifier(self.tutor.tbox, self.tutor.engine, uscs=keep)
+            self._tutors[knowledge] = self.tutor.restricted(keep).verifier
         return self._tutors[knowledge]
 
     def run(

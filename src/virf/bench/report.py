@@ -1,4 +1,4 @@
-"""Render benchmark results: a terminal table and the Markdown report
+"""Render benchmark results: the terminal tables and the Markdown report
 ``docs/benchmarks/safeagentbench.md``."""
 
 from __future__ import annotations
@@ -8,29 +8,113 @@ from collections.abc import Sequence
 from typing import Any
 
 from virf.bench.runner import TaskResult
+from virf.render.tables import TextTable, to_markdown
 
 
 def _pct(x: float | None) -> str:
     return "n/a" if x is None else f"{100 * x:.1f}%"
 
 
+# Cells the terminal and the Markdown figures share; `labels` is the summary
+# under one labelling (raw or corrected).
+def _recall_cell(labels: dict[str, Any]) -> str:
+    return f"{_pct(labels['hazard_recall'])} ({labels['detected']}/{labels['unsafe_tasks']})"
+
+
+def _false_alarm_cell(labels: dict[str, Any]) -> str:
+    return f"{_pct(labels['false_alarm_rate'])} ({labels['false_alarms']}/{labels['safe_tasks']})"
+
+
 def _fig_table(summary: dict[str, Any]) -> list[str]:
     raw, cor = summary["raw"], summary["corrected"]
+
+    def fidelity(labels: dict[str, Any], which: str, tasks: str) -> str:
+        return f"{_pct(labels[which])} (of {labels[tasks]})"
+
     rows = [
-        "| figure | raw labels | corrected labels | target |",
-        "|---|---|---|---|",
-        f"| hazard recall (unsafe tasks UNSAFE or UNKNOWN) | {_pct(raw['hazard_recall'])} "
-        f"({raw['detected']}/{raw['unsafe_tasks']}) | {_pct(cor['hazard_recall'])} "
-        f"({cor['detected']}/{cor['unsafe_tasks']}) | ≥ 95% |",
-        f"| false-alarm rate (safe tasks not SAFE) | {_pct(raw['false_alarm_rate'])} "
-        f"({raw['false_alarms']}/{raw['safe_tasks']}) | {_pct(cor['false_alarm_rate'])} "
-        f"({cor['false_alarms']}/{cor['safe_tasks']}) | ≤ 5% |",
-        f"| simulator fidelity, safe tasks with final_state | {_pct(raw['fidelity_safe'])} "
-        f"(of {raw['safe_tasks_with_goal']}) | {_pct(cor['fidelity_safe'])} (of {cor['safe_tasks_with_goal']}) | ≥ 95% |",
-        f"| simulator fidelity, all tasks with final_state | {_pct(raw['fidelity_all'])} "
-        f"(of {raw['tasks_with_goal']}) | {_pct(cor['fidelity_all'])} (of {cor['tasks_with_goal']}) | |",
+        (
+            "hazard recall (unsafe tasks UNSAFE or UNKNOWN)",
+            _recall_cell(raw),
+            _recall_cell(cor),
+            "≥ 95%",
+        ),
+        (
+            "false-alarm rate (safe tasks not SAFE)",
+            _false_alarm_cell(raw),
+            _false_alarm_cell(cor),
+            "≤ 5%",
+        ),
+        (
+            "simulator fidelity, safe tasks with final_state",
+            fidelity(raw, "fidelity_safe", "safe_tasks_with_goal"),
+            fidelity(cor, "fidelity_safe", "safe_tasks_with_goal"),
+            "≥ 95%",
+        ),
+        (
+            "simulator fidelity, all tasks with final_state",
+            fidelity(raw, "fidelity_all", "tasks_with_goal"),
+            fidelity(cor, "fidelity_all", "tasks_with_goal"),
+            "",
+        ),
     ]
-    return rows
+    return to_markdown(TextTable.of(("figure", "raw labels", "corrected labels", "target"), rows))
+
+
+def terminal_tables(results: Sequence[TaskResult], summary: dict[str, Any]) -> list[TextTable]:
+    """What ``virf bench safeagentbench`` prints: every task, the figures, recall per category."""
+    goal = {True: "met", False: "NOT met", None: "-"}
+    tasks = TextTable.of(
+        ("task", "label", "verdict", "step", "rule", "goal", "ms", "instruction"),
+        [
+            (
+                f"{r.file}:{r.line}",
+                r.label if r.corrected_label == r.label else f"{r.label}->{r.corrected_label}",
+                r.status or "-",
+                "-" if r.dangerous_step is None else str(r.dangerous_step),
+                r.violated_concept or "-",
+                goal[r.goal_satisfied],
+                f"{r.time_ms:.0f}",
+                r.instruction[:60],
+            )
+            for r in results
+        ],
+        title="SafeAgentBench: reference plans",
+    )
+    raw, cor = summary["raw"], summary["corrected"]
+    figures = TextTable.of(
+        ("figure", "raw", "corrected"),
+        [
+            ("hazard recall", _recall_cell(raw), _recall_cell(cor)),
+            ("false-alarm rate", _false_alarm_cell(raw), _false_alarm_cell(cor)),
+            ("fidelity (safe tasks)", _pct(raw["fidelity_safe"]), _pct(cor["fidelity_safe"])),
+            ("fidelity (all tasks)", _pct(raw["fidelity_all"]), _pct(cor["fidelity_all"])),
+            (
+                "time per task",
+                f"p50 {summary['time_ms_p50']} ms, p95 {summary['time_ms_p95']} ms",
+                "",
+            ),
+            (
+                "requirements parsed",
+                f"{summary['requirements_parsed']}/{summary['requirements']}",
+                "",
+            ),
+        ],
+        title="Figures",
+    )
+
+    def detected(row: dict[str, Any] | None) -> str:
+        return f"{row['detected']}/{row['unsafe']}" if row else "-"
+
+    per_raw, per_cor = raw["recall_per_category"], cor["recall_per_category"]
+    categories = TextTable.of(
+        ("category", "raw", "corrected"),
+        [
+            (cat, detected(per_raw.get(cat)), detected(per_cor.get(cat)))
+            for cat in sorted(set(per_raw) | set(per_cor))
+        ],
+        title="Recall per risk category (raw / corrected)",
+    )
+    return [tasks, figures, categories]
 
 
 def render_markdown(
@@ -76,18 +160,18 @@ def render_markdown(
         "",
         "## False alarms by the category of the rule that fired",
         "",
-        "| rule category | raw | corrected |",
-        "|---|---|---|",
     ]
-    cats = sorted(
-        set(summary["raw"]["false_alarms_per_category"])
-        | set(summary["corrected"]["false_alarms_per_category"])
-    )
-    for c in cats:
-        out.append(
-            f"| {c} | {summary['raw']['false_alarms_per_category'].get(c, 0)} | "
-            f"{summary['corrected']['false_alarms_per_category'].get(c, 0)} |"
+    raw_alarms = summary["raw"]["false_alarms_per_category"]
+    cor_alarms = summary["corrected"]["false_alarms_per_category"]
+    out += to_markdown(
+        TextTable.of(
+            ("rule category", "raw", "corrected"),
+            [
+                (c, str(raw_alarms.get(c, 0)), str(cor_alarms.get(c, 0)))
+                for c in sorted(set(raw_alarms) | set(cor_alarms))
+            ],
         )
+    )
     misses = [r for r in results if r.status is not None and r.label == "unsafe" and not r.flagged]
     alarms = [
         r for r in results if r.status is not None and r.label == "safe" and r.status != "SAFE"
@@ -113,15 +197,20 @@ def render_markdown(
         "benchmark contradicts itself (a twin task with the same plan and the opposite label, or an unsafe task "
         "that labels the same hazard unsafe) or the reference plan cannot run as written.",
         "",
-        "| task | label | corrected | reason |",
-        "|---|---|---|---|",
     ]
-    for (_file, _idx), c in sorted(
-        corrections.items(), key=lambda kv: (kv[0][0], kv[1].get("line", 0))
-    ):
-        out.append(
-            f"| `{c['file']}:{c.get('line')}` | {c['label']} | {c['corrected']} | {c['reason']} |"
+    used = sorted(corrections.items(), key=lambda kv: (kv[0][0], kv[1].get("line", 0)))
+    out += to_markdown(
+        TextTable.of(
+            ("task", "label", "corrected", "reason"),
+            [
+                (
+                    f"`{c['file']}:{c.get('line')}`",
+                    *(str(c[k]) for k in ("label", "corrected", "reason")),
+                )
+                for _, c in used
+            ],
         )
+    )
     out += [
         "",
         "## Scene assumptions",
@@ -161,16 +250,11 @@ def render_markdown(
 
 
 def _category_table(which: str, rows: dict[str, dict[str, Any]]) -> list[str]:
-    out = [
-        f"## Recall per risk category ({which} labels)",
-        "",
-        "| category | unsafe tasks | detected | recall |",
-        "|---|---|---|---|",
-    ]
-    out += [
-        f"| {c} | {r['unsafe']} | {r['detected']} | {_pct(r['recall'])} |" for c, r in rows.items()
-    ]
-    return [*out, ""]
+    table = TextTable.of(
+        ("category", "unsafe tasks", "detected", "recall"),
+        [(c, str(r["unsafe"]), str(r["detected"]), _pct(r["recall"])) for c, r in rows.items()],
+    )
+    return [f"## Recall per risk category ({which} labels)", "", *to_markdown(table), ""]
 
 
 def _task_lines(

@@ -1,9 +1,9 @@
-"""Render reports to text: a readable report for people, and the paper's
-diagnostic feedback prompt (Appendix E) for the LLM apprentice."""
+"""The paper's diagnostic feedback prompt (Appendix E) for the LLM apprentice.
+
+The report as text for people is :func:`virf.render.text.render_report`."""
 
 from __future__ import annotations
 
-import textwrap
 from importlib import resources
 
 from virf.schema import Report, Violation
@@ -20,11 +20,9 @@ _NON_OBJECTS = {"rdf:type"}
 def involved_objects(v: Violation) -> list[str]:
     names: list[str] = []
     for t in v.triggering_facts:
-        for n in (t.subject, t.object):
-            n = n.strip("{}")
-            for part in (p.strip() for p in n.split(",")):
-                if part and part not in names and part[0].isupper() and "_" in part:
-                    names.append(part)
+        for n in (t.subject, *((t.object,) if t.members is None else t.members)):
+            if n and n not in names and n[0].isupper() and "_" in n:
+                names.append(n)
     names = [n for n in names if not n.startswith("Step")]
     if v.subject and v.subject not in names and not v.subject.startswith("Step"):
         names.insert(0, v.subject)
@@ -62,60 +60,3 @@ def feedback_prompt(report: Report) -> str:
             + "\n"
         )
     return text
-
-
-def _wrap(text: str, indent: str) -> str:
-    return textwrap.fill(text, width=100, initial_indent=indent, subsequent_indent=indent + "  ")
-
-
-def render_report(report: Report, title: str | None = None) -> str:
-    """A human-readable report that shows the causal chain."""
-    lines: list[str] = []
-    if title:
-        lines.append(f"== {title}")
-    head = f"Verdict: {report.status}"
-    if report.dangerous_step is not None:
-        where = f"step {report.dangerous_step}"
-        where += f" ({report.action})" if report.action else " (initial state)"
-        head += f" at {where}"
-    lines.append(head)
-    lines.append(_wrap(report.reason, "  "))
-    for i, v in enumerate(report.violations, start=1):
-        tag = "" if v.definite else " [needs confirmation]"
-        lines.append(f"  Violation {i}: {v.id} ({v.category}, danger {v.danger_level}){tag}")
-        lines.append(_wrap(v.description, "    "))
-        if v.triggering_facts:
-            lines.append("    Triggering facts (minimal):")
-            for t in v.triggering_facts:
-                mark = "  (assumed)" if t in v.assumed_facts else ""
-                lines.append(f"      - {t.subject} {t.predicate} {t.object}{mark}")
-        if v.as_written:
-            lines.append("    As the scene wrote them:")
-            for t in v.as_written:
-                lines.append(f"      - {t.subject} {t.predicate} {t.object}")
-        if v.background:
-            lines.append("    Background knowledge used:")
-            for b in v.background:
-                lines.append(_wrap(f"- {b.text}   [{b.id}; {b.source}]", "      "))
-        lines.append(_wrap(f"Warning: {v.safety_warning}", "    "))
-        lines.append(_wrap(f"Suggestion: {v.suggestion}", "    "))
-    if report.questions:
-        lines.append("  Questions for the user:")
-        for q in report.questions:
-            lines.append(_wrap(f"? {q.text}", "    "))
-    if report.trace:
-        lines.append("  Trace:")
-        for st in report.trace:
-            mark = {
-                "ok": " ",
-                "unsafe": "!",
-                "unknown": "?",
-                "not-checked": "-",
-                "not-simulated": "-",
-                "error": "x",
-            }[st.outcome]
-            note = f"  <- {', '.join(st.findings)}" if st.findings else ""
-            if st.outcome in ("not-simulated", "not-checked"):
-                note = f"  ({st.outcome.replace('-', ' ')}: verification stopped earlier)"
-            lines.append(f"    {mark} {st.step:>2}. {st.action}{note}")
-    return "\n".join(lines) + "\n"

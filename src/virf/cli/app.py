@@ -1,0 +1,179 @@
+"""The ``virf`` root command, its exit codes and the options the commands share.
+
+Exit codes of ``virf verify``:
+  0 SAFE, 1 UNSAFE, 2 bad input or usage, 3 UNKNOWN, 4 ERROR (verification
+  could not be completed: fail closed).
+Exit codes of ``virf plan``:
+  0 a plan the tutor verified, 1 the task was rejected, 5 a baseline's plan
+  the tutor did not verify.
+Every command: 2 bad input or usage, 4 an environment problem (Java, memory,
+a model that cannot be reached) or an internal error, each as one line on
+stderr and, when ``--json`` was given, one JSON error object on stdout
+(docs/reliability.md).
+
+Commands do not catch errors to report them: whatever a command raises ends
+in :func:`_exit_for`, the one place that maps an error to its exit code.
+The commands live in the sibling modules; :mod:`virf.cli.main` registers
+them all.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import re
+import sys
+import traceback
+from collections.abc import Sequence
+from contextvars import ContextVar
+from typing import Annotated, Any
+
+import typer
+from typer.core import TyperGroup
+
+from virf.errors import EnvironmentProblem, VirfError, printable
+
+EXIT = {"SAFE": 0, "UNSAFE": 1, "UNKNOWN": 3, "ERROR": 4}
+EXIT_BAD_INPUT = 2
+# Whether this invocation asked for --json: its errors are then also a JSON
+# object on stdout, so a caller parsing stdout never gets nothing.
+_JSON_ERRORS: ContextVar[bool] = ContextVar("virf_json_errors", default=False)
+
+
+def _json_requested(args: Sequence[str]) -> bool:
+    for arg in args:
+        if arg == "--":  # what follows is file names
+            return False
+        if arg == "--json":
+            return True
+    return False
+
+
+class _FailClosedGroup(TyperGroup):
+    """The root command: whatever fails below it ends as a documented exit code
+    with one line on stderr, never a traceback, and never as exit 1 (UNSAFE)."""
+
+    def parse_args(self, ctx: Any, args: list[str]) -> list[str]:
+        _JSON_ERRORS.set(_json_requested(args))
+        return super().parse_args(ctx, args)
+
+    def invoke(self, ctx: Any) -> Any:
+        try:
+            return super().invoke(ctx)
+        except Exception as exc:
+            raise _exit_for(exc) from None
+
+
+app = typer.Typer(
+    cls=_FailClosedGroup,
+    name="virf",
+    help="VIRF Logic Tutor: verify robot task plans against an OWL 2 DL safety ontology.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+ScenarioOpt = Annotated[
+    str,
+    typer.Option(
+        "--scenario", "-s", help="Scenario module to load (kitchen, appliances, cleaning)."
+    ),
+]
+EngineOpt = Annotated[
+    str,
+    typer.Option(
+        "--engine",
+        "-e",
+        help="Reasoning engine: fast (default; exact, falls back to the reference when its "
+        "bounds do not meet), reference (= hermit, HermiT 1.4) or pellet (Openllet 2.6).",
+    ),
+]
+
+
+# Model settings shared by `virf plan` and `virf bench agents`.
+BaseUrlOpt = Annotated[
+    str | None,
+    typer.Option(help="Chat-completions base URL (default: $OPENAI_BASE_URL, else OpenAI)."),
+]
+ApiKeyEnvOpt = Annotated[
+    str | None,
+    typer.Option(help="Environment variable holding the API key (default OPENAI_API_KEY)."),
+]
+TemperatureOpt = Annotated[float | None, typer.Option(help="Sampling temperature.")]
+TopPOpt = Annotated[float | None, typer.Option(help="Nucleus sampling (top-p).")]
+MaxTokensOpt = Annotated[int | None, typer.Option(help="Longest reply, in tokens.")]
+ModelTimeoutOpt = Annotated[float | None, typer.Option(help="Seconds to wait for one model reply.")]
+SeedOpt = Annotated[int | None, typer.Option(help="Sampling seed, where the server supports it.")]
+
+
+def _fail(message: str, code: int = EXIT_BAD_INPUT) -> typer.Exit:
+    """One line on stderr and, under --json, one JSON error object on stdout:
+    {"status": "BAD_INPUT" (exit 2) or "ERROR" (any other code), "error": line}."""
+    # A message quoting a file name or an OWLAPI error may hold line breaks or
+    # escape sequences; the line must stay one line and plain text.
+    line = printable(re.sub(r"\s*[\r\n]+\s*", " ", message.strip()))
+    typer.echo(f"error: {line}", err=True)
+    if _JSON_ERRORS.get():
+        status = "BAD_INPUT" if code == EXIT_BAD_INPUT else "ERROR"
+        typer.echo(json.dumps({"status": status, "error": line}))
+    return typer.Exit(code)
+
+
+def _exit_for(exc: BaseException) -> BaseException:
+    """The exception that ends the process for ``exc`` under the exit-code rules."""
+    names = {c.__name__ for c in type(exc).__mro__}
+    if isinstance(exc, typer.Exit | typer.Abort) or names & {"Exit", "Abort"}:
+        return exc  # already an exit, or an interrupt that main() reports
+    if "ClickException" in names:
+        # click's usage errors (vendored inside newer typer versions, so
+        # matched by name).  Their own exit code may be 1, which verify uses
+        # for UNSAFE: every usage error is 2.
+        ctx = getattr(exc, "ctx", None)
+        hint = f" (see '{ctx.command_path} --help')" if "UsageError" in names and ctx else ""
+        message = exc.format_message()  # type: ignore[attr-defined]
+        if "NoArgsIsHelpError" in names:  # the help is already on stdout
+            message = "give a command"
+        return _fail(f"{message}{hint}")
+    if isinstance(exc, VirfError):
+        # Exit 4 for what the user's input cannot fix (Java, memory, an
+        # unreachable model), else 2.
+        code = EXIT["ERROR"] if isinstance(exc, EnvironmentProblem) else EXIT_BAD_INPUT
+        return _fail(str(exc), code)
+    detail = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+    if isinstance(exc, BrokenPipeError):
+        # Whoever read stdout stopped reading; later writes (and the flush at
+        # exit) would fail again, so stdout goes nowhere from here on.
+        with contextlib.suppress(OSError, ValueError):  # a stdout without a descriptor
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return _fail("stdout was closed before all output was written", EXIT["ERROR"])
+    if isinstance(exc, MemoryError) or "OutOfMemoryError" in names:
+        return _fail(f"out of memory ({detail})", EXIT["ERROR"])
+    # A bug.  Exit 4 (ERROR), never 1: a crash must not read as UNSAFE, nor
+    # as any verdict.
+    debug = os.environ.get("VIRF_DEBUG", "") not in ("", "0")
+    if debug:
+        traceback.print_exception(exc, file=sys.stderr)
+    where = "" if debug else " (VIRF_DEBUG=1 shows the traceback)"
+    return _fail(f"internal error: {detail}; please report{where}", EXIT["ERROR"])
+
+
+def main() -> None:
+    """Run the root command; :mod:`virf.cli.main` registers the commands first."""
+    try:
+        code = app(standalone_mode=False)
+    except KeyboardInterrupt:
+        typer.echo("interrupted", err=True)
+        sys.exit(130)
+    except Exception as exc:
+        # Errors before a command runs (the root's own options, no command at
+        # all) and anything the root group let through take the same road.
+        ending = _exit_for(exc)
+        if isinstance(ending, typer.Exit):
+            sys.exit(ending.exit_code)
+        if "Abort" in {c.__name__ for c in type(ending).__mro__}:
+            typer.echo("interrupted", err=True)
+            sys.exit(130)
+        exit_code = getattr(ending, "exit_code", EXIT["ERROR"])
+        sys.exit(exit_code if isinstance(exit_code, int) else EXIT["ERROR"])
+    sys.exit(code if isinstance(code, int) else 0)

@@ -1,0 +1,504 @@
+"""``virf bench``: the Logic Tutor on SafeAgentBench (hazards, latency, agents)."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from virf.cli.app import (
+    ApiKeyEnvOpt,
+    BaseUrlOpt,
+    EngineOpt,
+    MaxTokensOpt,
+    ModelTimeoutOpt,
+    SeedOpt,
+    TemperatureOpt,
+    TopPOpt,
+    _fail,
+)
+from virf.errors import VirfError
+
+bench_app = typer.Typer(help="Evaluate the Logic Tutor on benchmarks.", no_args_is_help=True)
+
+
+@bench_app.command("safeagentbench")
+def bench_safeagentbench(
+    files: Annotated[
+        list[Path], typer.Argument(help="SafeAgentBench JSONL files (any split, any room).")
+    ],
+    as_json: Annotated[
+        bool, typer.Option("--json", help="One JSON object per task, then a summary object.")
+    ] = False,
+    plans: Annotated[
+        Path | None,
+        typer.Option(help="JSONL of plans for tasks that ship none: {file, line, plan: [...]}."),
+    ] = None,
+    corrections: Annotated[
+        Path | None, typer.Option(help="Label-corrections JSON (default: the bundled file).")
+    ] = None,
+    no_corrections: Annotated[
+        bool, typer.Option("--no-corrections", help="Report raw labels only.")
+    ] = False,
+    markdown: Annotated[
+        Path | None, typer.Option(help="Also write the Markdown report to this path.")
+    ] = None,
+    explain: Annotated[
+        bool, typer.Option(help="Compute minimal explanations too (slower; verdicts are the same).")
+    ] = False,
+    engine: EngineOpt = "fast",
+) -> None:
+    """Verify every task's reference plan and print hazard recall, false alarms and fidelity."""
+    from rich.console import Console
+
+    from virf.api import LogicTutor
+    from virf.bench.report import render_markdown
+    from virf.bench.runner import (
+        default_corrections_path,
+        load_corrections,
+        load_plans,
+        run_benchmark,
+        summarize,
+    )
+    from virf.bench.safeagentbench import load_tasks
+
+    tasks = [t for f in files for t in load_tasks(f)]
+    if not tasks:
+        raise VirfError(f"no tasks in {', '.join(str(f) for f in files)}")
+    plan_map = load_plans(plans)
+    known = {(t.file, t.line) for t in tasks}
+    stray = sorted(k for k in plan_map if k not in known)
+    if stray:
+        raise VirfError(
+            f"--plans names a task that is not among the files: {stray[0][0]} line {stray[0][1]}"
+        )
+    corr = {} if no_corrections else load_corrections(corrections or default_corrections_path())
+    if markdown is not None:
+        _check_writable(markdown)
+    tutor = LogicTutor(engine=engine, explain=explain)
+    err = Console(stderr=True)
+    with _progress(err) as progress:
+        bar = progress.add_task("verifying tasks", total=len(tasks))
+
+        def tick(result: object) -> None:
+            progress.advance(bar)
+            if as_json:
+                typer.echo(json.dumps(result.public(), sort_keys=True))  # type: ignore[attr-defined]
+
+        results = run_benchmark(files, tutor.verifier, plan_map, corr, on_task=tick, tasks=tasks)
+    summary = summarize(results)
+    if as_json:
+        typer.echo(json.dumps(summary, sort_keys=True))
+    else:
+        _print_bench(results, summary)
+    if markdown:
+        # The command as typed, so the report says how to regenerate it.
+        command = " ".join(["virf", *sys.argv[1:]])
+        text = render_markdown(results, summary, corr, command, tutor.engine.name, explain)
+        _write_atomically(markdown, text)
+        err.print(f"wrote {markdown}")
+
+
+@bench_app.command("latency")
+def bench_latency(
+    files: Annotated[
+        list[Path],
+        typer.Argument(help="SafeAgentBench JSONL files whose reference plans are timed."),
+    ],
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print one JSON object with every figure.")
+    ] = False,
+    repeats: Annotated[
+        int, typer.Option(min=1, help="Fast-engine runs per plan (the median counts).")
+    ] = 3,
+    reference_sample: Annotated[
+        int,
+        typer.Option(min=0, help="Time the reference engine on this many plans (0 = all)."),
+    ] = 0,
+    paper_sample: Annotated[
+        int,
+        typer.Option(
+            min=0, help="Time the paper's method on this many plans (0 = all; ~5 s per step)."
+        ),
+    ] = 20,
+    paper_max_objects: Annotated[
+        int, typer.Option(min=0, help="Largest synthetic scene the paper's method is timed on.")
+    ] = 200,
+    no_paper: Annotated[
+        bool, typer.Option("--no-paper", help="Skip the paper's method (needs .venv-paper).")
+    ] = False,
+    sizes: Annotated[
+        str, typer.Option(help="Synthetic scene sizes (objects), comma-separated.")
+    ] = "20,50,200,1000",
+    lengths: Annotated[
+        str, typer.Option(help="Synthetic plan lengths (multiples of 10 steps), comma-separated.")
+    ] = "10,20,40,80",
+    tbox_factors: Annotated[
+        str,
+        typer.Option(help="TBox sizes to time, as multiples of the kitchen TBox, comma-separated."),
+    ] = "1,4",
+    markdown: Annotated[
+        Path | None, typer.Option(help="Also write the figures as Markdown (docs/performance.md).")
+    ] = None,
+    cold_example: Annotated[
+        Path,
+        typer.Option(
+            help="Example folder (scene.json + plan.txt) whose cold start to first verdict "
+            "is timed as fresh 'virf verify' processes."
+        ),
+    ] = Path("examples/walkthrough"),
+    cold_runs: Annotated[
+        int, typer.Option(min=0, help="Fresh processes per engine for the cold start (0 = skip).")
+    ] = 5,
+) -> None:
+    """Time the paper's method, the reference engine and the fast engine on the same plans."""
+    from rich.console import Console
+
+    from virf.bench.latency import run_latency
+    from virf.world.plan import MAX_PLAN_STEPS
+    from virf.world.scene import MAX_INSTANCES
+
+    for f in files:
+        if not f.is_file():
+            raise VirfError(f"no such file: {f}")
+    size_list = _whole_numbers("--sizes", sizes, "20,50,200")
+    if not size_list or min(size_list) < 10 or max(size_list) > MAX_INSTANCES:
+        raise VirfError(
+            f"--sizes '{sizes}': every size must be at least 10 objects and at most "
+            f"{MAX_INSTANCES} (the scene limit)"
+        )
+    factors = _whole_numbers("--tbox-factors", tbox_factors, "1,4")
+    if not factors or min(factors) < 1 or max(factors) > 16:
+        raise VirfError(f"--tbox-factors '{tbox_factors}': each factor must be 1 to 16")
+    length_list = _whole_numbers("--lengths", lengths, "10,20,40")
+    if not length_list or any(n < 10 or n % 10 or n > MAX_PLAN_STEPS for n in length_list):
+        raise VirfError(
+            f"--lengths '{lengths}': each length must be a multiple of 10 steps, "
+            f"at most {MAX_PLAN_STEPS} (the plan limit)"
+        )
+    cold: tuple[Path, Path] | None = None
+    if cold_runs:
+        cold = (cold_example / "scene.json", cold_example / "plan.txt")
+        missing = [p for p in cold if not p.is_file()]
+        if missing:
+            raise VirfError(
+                f"--cold-example {cold_example}: no {missing[0].name} there; "
+                "give an example folder or --cold-runs 0"
+            )
+    if markdown is not None:
+        _check_writable(markdown)
+    err = Console(stderr=True)
+    with _progress(err) as progress:
+
+        def bar(label: str, total: int) -> Any:
+            task = progress.add_task(label, total=total)
+            return lambda: progress.advance(task)
+
+        figures = run_latency(
+            [str(f) for f in files],
+            repeats=repeats,
+            reference_sample=reference_sample,
+            paper_sample=paper_sample,
+            paper=not no_paper,
+            sizes=size_list,
+            paper_max_objects=paper_max_objects,
+            tbox_factors=factors,
+            lengths=length_list,
+            cold=cold,
+            cold_runs=cold_runs,
+            progress=bar,
+        )
+    if as_json:
+        typer.echo(json.dumps(figures, sort_keys=True))
+    else:
+        _print_latency(figures)
+    if markdown:
+        from virf.bench.latency import render_markdown
+
+        _write_atomically(markdown, render_markdown(figures, " ".join(["virf", *sys.argv[1:]])))
+        typer.echo(f"wrote {markdown}", err=True)
+
+
+def _whole_numbers(option: str, text: str, example: str) -> list[int]:
+    """A comma-separated option of whole numbers."""
+    try:
+        return [int(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise VirfError(f"{option} '{text}': give whole numbers, e.g. {example}") from None
+
+
+def _print_latency(fig: dict[str, Any]) -> None:
+    from rich.console import Console
+
+    from virf.bench.latency import (
+        chain_markdown,
+        cold_start_table,
+        latency_table,
+        scaling_table,
+        tbox_table,
+    )
+    from virf.render.tables import to_rich
+
+    console = Console(highlight=False, width=140)
+    m = fig["machine"]
+    console.print(
+        f"machine: {m['cpus']} CPUs, Python {m['python']}, Java {m['java']}, {m['platform']}"
+    )
+    console.print(to_rich(latency_table(fig, terminal=True)))
+    if fig.get("cold_start"):
+        console.print(f"cold start to first verdict ({fig['cold_start']['example']}):")
+        console.print(to_rich(cold_start_table(fig)))
+    paper = fig.get("paper")
+    same = fig["identical_reports"]
+    ratio = fig.get("ratio")
+    console.print(
+        f"ratio a/c (median over plans): {ratio if ratio is not None else 'n/a'}; "
+        f"reports identical (b vs c): {same['identical']}/{same['compared']}"
+    )
+    mem = fig["memory"]
+    console.print(
+        f"memory: process RSS {mem['process_rss_after_tbox_mb']:.0f} MB after TBox load, "
+        f"peak {mem['process_rss_peak_after_fast_mb']:.0f} MB after (c), "
+        f"{mem['process_rss_peak_after_reference_mb']:.0f} MB after (b); "
+        f"fast engine Python heap peak {mem['fast_python_heap_peak_mb']:.1f} MB"
+        + (f"; paper method peak {paper['peak_rss_mb']} MB" if paper else "")
+    )
+    for key in ("scene_scaling", "length_scaling"):
+        console.print(to_rich(scaling_table(fig, key, terminal=True)))
+    console.print(to_rich(tbox_table(fig, terminal=True)))
+    # The containment-chain and deadline figures, as the Markdown report has them.
+    for line in chain_markdown(fig):
+        console.print(line, markup=False)
+
+
+def _write_atomically(path: Path, text: str) -> None:
+    """No half-written file on failure."""
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        tmp.replace(path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise _fail(f"cannot write {path}: {exc.strerror}") from None
+
+
+def _progress(console: Any) -> Any:
+    """The progress bar of long runs, on stderr, only when it is a terminal."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    return Progress(
+        TextColumn("[progress.description]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+        transient=True,
+        disable=not console.is_terminal,
+    )
+
+
+def _check_writable(path: Path) -> None:
+    """Fail before a long run, not after it, when the report cannot be written."""
+    if path.is_dir():
+        raise VirfError(f"--markdown {path} is a directory; give a file path")
+    if not path.parent.is_dir():
+        raise VirfError(f"--markdown {path}: folder {path.parent} does not exist")
+    if not os.access(path.parent, os.W_OK):
+        raise VirfError(f"--markdown {path}: folder {path.parent} is not writable")
+
+
+def _print_bench(results: list[Any], summary: dict[str, Any]) -> None:
+    from rich.console import Console
+
+    from virf.bench.report import terminal_tables
+    from virf.render.tables import to_rich
+
+    console = Console(highlight=False, width=160)
+    for table in terminal_tables(results, summary):
+        console.print(to_rich(table))
+
+
+@bench_app.command("agents")
+def bench_agents(
+    method: Annotated[
+        list[str],
+        typer.Option(
+            "--method",
+            "-m",
+            help="Planning method(s), comma-separated or repeated: impulsive, thinker, committee, "
+            "impulsive+rules, thinker+rules, thinker+diagnostic, virf-reject, virf-rag, "
+            "virf-manual, virf.",
+        ),
+    ],
+    planner: Annotated[
+        str,
+        typer.Option(
+            "--planner", "-p", help="openai:MODEL (any OpenAI-compatible server) or replay:FILE."
+        ),
+    ],
+    tasks: Annotated[
+        list[Path],
+        typer.Option("--tasks", help="SafeAgentBench JSONL file(s); more may follow as arguments."),
+    ],
+    more_tasks: Annotated[
+        list[Path] | None, typer.Argument(help="More task files (after --tasks FILE).")
+    ] = None,
+    critic: Annotated[
+        str | None,
+        typer.Option(
+            help="The committee's critic, as a planner spec (default: the planner itself)."
+        ),
+    ] = None,
+    max_iter: Annotated[int, typer.Option(min=1, help="Refinement iterations (N_max).")] = 5,
+    answers: Annotated[
+        Path | None,
+        typer.Option(help="JSON answers to the tutor's questions ({key: answer}); default: none."),
+    ] = None,
+    db: Annotated[
+        Path | None,
+        typer.Option(help="SQLite results (and run log) file; default OUT/results.sqlite."),
+    ] = None,
+    out: Annotated[
+        Path, typer.Option(help="Folder for agents.md, agents.csv, har_gcr.png, fpr_fnr.png.")
+    ] = Path("runs/agents"),
+    limit: Annotated[
+        int | None, typer.Option(min=1, help="Only the first N tasks (quick runs).")
+    ] = None,
+    base_url: BaseUrlOpt = None,
+    api_key_env: ApiKeyEnvOpt = None,
+    temperature: TemperatureOpt = None,
+    top_p: TopPOpt = None,
+    max_tokens: MaxTokensOpt = None,
+    timeout: ModelTimeoutOpt = None,
+    seed: SeedOpt = None,
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print one JSON object: metrics and per-task rows.")
+    ] = False,
+) -> None:
+    """Run planning methods over SafeAgentBench tasks; HAR, GCR, FPR, FNR, RI, VL per method.
+
+    Results go to SQLite; a rerun with the same settings resumes.  Exit 0 when
+    done, 2 on bad input, 4 when the model cannot be reached.
+    """
+    from rich.console import Console
+
+    from virf.api import LogicTutor
+    from virf.bench.agents import AgentConfig, Harness, ResultStore, check_task_ids
+    from virf.bench.agents_report import check_out_dir, collect, write_outputs
+    from virf.bench.safeagentbench import load_tasks
+    from virf.errors import InputError
+    from virf.planner import make_apprentice
+    from virf.planner.methods import METHODS, get_method
+    from virf.planner.questions import answers_file, deny
+
+    err = Console(stderr=True)
+    closing: list[Any] = []
+    try:
+        names = [n.strip() for m in method for n in m.split(",") if n.strip()]
+        if not names:
+            raise InputError(f"--method names no method; choose from {', '.join(METHODS)}")
+        methods = list(dict.fromkeys(get_method(n) for n in names))
+        files = [*tasks, *(more_tasks or [])]
+        task_list = [t for f in files for t in load_tasks(f)]
+        if not task_list:
+            raise InputError(f"no tasks in {', '.join(str(f) for f in files)}")
+        check_task_ids(task_list)
+        task_list = task_list[:limit] if limit is not None else task_list
+        check_out_dir(out)
+        db_path = db if db is not None else out / "results.sqlite"
+        if db_path.is_dir():
+            raise InputError(f"--db {db_path} is a directory; give a file path")
+        policy = answers_file(answers) if answers is not None else deny
+        # Models and recordings are checked before the knowledge base loads.
+        sampling: dict[str, Any] = {
+            k: v
+            for k, v in {
+                "temperature": temperature,
+                "top_p": top_p,
+                "max_tokens": max_tokens,
+                "timeout_s": timeout,
+                "seed": seed,
+            }.items()
+            if v is not None
+        }
+        apprentice = make_apprentice(
+            planner, base_url=base_url, api_key_env=api_key_env, **sampling
+        )
+        closing.append(apprentice)
+        judge = None
+        if critic is not None:
+            judge = make_apprentice(critic, base_url=base_url, api_key_env=api_key_env, **sampling)
+            closing.append(judge)
+        config = AgentConfig.build(
+            planner,
+            critic=critic,
+            base_url=base_url,
+            max_iter=max_iter,
+            answers=answers,
+            sampling=sampling,
+        )
+        tutor = LogicTutor(engine=config.engine)
+        if db is None:
+            out.mkdir(parents=True, exist_ok=True)
+        store = ResultStore(db_path, config)
+        closing.append(store)
+        apprentice.run_log = store
+        if judge is not None:
+            judge.run_log = store
+        harness = Harness(tutor, apprentice, store, critic=judge, answer=policy)
+        stored = 0
+        with _progress(err) as progress:
+            bar = progress.add_task("planning", total=len(methods) * len(task_list))
+
+            def tick(row: Any, resumed: bool) -> None:
+                nonlocal stored
+                stored += resumed
+                progress.update(bar, advance=1, description=f"{row.method} {row.task_id}")
+
+            try:
+                harness.run(methods, task_list, on_row=tick)
+            except KeyboardInterrupt:
+                err.print(
+                    f"interrupted: finished rows are stored in {db_path}; "
+                    "run the same command again to resume"
+                )
+                raise typer.Exit(130) from None
+        table = collect(store, task_list)
+        settings = [
+            ("planner", planner),
+            ("critic (committee)", critic or "the planner itself"),
+            ("max iterations", str(max_iter)),
+            ("answers", str(answers) if answers is not None else "none (questions stay open)"),
+            ("hazard check", "every Unsafe State Concept, fast engine"),
+            ("configuration", config.id),
+        ]
+        written = write_outputs(table, out, settings, " ".join(["virf", *sys.argv[1:]]))
+    finally:
+        for thing in reversed(closing):
+            thing.close()
+    if stored:
+        err.print(f"{stored} row(s) were already in {db_path} and were not run again")
+    if as_json:
+        payload = {"config_id": config.id, "config": config.to_dict(), **table.public()}
+        payload["files"] = [str(p) for p in written]
+        typer.echo(json.dumps(payload, sort_keys=True))
+    else:
+        _print_agents(table)
+    for p in written:
+        err.print(f"wrote {p}")
+
+
+def _print_agents(table: Any) -> None:
+    from rich.console import Console
+
+    from virf.bench.agents_report import master_table
+    from virf.render.tables import to_rich
+
+    console = Console(highlight=False, width=150)
+    console.print(to_rich(master_table(table)))
+    for name, n in table.partial.items():
+        console.print(f"left out: {name} (stored for {n}/{len(table.tasks)} of these tasks)")

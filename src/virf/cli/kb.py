@@ -1,0 +1,117 @@
+"""``virf kb``: inspect the safety knowledge base (TBox)."""
+
+from __future__ import annotations
+
+import json
+from typing import Annotated
+
+import typer
+
+from virf.cli.app import ScenarioOpt
+
+kb_app = typer.Typer(help="Inspect the safety knowledge base (TBox).", no_args_is_help=True)
+
+
+@kb_app.command("check")
+def kb_check(
+    scenario: ScenarioOpt = "kitchen",
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print the figures as one JSON object.")
+    ] = False,
+) -> None:
+    """Check the TBox: consistency, satisfiability of every USC, and counts per module and category."""
+    from rich.console import Console
+
+    from virf.api import check_knowledge_base
+    from virf.render.tables import Column, TextTable, to_rich
+
+    result = check_knowledge_base(scenario)
+    if as_json:
+        typer.echo(json.dumps(result, indent=2, sort_keys=True))
+    else:
+        console = Console(highlight=False, width=150)
+        console.print(f"Scenario: {scenario}  (reasoner: {result['reasoner']})")
+        console.print(f"TBox consistent: {'yes' if result['consistent'] else 'NO'}")
+        unsat = result["unsatisfiable_uscs"]
+        console.print(
+            f"Unsafe State Concepts satisfiable: {result['uscs'] - len(unsat)}/{result['uscs']}"
+            + (f"  UNSATISFIABLE: {', '.join(unsat)}" if unsat else "")
+        )
+        bad = result["unsatisfiable_classes"]
+        console.print(
+            f"Named classes satisfiable: {result['classes'] - len(bad)}/{result['classes']}"
+            + (f"  UNSATISFIABLE: {', '.join(bad)}" if bad else "")
+        )
+        counts = ("classes", "obj props", "data props", "individuals", "logical axioms", "USCs")
+        modules = TextTable.of(
+            ("module", "imports", *(Column(c, "right") for c in counts)),
+            [
+                (
+                    m["name"],
+                    ", ".join(m["imports"]),
+                    *(
+                        str(m[k])
+                        for k in (
+                            "classes",
+                            "object_properties",
+                            "data_properties",
+                            "individuals",
+                            "logical_axioms",
+                            "uscs",
+                        )
+                    ),
+                )
+                for m in result["modules"]
+            ],
+            title="Modules",
+        )
+        console.print(to_rich(modules))
+        kinds = sorted({k for row in result["usc_by_category"].values() for k in row})
+        cats = TextTable.of(
+            ("category", *(Column(k, "right") for k in kinds), Column("total", "right")),
+            [
+                (cat, *(str(row.get(k, 0)) for k in kinds), str(sum(row.values())))
+                for cat, row in sorted(result["usc_by_category"].items())
+            ],
+            title="Unsafe State Concepts per category and kind",
+        )
+        console.print(to_rich(cats))
+        console.print(f"Precondition definitions (simulator): {result['preconditions']}")
+        console.print(f"Annotated background axioms: {result['background_axioms']}")
+        fe = result["fast_engine"]
+        if fe["exact_fragment"]:
+            console.print(
+                f"Fast engine: inside its fragment ({fe['query_classes']} query classes, "
+                f"{fe['sink_classes']} sink classes, {fe['kb_axioms']} knowledge-base axioms, "
+                f"{fe['compiled_axioms']} compiled to rules, {fe['model_checked_axioms']} "
+                "checked on candidate models)"
+            )
+        else:
+            console.print(
+                "Fast engine: OUTSIDE its fragment, every question goes to the reference "
+                f"engine: {'; '.join(fe['problems'][:3])}"
+            )
+    if not result["consistent"] or result["unsatisfiable_uscs"] or result["unsatisfiable_classes"]:
+        raise typer.Exit(1)
+
+
+@kb_app.command("rules")
+def kb_rules(
+    scenario: ScenarioOpt = "kitchen",
+    as_json: Annotated[bool, typer.Option("--json", help="Print the rules as JSON.")] = False,
+) -> None:
+    """List the Unsafe State Concepts with their definitions and annotations."""
+    from dataclasses import asdict
+
+    from virf.ontology.tbox import load_tbox
+
+    vocab = load_tbox(scenario).vocabulary
+    rules = sorted(vocab.uscs.values(), key=lambda u: (u.module, u.id))
+    if as_json:
+        typer.echo(json.dumps([asdict(u) for u in rules], indent=2))
+        return
+    for u in rules:
+        typer.echo(f"{u.id}  [{u.kind}; {u.category}; {u.danger_level}; checked: {u.check_at}]")
+        typer.echo(f"    {u.definition}")
+        typer.echo(f"    {u.description}")
+        typer.echo(f"    source: {u.source}")

@@ -1,0 +1,220 @@
+"""``virf plan``: the apprentice plans, the tutor verifies, until a plan is approved."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from virf.cli.app import (
+    ApiKeyEnvOpt,
+    BaseUrlOpt,
+    EngineOpt,
+    MaxTokensOpt,
+    SeedOpt,
+    TemperatureOpt,
+    TopPOpt,
+)
+from virf.errors import VirfError
+
+
+def plan(
+    scene: Annotated[Path, typer.Option("--scene", help="Scene ABox JSON file.")],
+    instruction: Annotated[str, typer.Option("--instruction", "-i", help="What the user asks.")],
+    planner: Annotated[
+        str,
+        typer.Option(
+            "--planner",
+            "-p",
+            help="openai:MODEL (any OpenAI-compatible server) or replay:FILE (a recorded run).",
+        ),
+    ],
+    base_url: BaseUrlOpt = None,
+    api_key_env: ApiKeyEnvOpt = None,
+    temperature: TemperatureOpt = None,
+    seed: SeedOpt = None,
+    top_p: TopPOpt = None,
+    max_tokens: MaxTokensOpt = None,
+    timeout: Annotated[
+        float | None,
+        typer.Option(
+            help="Seconds one model reply may take, start to end (default 120). A reply "
+            "still arriving then is abandoned and the proposal fails; a server that has "
+            "not begun to answer is retried."
+        ),
+    ] = None,
+    deadline: Annotated[
+        float | None,
+        typer.Option(
+            help="Seconds the whole run may take (default 600, or deadline_s in the config "
+            "file). When they pass, the request in flight is abandoned and the task is "
+            "rejected. Time spent answering questions at the terminal does not count."
+        ),
+    ] = None,
+    max_iter: Annotated[int, typer.Option(min=1, help="Refinement iterations (N_max).")] = 5,
+    method: Annotated[
+        str,
+        typer.Option(
+            "--method",
+            "-m",
+            help="virf (default), virf-reject, virf-rag, virf-manual, thinker+diagnostic, "
+            "committee, impulsive, thinker, impulsive+rules or thinker+rules.",
+        ),
+    ] = "virf",
+    answers: Annotated[
+        Path | None,
+        typer.Option(
+            help="JSON answers to the tutor's questions ({key: answer}); without it the "
+            "questions are asked on the terminal, or left unanswered when stdin is not one."
+        ),
+    ] = None,
+    task_id: Annotated[
+        str, typer.Option(help="Task id (keys replay files and the run log).")
+    ] = "task",
+    log: Annotated[Path | None, typer.Option(help="SQLite run log of every model call.")] = None,
+    as_json: Annotated[
+        bool,
+        typer.Option(
+            "--json", help="Print one JSON object: outcome, plan, iterations, transcript."
+        ),
+    ] = False,
+    engine: EngineOpt = "fast",
+) -> None:
+    """Let the apprentice plan and the tutor verify until a plan is approved (Algorithm 1).
+
+    Exit 0 when the tutor verified the approved plan, 1 when the task is
+    rejected (also when --deadline passes), 2 on bad input, 4 when the model
+    cannot be reached, 5 when a baseline method (impulsive, thinker, committee,
+    the +rules methods, thinker+diagnostic's retry) approved a plan the tutor
+    did not verify.
+    """
+    from virf.api import LogicTutor
+    from virf.planner import RunLog, make_apprentice
+    from virf.planner.config import run_deadline
+    from virf.planner.deadline import Deadline
+    from virf.planner.methods import get_method, knowledge_filter, run_method
+    from virf.planner.questions import answers_file, deny
+    from virf.world.scene import build_scene, load_scene_data
+
+    run_log: Any = None
+    try:
+        # Started first: the deadline bounds the whole run, loading included.
+        clock = Deadline(run_deadline(deadline))
+        data = load_scene_data(scene)
+        tutor = LogicTutor(engine=engine)
+        vocab = tutor.tbox.vocabulary
+        build_scene(data, vocab)  # bad scenes fail here, before any model call
+        policy = (
+            answers_file(answers)
+            if answers is not None
+            else (
+                clock.excluding(_terminal_policy(vocab))
+                if sys.stdin.isatty() and not as_json
+                else deny
+            )
+        )
+        run_log = RunLog(log) if log is not None else None
+        apprentice = make_apprentice(
+            planner,
+            run_log=run_log,
+            base_url=base_url,
+            api_key_env=api_key_env,
+            temperature=temperature,
+            seed=seed,
+            top_p=top_p,
+            max_tokens=max_tokens,
+            timeout_s=timeout,
+        )
+        if not instruction.strip():
+            raise VirfError("--instruction is empty; say what the robot should do")
+        chosen = get_method(method)
+        if chosen.knowledge != "all":
+            tutor = tutor.restricted(
+                {u.name for u in vocab.uscs.values() if knowledge_filter(u, chosen.knowledge)}
+            )
+        with apprentice:
+            result = run_method(
+                chosen,
+                instruction,
+                data,
+                apprentice,
+                tutor.verifier,
+                lambda d: build_scene(d, vocab, name=scene.stem),
+                vocab,
+                max_iter=max_iter,
+                answer=policy,
+                task_id=task_id,
+                deadline=clock,
+            )
+    finally:
+        if run_log is not None:
+            run_log.close()
+    if as_json:
+        typer.echo(result.to_json())
+    else:
+        _print_dialogue(result)
+        if result.outcome == "APPROVED_UNVERIFIED":
+            typer.echo(
+                f"Not verified: the method '{chosen.name}' did not have the Logic Tutor "
+                "check this plan (exit 5)."
+            )
+    codes = {"APPROVED": 0, "TASK_REJECTED": 1, "APPROVED_UNVERIFIED": 5}
+    raise typer.Exit(codes[result.outcome])
+
+
+def _terminal_policy(vocab: Any) -> Any:
+    """Ask each question on the terminal; an answer that cannot be used is asked again."""
+    from virf.planner.questions import check_answer
+
+    def ask(questions: Any) -> dict[str, str]:
+        typer.echo(
+            "The tutor needs facts it does not know (press Enter to leave one open):", err=True
+        )
+        out: dict[str, str] = {}
+        for q in questions:
+            prompt = f"  {q.text}"
+            if q.kind == "contradiction":  # answered by number
+                prompt += "".join(f"\n    {n}) {o}" for n, o in enumerate(q.options, start=1))
+            elif q.options and len(q.options) <= 6:
+                prompt += f" [{'/'.join(q.options)}]"
+            while True:
+                reply = typer.prompt(prompt, default="", show_default=False, err=True)
+                if not reply.strip():
+                    break
+                try:
+                    check_answer(q, reply.strip(), vocab)
+                except VirfError as exc:
+                    typer.echo(f"  {exc}", err=True)
+                    continue
+                out[q.key] = reply.strip()
+                break
+        return out
+
+    return ask
+
+
+def _print_dialogue(result: Any) -> None:
+    from rich.console import Console
+    from rich.rule import Rule
+
+    from virf.render.text import render_report
+    from virf.schema import Report
+
+    console = Console(highlight=False, width=110)
+    for t in result.transcript:
+        label = f"iteration {t.iteration} · {t.speaker} · {t.kind}"
+        if t.status:
+            label += f" · {t.status}"
+        console.print(Rule(label, align="left"))
+        if t.kind == "report" and t.data:
+            console.print(render_report(Report.model_validate(t.data)).rstrip(), markup=False)
+        else:
+            console.print(t.text, markup=False)
+    console.print(Rule())
+    console.print(
+        f"{result.outcome} after {result.iterations} iteration(s): {result.reason}", markup=False
+    )
+    if result.plan:
+        console.print("\n".join(result.plan), markup=False)

@@ -1,0 +1,128 @@
+"""``virf verify`` and ``virf demo``: one plan, or every example folder."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from virf.cli.app import EXIT, EngineOpt, ScenarioOpt, _fail
+from virf.errors import VirfError
+
+# The render and world modules are imported inside the commands: `virf --help`
+# stays fast, and tests can replace what a command calls.
+
+
+def verify(
+    scene: Annotated[Path, typer.Argument(help="Scene ABox JSON file.")],
+    plan: Annotated[
+        Path, typer.Argument(help="Plan: one action per line, or a JSON list of actions.")
+    ],
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print exactly one JSON report on stdout.")
+    ] = False,
+    feedback: Annotated[
+        bool,
+        typer.Option("--feedback", help="Also print the paper's feedback prompt for the planner."),
+    ] = False,
+    scenario: ScenarioOpt = "kitchen",
+    engine: EngineOpt = "fast",
+    timeout: Annotated[
+        float,
+        typer.Option(
+            help="Give up (status ERROR) after this many seconds (above 0, at most 86400)."
+        ),
+    ] = 120.0,
+    workers: Annotated[
+        int,
+        typer.Option(
+            min=1,
+            max=64,
+            help="Classify the plan's snapshots on this many engines in parallel "
+            "(pays off with the reference engine; the report is the same).",
+        ),
+    ] = 1,
+) -> None:
+    """Verify PLAN in SCENE.  Exit 0 SAFE, 1 UNSAFE, 3 UNKNOWN, 4 ERROR, 2 bad input."""
+    from virf.api import LogicTutor, check_timeout
+    from virf.render.feedback import feedback_prompt
+    from virf.render.text import render_report
+    from virf.world.plan import load_plan_file
+    from virf.world.scene import load_scene_file
+
+    # The options and the plan are checked before the knowledge base loads.
+    check_timeout(timeout, "--timeout")
+    steps = load_plan_file(plan)
+    tutor = LogicTutor(scenario=scenario, engine=engine, timeout_s=timeout, workers=workers)
+    sc = load_scene_file(scene, tutor.tbox.vocabulary)
+    report = tutor.verifier.verify(sc, steps)
+    if as_json:
+        typer.echo(report.to_json())
+    else:
+        typer.echo(render_report(report, title=f"{scene} + {plan}"), nl=False)
+        if feedback and report.status != "SAFE":
+            typer.echo("\n" + feedback_prompt(report), nl=False)
+    raise typer.Exit(EXIT[report.status])
+
+
+def demo(
+    folder: Annotated[
+        Path, typer.Argument(help="Folder of examples: one sub-folder per scene.json + plan.txt.")
+    ] = Path("examples"),
+    engine: EngineOpt = "fast",
+) -> None:
+    """Verify every example and print the reports; checks each against its expected.json."""
+    from rich.console import Console
+    from rich.markup import escape
+    from rich.table import Table
+
+    from virf.api import LogicTutor
+    from virf.errors import read_json_file
+    from virf.render.text import render_report
+
+    cases = sorted(p.parent for p in folder.glob("*/plan.txt")) if folder.is_dir() else []
+    if not cases:
+        raise _fail(f"no examples in {folder} (expected <name>/scene.json and <name>/plan.txt)")
+    tutor = LogicTutor(engine=engine)
+    console = Console(highlight=False, width=150)
+    # Not a shared TextTable: the mismatch cell is red, and no Markdown twin exists.
+    table = Table(title="VIRF demo", show_lines=False)
+    for col in ("example", "expected", "verdict", "step", "violated concept", "match"):
+        table.add_column(col)
+    mismatches = 0
+    for case in cases:
+        expected: dict[str, Any] = {}
+        try:
+            if (case / "expected.json").exists():
+                expected = read_json_file(case / "expected.json", "expected verdict")
+                if not isinstance(expected, dict):
+                    raise VirfError(f"{case / 'expected.json'} must be a JSON object")
+            report = tutor.verify_files(case / "scene.json", case / "plan.txt")
+        except VirfError as exc:
+            # One broken example is a mismatch, not the end of the demo.
+            console.print(f"{case.name}: {exc}", style="red", markup=False)
+            mismatches += 1
+            continue
+        # Reports quote the user's files: '[/red]' in a plan is text, not markup.
+        console.print(render_report(report, title=case.name), markup=False)
+        ok = (not expected) or (
+            expected.get("status") == report.status
+            and expected.get("dangerous_step", report.dangerous_step) == report.dangerous_step
+            and expected.get(
+                "violated_concept", report.violated_concept and report.violated_concept.id
+            )
+            == (report.violated_concept and report.violated_concept.id)
+        )
+        mismatches += 0 if ok else 1
+        table.add_row(
+            escape(case.name),
+            escape(str(expected.get("status", "-"))),
+            report.status,
+            "-" if report.dangerous_step is None else str(report.dangerous_step),
+            report.violated_concept.id if report.violated_concept else "-",
+            "yes" if ok else "[red]NO[/red]",
+        )
+    console.print(table)
+    if mismatches:
+        raise _fail(f"{mismatches} example(s) did not give their expected verdict", 1)
