@@ -23,6 +23,7 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/ruff check src tests
 	$(BIN)/mypy
+	$(BIN)/lint-imports
 	$(BIN)/pytest
 
 # The full equivalence sweep: every SafeAgentBench dev plan and a few hundred
@@ -30,6 +31,7 @@ test: $(STAMP)
 test-full: $(STAMP)
 	$(BIN)/ruff check src tests
 	$(BIN)/mypy
+	$(BIN)/lint-imports
 	VIRF_FULL=1 $(BIN)/pytest
 
 install: $(STAMP)

@@ -24,6 +24,7 @@ from virf.bench.latency import (
 )
 from virf.ontology.tbox import load_tbox
 from virf.reasoning.fast import fragment_of
+from virf.world.simulate import simulate
 
 SAB = ROOT.parent / "shared" / "benchmarks" / "safeagentbench"
 
@@ -42,7 +43,9 @@ def test_the_cycle_returns_to_the_same_world(tutor: LogicTutor) -> None:
     """After the first pass (which also marks objects found and near), every
     pass of the cycle ends in the same state, so longer plans repeat equal work."""
     case = synthetic_case(20, tutor.tbox, 30)
-    states, _, stop = tutor.verifier._simulate(case.scene, case.plan)
+    sim = tutor.verifier.sim
+    trace = simulate(sim, sim.initial(case.scene), case.plan)
+    states, stop = trace.states, trace.stop
     n = len(SYNTHETIC_CYCLE)
     assert stop is None and len(states) == 3 * n + 1
     assert dict(states[n].facts) == dict(states[2 * n].facts) == dict(states[3 * n].facts)
@@ -52,7 +55,7 @@ def test_synthetic_domain_modules_load_and_stay_in_the_fragment(tmp_path: Path) 
     base = load_tbox()
     extra = synthetic_modules(1, tmp_path)
     bigger = load_tbox("kitchen", extra)
-    assert len(bigger.logical_axioms()) > 1.5 * len(base.logical_axioms())
+    assert len(bigger.owl.logical_axioms()) > 1.5 * len(base.owl.logical_axioms())
     assert fragment_of(bigger).exact
     assert any(c.startswith("Syn1_") for c in bigger.vocabulary.classes)
 
@@ -96,6 +99,15 @@ def test_bad_options_give_one_line(tmp_path: Path, args: list[str], message: str
     assert "Traceback" not in result.stderr
 
 
+def test_a_cold_example_without_its_files_gives_one_line(tmp_path: Path) -> None:
+    tasks = tmp_path / "unsafe_detailed.jsonl"
+    task = {"scene_name": "FloorPlan1", "instruction": "Throw the pot.", "step": ["find pot"]}
+    tasks.write_text(json.dumps(task) + "\n", encoding="utf-8")
+    result = _cli(str(tasks), "--no-paper", "--cold-example", str(tmp_path))
+    assert result.returncode == 2
+    assert result.stderr.count("\n") == 1 and "no scene.json there" in result.stderr
+
+
 def test_missing_file_gives_one_line(tmp_path: Path) -> None:
     result = _cli(str(tmp_path / "nope.jsonl"), "--no-paper")
     assert result.returncode == 2
@@ -121,6 +133,8 @@ def test_a_small_run_prints_every_figure(tmp_path: Path) -> None:
         "1",
         "--repeats",
         "1",
+        "--cold-runs",
+        "1",
         "--markdown",
         str(md),
     )
@@ -138,3 +152,8 @@ def test_a_small_run_prints_every_figure(tmp_path: Path) -> None:
     assert "## Scaling with plan length" in text and "| x1 |" in text
     assert "| (c) fast engine | 3 |" in text
     assert render_markdown(fig, "virf bench latency X").startswith("# Performance")
+    cold = {row["engine"]: row for row in fig["cold_start"]["rows"]}
+    assert set(cold) == {"fast", "reference"}
+    assert all(row["verdict"] == "UNSAFE" and row["runs"] == 1 for row in cold.values())
+    assert 0 < cold["fast"]["min_s"] <= cold["fast"]["median_s"] <= cold["fast"]["max_s"]
+    assert "## Cold start to first verdict" in text and "| fast | UNSAFE | 1 |" in text

@@ -129,3 +129,11 @@ def _try_in_a_copy(jars: list[str], limit: int) -> None:
         "reserves address space for a heap of a quarter of the RAM, 1 GiB of class space "
         "and its threads' stacks)"
     )
+
+
+def java_version() -> str:
+    """The running JVM's version (starts the JVM)."""
+    ensure_jvm()
+    from java.lang import System
+
+    return str(System.getProperty("java.version"))

@@ -1,0 +1,74 @@
+"""Cold start to first verdict: ``virf verify`` as a fresh process, timed.
+
+What a robot stack pays when it calls the CLI once: interpreter start,
+imports, loading the knowledge base, simulating and classifying, printing the
+report.  Each run is a new process, so nothing is warm but the operating
+system's file cache (the first run warms it and is not counted).
+"""
+
+from __future__ import annotations
+
+import statistics
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from virf.errors import EnvironmentProblem
+
+# virf verify's exit codes for a verdict; anything else means it did not answer.
+VERDICT_EXITS = {0: "SAFE", 1: "UNSAFE", 3: "UNKNOWN", 4: "ERROR"}
+
+
+def virf_command() -> list[str]:
+    """The installed ``virf`` script next to this interpreter, else the module."""
+    script = Path(sys.executable).with_name("virf")
+    return [str(script)] if script.is_file() else [sys.executable, "-m", "virf.cli.main"]
+
+
+def cold_start(
+    scene: str | Path,
+    plan: str | Path,
+    engine: str = "fast",
+    runs: int = 5,
+    tick: Callable[[], None] | None = None,
+) -> dict[str, Any]:
+    """Wall-clock seconds of ``runs`` fresh ``virf verify`` processes, after one
+    uncounted run that warms the file cache."""
+    argv = [*virf_command(), "verify", "--engine", engine, str(scene), str(plan)]
+    times: list[float] = []
+    verdict = ""
+    for i in range(runs + 1):
+        started = time.perf_counter()
+        done = subprocess.run(argv, capture_output=True, text=True, timeout=600)
+        elapsed = time.perf_counter() - started
+        if done.returncode not in VERDICT_EXITS:
+            line = (done.stderr.strip().splitlines() or ["no message"])[-1]
+            raise EnvironmentProblem(
+                f"virf verify exited with {done.returncode} in the cold-start run: {line}"
+            )
+        verdict = VERDICT_EXITS[done.returncode]
+        if i:
+            times.append(elapsed)
+        if tick:
+            tick()
+    return {
+        "engine": engine,
+        "runs": runs,
+        "verdict": verdict,
+        "median_s": round(statistics.median(times), 3),
+        "min_s": round(min(times), 3),
+        "max_s": round(max(times), 3),
+    }
+
+
+def cold_start_rows(
+    scene: str | Path,
+    plan: str | Path,
+    engines: Sequence[str] = ("fast", "reference"),
+    runs: int = 5,
+    tick: Callable[[], None] | None = None,
+) -> list[dict[str, Any]]:
+    return [cold_start(scene, plan, engine, runs, tick) for engine in engines]
