@@ -61,21 +61,18 @@ def test_an_artifact_of_another_format_is_refused() -> None:
         kbc.from_json(json.dumps(doc))
 
 
-def _without_java(tmp_path: Path) -> dict[str, str]:
-    """An environment in which no Java runtime can be found."""
+def _without_java(argv: list[str], tmp_path: Path) -> subprocess.CompletedProcess[str]:
+    """Run ``argv`` where no Java runtime can be found."""
     env = {k: v for k, v in os.environ.items() if k not in ("JAVA_HOME", "VIRF_JARS")}
-    env["PATH"] = str(tmp_path)  # nothing there; the tools below are called by full path
-    return env
+    env["PATH"] = str(tmp_path)  # nothing there; the tools are called by full path
+    return subprocess.run(argv, capture_output=True, text=True, env=env, timeout=120)
 
 
 def test_the_fast_engine_verifies_without_java(tmp_path: Path) -> None:
     virf = Path(sys.executable).with_name("virf")
-    run = subprocess.run(
+    run = _without_java(
         [str(virf), "verify", str(WALKTHROUGH / "scene.json"), str(WALKTHROUGH / "plan.txt")],
-        capture_output=True,
-        text=True,
-        env=_without_java(tmp_path),
-        timeout=120,
+        tmp_path,
     )
     assert run.returncode == 1, run.stderr  # UNSAFE, as with Java
     assert "Verdict: UNSAFE at step 7" in run.stdout
@@ -85,13 +82,7 @@ def test_the_fast_engine_verifies_without_java(tmp_path: Path) -> None:
         f"{str(WALKTHROUGH / 'plan.txt')!r}); "
         "print(r.status, jpype.isJVMStarted())"
     )
-    run = subprocess.run(
-        [sys.executable, "-c", probe],
-        capture_output=True,
-        text=True,
-        env=_without_java(tmp_path),
-        timeout=120,
-    )
+    run = _without_java([sys.executable, "-c", probe], tmp_path)
     assert run.stdout.split() == ["UNSAFE", "False"], run.stderr
 
 
@@ -108,13 +99,7 @@ def test_without_java_a_question_the_fast_engine_cannot_answer_is_an_error(
         "except ReasonerFailure as exc:\n"
         "    print('failure:', exc)\n"
     )
-    run = subprocess.run(
-        [sys.executable, "-c", probe],
-        capture_output=True,
-        text=True,
-        env=_without_java(tmp_path),
-        timeout=120,
-    )
+    run = _without_java([sys.executable, "-c", probe], tmp_path)
     assert run.stdout.startswith("failure: the fast engine needed the reference reasoner"), (
         run.stdout + run.stderr
     )
@@ -123,7 +108,7 @@ def test_without_java_a_question_the_fast_engine_cannot_answer_is_an_error(
 
 def test_a_java_only_feature_without_java_names_what_to_install(tmp_path: Path) -> None:
     virf = Path(sys.executable).with_name("virf")
-    run = subprocess.run(
+    run = _without_java(
         [
             str(virf),
             "verify",
@@ -132,10 +117,7 @@ def test_a_java_only_feature_without_java_names_what_to_install(tmp_path: Path) 
             str(WALKTHROUGH / "scene.json"),
             str(WALKTHROUGH / "plan.txt"),
         ],
-        capture_output=True,
-        text=True,
-        env=_without_java(tmp_path),
-        timeout=120,
+        tmp_path,
     )
     assert run.returncode == 4
     lines = run.stderr.strip().splitlines()

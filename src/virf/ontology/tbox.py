@@ -71,9 +71,11 @@ class UnsafeStateConcept:
     trigger_reason: str
     suggestion: str
     source: str
-    check_at: str
-    definition: str
-    module: str
+    # Defaults for concepts the verifier makes itself (a missing object, an
+    # inconsistent world); every concept read from the ontology sets them.
+    check_at: str = "always"
+    definition: str = ""
+    module: str = ""
     question: str = ""
     generalizes: str = ""
 

@@ -97,9 +97,6 @@ def synthetic(
         trigger_reason=reason,
         suggestion=suggestion,
         source="VIRF sandbox simulator",
-        check_at="always",
-        definition="",
-        module="",
     )
 
 
@@ -116,9 +113,6 @@ def requirement_concept(n: int, text: str, reason: str) -> UnsafeStateConcept:
         trigger_reason=reason,
         suggestion="Reorder the plan so that the required action comes within the stated number of steps.",
         source="task instruction (step-bounded requirement)",
-        check_at="always",
-        definition="",
-        module="",
     )
 
 
@@ -133,9 +127,6 @@ _INCONSISTENT = UnsafeStateConcept(
     trigger_reason="the facts contradict the ontology",
     suggestion="Confirm which of the contradictory facts is wrong and correct the scene.",
     source="OWL 2 DL consistency check",
-    check_at="always",
-    definition="",
-    module="",
 )
 
 
@@ -224,9 +215,6 @@ def stopped(
             trigger_reason=f"step {stop.step.index} refers to '{stop.term}', which is not in the scene",
             suggestion=f"Confirm where the {stop.term} is (add it to the scene), or plan without it.",
             source="paper: noise test (object omission)",
-            check_at="always",
-            definition="",
-            module="",
         )
         receptacles = [o for o in state.order if vocab.any_is_a(state.objects[o], "Receptacle")]
         question = where_question(
