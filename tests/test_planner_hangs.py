@@ -27,10 +27,10 @@ from typing import Any
 
 import pytest
 from conftest import EXAMPLES_DIR, ROOT
+from loop_support import Recorder, run_loop, statuses
 from test_loop import CLOSES, FRIDGE_SCENE, LEAVES_OPEN
 from test_methods import run as run_method_with
 from test_planner_clients import ChatServer, completion, server  # noqa: F401
-from test_questions import Recorder
 
 from virf.api import LogicTutor
 from virf.errors import EnvironmentProblem, InputError
@@ -444,23 +444,7 @@ def looped(
     user: Recorder,
     build: Callable[[Mapping[str, Any]], Scene] | None = None,
 ) -> tuple[LoopResult, ScriptedApprentice]:
-    vocab = tutor.tbox.vocabulary
-    apprentice = ScriptedApprentice(replies)
-    result = refine(
-        "Heat the bowl.",
-        scene,
-        apprentice,
-        tutor.verifier,
-        build or (lambda d: build_scene(d, vocab)),
-        vocab,
-        answer=user,
-        max_iter=2,
-    )
-    return result, apprentice
-
-
-def statuses(result: LoopResult) -> list[str | None]:
-    return [t.status for t in result.transcript if t.kind == "report"]
+    return run_loop(tutor, scene, replies, user, instruction="Heat the bowl.", build=build)
 
 
 def unsettled(result: LoopResult) -> dict[str, str]:
@@ -551,14 +535,14 @@ def test_questions_without_end_stop_after_max_rounds(tutor: LogicTutor) -> None:
     def always_bowl(questions: Sequence[Question]) -> dict[str, str]:
         return {q.key: "Bowl_1" for q in questions}
 
-    result = refine(
-        "Heat the bowl.",
+    result, _ = run_loop(
+        tutor,
         scene,
-        ScriptedApprentice([plan, "TASK_ABORT"]),
-        fresh,
-        lambda d: build_scene(d, tutor.tbox.vocabulary),
-        tutor.tbox.vocabulary,
-        answer=always_bowl,
+        [plan, "TASK_ABORT"],
+        always_bowl,
+        instruction="Heat the bowl.",
+        verifier=fresh,
+        max_iter=5,
     )
     # Every answer settled something, and still the loop stopped.
     assert fresh.calls == MAX_ROUNDS + 1

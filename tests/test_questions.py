@@ -14,11 +14,12 @@ from typing import Any
 
 import pytest
 from conftest import EXAMPLES_DIR, ROOT, inst
+from loop_support import Recorder, run_loop, statuses
 
 from virf.api import LogicTutor
 from virf.errors import InputError
 from virf.planner import ScriptedApprentice
-from virf.planner.loop import MAX_ASKS, LoopResult, refine
+from virf.planner.loop import MAX_ASKS, LoopResult
 from virf.planner.questions import SETTLEABLE, apply_answers, check_answer
 from virf.schema import Question, Report
 from virf.world.plan import PlanStep, load_plan_file
@@ -47,44 +48,18 @@ BOWL_PLAN = (
 CONTRADICTION = EXAMPLES_DIR / "noise-contradiction"
 
 
-class Recorder:
-    """An answer policy that records what it was asked."""
-
-    def __init__(self, answers: Mapping[str, str]) -> None:
-        self.answers = dict(answers)
-        self.asked: list[list[str]] = []
-
-    def __call__(self, questions: Sequence[Question]) -> dict[str, str]:
-        self.asked.append([q.key for q in questions])
-        return {q.key: self.answers[q.key] for q in questions if q.key in self.answers}
-
-
 def loop(
     tutor: LogicTutor, replies: list[str], scene: Mapping[str, Any], answer: Recorder
 ) -> tuple[LoopResult, ScriptedApprentice, list[dict[str, Any]]]:
     """Run the loop; also return every scene it built, last one last."""
-    apprentice = ScriptedApprentice(replies)
     built: list[dict[str, Any]] = []
 
     def build(data: Mapping[str, Any]) -> Scene:
         built.append(dict(data))
         return build_scene(data, tutor.tbox.vocabulary)
 
-    result = refine(
-        "Do the task.",
-        scene,
-        apprentice,
-        tutor.verifier,
-        build,
-        tutor.tbox.vocabulary,
-        answer=answer,
-        max_iter=2,
-    )
+    result, apprentice = run_loop(tutor, scene, replies, answer, build=build)
     return result, apprentice, built
-
-
-def statuses(result: LoopResult) -> list[str | None]:
-    return [t.status for t in result.transcript if t.kind == "report"]
 
 
 def test_a_missing_object_is_asked_and_placed(tutor: LogicTutor) -> None:
@@ -204,15 +179,7 @@ def test_a_question_that_stays_open_is_not_asked_forever(tutor: LogicTutor) -> N
     report = tutor.verify(BOWLS, BOWL_PLAN.splitlines())
     stuck = StuckTutor(report)
     user = Recorder({"which:Bowl": "Bowl_1"})  # settles, yet the report still asks
-    result = refine(
-        "Do the task.",
-        BOWLS,
-        ScriptedApprentice([BOWL_PLAN, "TASK_ABORT"]),
-        stuck,
-        lambda d: build_scene(d, tutor.tbox.vocabulary),
-        tutor.tbox.vocabulary,
-        answer=user,
-    )
+    result, _ = run_loop(tutor, BOWLS, [BOWL_PLAN, "TASK_ABORT"], user, verifier=stuck, max_iter=5)
     assert user.asked == [["which:Bowl"]] * MAX_ASKS
     assert stuck.calls == MAX_ASKS + 1
     assert result.outcome == "TASK_REJECTED"
