@@ -13,11 +13,12 @@ import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from http.server import BaseHTTPRequestHandler
 from pathlib import Path
 from typing import Any
 
 import pytest
+from http_support import LocalServer, running
 
 from virf.errors import EnvironmentProblem, InputError
 from virf.planner import (
@@ -91,7 +92,7 @@ class Seen:
     authorization: str | None
 
 
-class ChatServer:
+class ChatServer(LocalServer):
     """A chat-completions endpoint that answers from a queue of ``Reply``."""
 
     def __init__(self) -> None:
@@ -135,16 +136,7 @@ class ChatServer:
             def log_message(self, format: str, *args: Any) -> None:
                 pass
 
-        self.httpd = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
-        self.httpd.daemon_threads = True
-        self.httpd.block_on_close = False
-        self.thread = threading.Thread(
-            target=self.httpd.serve_forever, kwargs={"poll_interval": 0.01}, daemon=True
-        )
-
-    @property
-    def base_url(self) -> str:
-        return f"http://127.0.0.1:{self.httpd.server_address[1]}/v1"
+        self.serve(Handler)
 
     def queue(self, *replies: Reply) -> None:
         with self._lock:
@@ -153,13 +145,8 @@ class ChatServer:
 
 @pytest.fixture
 def server() -> Iterator[ChatServer]:
-    srv = ChatServer()
-    srv.thread.start()
-    try:
+    with running(ChatServer()) as srv:
         yield srv
-    finally:
-        srv.httpd.shutdown()
-        srv.httpd.server_close()
 
 
 def apprentice(

@@ -21,12 +21,13 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from http.server import BaseHTTPRequestHandler
 from pathlib import Path
 from typing import Any
 
 import pytest
 from conftest import EXAMPLES_DIR, ROOT
+from http_support import LocalServer, running
 from loop_support import Recorder, run_loop, statuses
 from test_loop import CLOSES, FRIDGE_SCENE, LEAVES_OPEN
 from test_methods import run as run_method_with
@@ -63,7 +64,7 @@ MARGIN_S = 3.0
 # A server that answers too slowly
 
 
-class SlowServer:
+class SlowServer(LocalServer):
     """POST /v1/chat/completions, answered in one of three slow ways:
 
     * ``body``: status and headers at once, then the body a byte at a time;
@@ -94,16 +95,7 @@ class SlowServer:
             def log_message(self, format: str, *args: Any) -> None:
                 pass
 
-        self.httpd = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
-        self.httpd.daemon_threads = True
-        self.httpd.block_on_close = False
-        self.thread = threading.Thread(
-            target=self.httpd.serve_forever, kwargs={"poll_interval": 0.01}, daemon=True
-        )
-
-    @property
-    def base_url(self) -> str:
-        return f"http://127.0.0.1:{self.httpd.server_address[1]}/v1"
+        self.serve(Handler)
 
     def answer(self, handler: BaseHTTPRequestHandler) -> None:
         sock: socket.socket = handler.connection
@@ -137,13 +129,8 @@ class SlowServer:
 
 @pytest.fixture
 def slow_server(request: pytest.FixtureRequest) -> Iterator[SlowServer]:
-    srv = SlowServer(request.param)
-    srv.thread.start()
-    try:
+    with running(SlowServer(request.param)) as srv:
         yield srv
-    finally:
-        srv.httpd.shutdown()
-        srv.httpd.server_close()
 
 
 def client(slow: SlowServer, run_log: RunLog | None = None, **settings: Any) -> OpenAIApprentice:
