@@ -21,7 +21,7 @@ from virf.bench.paper import (
     fact_json,
     run_paper_baseline,
 )
-from virf.ontology.tbox import NS
+from virf.ontology.iri import NS
 from virf.schema import Fact, FactKind
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -21,7 +21,8 @@ from pathlib import Path
 from typing import Any
 
 from virf.errors import EnvironmentProblem, InputError, VirfError
-from virf.ontology.tbox import NS, TBox
+from virf.ontology.iri import NS
+from virf.ontology.tbox import TBox
 from virf.schema import Fact, FactKind
 
 # TBox individuals move here in the export: every one of them is punned with

@@ -33,8 +33,6 @@ from typing import Any
 
 from virf.ontology.iri import NOTHING, THING, iri_short
 
-__all__ = ["NOTHING", "THING"]
-
 Role = tuple[str, bool]  # (object property, inverted)
 # Class expressions are nested tuples:
 #   ("C", name) | ("and", (e, ...)) | ("or", (e, ...)) | ("not", e)

@@ -23,14 +23,11 @@ from typing import TYPE_CHECKING
 
 from virf.errors import InputError, closest, unknown_term
 from virf.names import term_key
-from virf.ontology.iri import MODULE_BASE, NS
 
 if TYPE_CHECKING:  # the Java bridge and the compiler load only when used
     from virf.ontology.compile import CompiledKB
     from virf.ontology.fragment import Fragment
     from virf.ontology.owlapi import OwlModules
-
-__all__ = ["MODULE_BASE", "NS"]
 DEFAULT_SCENARIO = "kitchen"
 
 USC_KINDS = ("state-based", "action-based", "logical-inconsistency", "uncertainty")

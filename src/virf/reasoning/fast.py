@@ -29,7 +29,8 @@ from contextlib import contextmanager
 from typing import Any
 
 from virf.errors import VirfError
-from virf.ontology.fragment import NOTHING, THING, Axiom, Expr, Fragment, Role
+from virf.ontology.fragment import Axiom, Expr, Fragment, Role
+from virf.ontology.iri import NOTHING, THING
 from virf.ontology.tbox import TBox
 from virf.reasoning import Classification, Engine, ReasonerFailure, check_deadline, make_engine
 from virf.reasoning.program import ChaseLimit, Model, Program, compile_program

@@ -26,7 +26,8 @@ from dataclasses import dataclass, field
 from itertools import count
 from typing import Any
 
-from virf.ontology.fragment import NOTHING, THING, Axiom, Expr, Fragment, Role
+from virf.ontology.fragment import Axiom, Expr, Fragment, Role
+from virf.ontology.iri import NOTHING, THING
 from virf.reasoning import DeadlineExceeded, current_deadline
 
 
