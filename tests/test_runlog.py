@@ -18,7 +18,7 @@ from virf.planner import (
     ScriptedApprentice,
     export_replay,
 )
-from virf.planner.runlog import check_migrations
+from virf.migrations import check_migrations
 
 MESSAGES = [{"role": "user", "content": "Slice the apple."}]
 
@@ -107,7 +107,7 @@ def test_old_database_gets_the_missing_migration(tmp_path: Path) -> None:
         RunLog(path, run_id="older")
     assert str(exc.value) == (
         f"run log {path} was written by a newer VIRF (migration {EXTRA.id}); "
-        "upgrade VIRF or choose another run log file"
+        "upgrade VIRF or choose another file"
     )
 
 

@@ -67,12 +67,13 @@ from virf.api import LogicTutor
 from virf.bench.safeagentbench import Task, check_goals
 from virf.bench.safeagentbench import build_scene as golden_scene
 from virf.errors import EnvironmentProblem, InputError
+from virf.migrations import Migration
 from virf.planner.apprentices import Apprentice, Proposal, ProposalRequest
 from virf.planner.config import planner_settings
 from virf.planner.loop import Tutor
 from virf.planner.methods import Knowledge, Method, knowledge_filter, run_method
 from virf.planner.questions import AnswerPolicy, deny
-from virf.planner.runlog import MIGRATIONS, Migration, RunLog
+from virf.planner.runlog import MIGRATIONS, RunLog
 from virf.schema import Report
 from virf.world.plan import PlanStep, parse_plan
 from virf.world.scene import Scene

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from virf.migrations import Migration
 from virf.planner.apprentices import (
     Apprentice,
     Proposal,
@@ -14,7 +15,7 @@ from virf.planner.apprentices import (
 from virf.planner.clients import ClientSettings, Endpoint, OpenAIApprentice
 from virf.planner.deadline import Deadline
 from virf.planner.factory import make_apprentice
-from virf.planner.runlog import MIGRATIONS, CallRecord, Migration, RunLog
+from virf.planner.runlog import MIGRATIONS, CallRecord, RunLog
 
 __all__ = [
     "MIGRATIONS",

@@ -1,18 +1,12 @@
 """The SQLite run log: every model call an apprentice makes, for audit and replay.
 
-The schema evolves only by appending to ``MIGRATIONS``.  A migration that has
-shipped is never edited: databases in the field already ran it, and the hash
-stored in ``_migrations`` turns an edit into a loud error instead of a silently
-diverging schema.  Opening a database applies the migrations it lacks, in
-order, each in its own transaction.
+The schema evolves only by appending to ``MIGRATIONS`` (see
+:mod:`virf.migrations`).
 """
 
 from __future__ import annotations
 
-import contextlib
-import hashlib
 import json
-import re
 import sqlite3
 import threading
 import uuid
@@ -24,19 +18,8 @@ from types import TracebackType
 from typing import Final, Self
 
 from virf.errors import EnvironmentProblem, InputError
-
-
-@dataclass(frozen=True)
-class Migration:
-    """One schema step: a stable id and the SQL it runs (several statements allowed)."""
-
-    id: str
-    sql: str
-
-    @property
-    def sha256(self) -> str:
-        return hashlib.sha256(self.sql.encode("utf-8")).hexdigest()
-
+from virf.migrations import Migration, applied_migrations, check_migrations, migrate
+from virf.migrations import now as _now
 
 # Append only.  Never edit or reorder an entry once it has been committed.
 MIGRATIONS: Final[tuple[Migration, ...]] = (
@@ -67,17 +50,6 @@ MIGRATIONS: Final[tuple[Migration, ...]] = (
     ),
 )
 
-_MIGRATION_ID: Final = re.compile(r"^[0-9]{4}_[a-z0-9_]+$")
-
-_BOOKKEEPING: Final = """
-CREATE TABLE IF NOT EXISTS _migrations (
-    id         TEXT PRIMARY KEY,
-    sha256     TEXT NOT NULL,
-    applied_at TEXT NOT NULL
-)
-"""
-
-
 @dataclass(frozen=True)
 class CallRecord:
     """One logged model call, as stored."""
@@ -99,42 +71,6 @@ class CallRecord:
     latency_ms: float
     attempts: int
     created_at: str
-
-
-def _now() -> str:
-    return datetime.now(UTC).isoformat(timespec="milliseconds")
-
-
-def _statements(sql: str) -> list[str]:
-    """Split a migration into statements without breaking a trigger body.
-
-    ``sqlite3.Connection.execute`` runs one statement, and ``executescript``
-    commits on its own, which would let a half-applied migration escape its
-    transaction.  ``sqlite3.complete_statement`` knows where a statement ends.
-    """
-    out: list[str] = []
-    pending = ""
-    for piece in sql.split(";"):
-        pending += piece + ";"
-        if sqlite3.complete_statement(pending):
-            if pending.strip(" \t\r\n;"):
-                out.append(pending.strip())
-            pending = ""
-    if pending.strip(" \t\r\n;"):
-        raise ValueError("migration SQL ends with an incomplete statement")
-    return out
-
-
-def check_migrations(migrations: Sequence[Migration]) -> None:
-    """Reject a malformed migration list: a programming error, caught by tests."""
-    seen: set[str] = set()
-    for m in migrations:
-        if not _MIGRATION_ID.match(m.id):
-            raise ValueError(f"migration id {m.id!r} must look like 0001_name")
-        if m.id in seen:
-            raise ValueError(f"migration id {m.id} appears twice")
-        seen.add(m.id)
-        _statements(m.sql)
 
 
 class RunLog:
@@ -179,55 +115,12 @@ class RunLog:
     # -- schema ------------------------------------------------------------
 
     def _migrate(self, migrations: Sequence[Migration]) -> None:
-        conn = self._conn
-        try:
-            conn.execute("BEGIN IMMEDIATE")
-            conn.execute(_BOOKKEEPING)
-            applied = {row[0]: row[1] for row in conn.execute("SELECT id, sha256 FROM _migrations")}
-            known = {m.id for m in migrations}
-            newer = sorted(set(applied) - known)
-            if newer:
-                raise EnvironmentProblem(
-                    f"run log {self.path} was written by a newer VIRF (migration {newer[0]}); "
-                    "upgrade VIRF or choose another run log file"
-                )
-            for m in migrations:
-                if m.id in applied:
-                    if applied[m.id] != m.sha256:
-                        raise EnvironmentProblem(
-                            f"run log {self.path}: migration {m.id} differs from the one applied; "
-                            "migrations are append-only, add a new one instead of editing"
-                        )
-                    continue
-                for statement in _statements(m.sql):
-                    conn.execute(statement)
-                conn.execute(
-                    "INSERT INTO _migrations (id, sha256, applied_at) VALUES (?, ?, ?)",
-                    (m.id, m.sha256, _now()),
-                )
-            conn.execute("COMMIT")
-        except sqlite3.Error as exc:
-            self._rollback()
-            if "not a database" in str(exc):
-                raise InputError(
-                    f"run log {self.path} is not a SQLite database; choose another file"
-                ) from None
-            raise EnvironmentProblem(f"cannot migrate run log {self.path}: {exc}") from None
-        except BaseException:
-            self._rollback()
-            raise
-
-    def _rollback(self) -> None:
-        # The failure may have ended the transaction already; the original
-        # error is the one worth reporting.
-        with contextlib.suppress(sqlite3.Error):
-            self._conn.execute("ROLLBACK")
+        migrate(self._conn, migrations, f"run log {self.path}")
 
     def applied_migrations(self) -> list[str]:
         """Ids of the migrations this database has run, oldest first."""
         with self._lock:
-            rows = self._conn.execute("SELECT id FROM _migrations ORDER BY id").fetchall()
-        return [r[0] for r in rows]
+            return applied_migrations(self._conn)
 
     # -- writing and reading ---------------------------------------------------
 
