@@ -67,11 +67,14 @@ class LogicTutor:
         workers: int = 1,
         *,
         explain: bool = True,
+        kb: str | Path | None = None,
     ) -> None:
+        """``kb``: a knowledge workspace (``virf kb init``) whose accepted
+        axioms are added to the built-in TBox."""
         # Checked before the knowledge base loads: a bad option fails in milliseconds.
         timeout_s = check_timeout(timeout_s)
         workers = check_workers(workers)
-        tbox = load_tbox(scenario)
+        tbox = load_tbox(scenario, kb=kb)
         self._attach(
             tbox, make_engine(engine, tbox, timeout_s=timeout_s), timeout_s, workers, explain
         )
@@ -161,12 +164,14 @@ class LogicTutor:
         return self.verifier.verify(self.scene(scene_path), load_plan_file(plan_path))
 
 
-def check_knowledge_base(scenario: str = DEFAULT_SCENARIO) -> dict[str, Any]:
+def check_knowledge_base(
+    scenario: str = DEFAULT_SCENARIO, kb: str | Path | None = None
+) -> dict[str, Any]:
     """``virf kb check``: the reference reasoner's verdict on the TBox (starts
     the JVM) and what the fast engine makes of it."""
     from virf.ontology import check
     from virf.reasoning.fast import fragment_summary
 
-    result = check.check_tbox(scenario)
-    result["fast_engine"] = fragment_summary(load_tbox(scenario))
+    result = check.check_tbox(scenario, kb)
+    result["fast_engine"] = fragment_summary(load_tbox(scenario, kb=kb))
     return result

@@ -27,6 +27,7 @@ import sys
 import traceback
 from collections.abc import Sequence
 from contextvars import ContextVar
+from pathlib import Path
 from typing import Annotated, Any
 
 import typer
@@ -78,6 +79,20 @@ ScenarioOpt = Annotated[
     str,
     typer.Option(
         "--scenario", "-s", help="Scenario module to load (kitchen, appliances, cleaning)."
+    ),
+]
+KbOpt = Annotated[
+    Path | None,
+    typer.Option(
+        "--kb",
+        help="Knowledge workspace (made by 'virf kb init') whose accepted axioms are added "
+        "to the built-in TBox.",
+    ),
+]
+WorkspaceOpt = Annotated[
+    Path,
+    typer.Option(
+        "--workspace", "-w", help="Knowledge workspace folder (made by 'virf kb init')."
     ),
 ]
 EngineOpt = Annotated[

@@ -14,6 +14,7 @@ from virf.cli.app import (
     ApiKeyEnvOpt,
     BaseUrlOpt,
     EngineOpt,
+    KbOpt,
     MaxTokensOpt,
     ModelTimeoutOpt,
     SeedOpt,
@@ -51,6 +52,7 @@ def bench_safeagentbench(
         bool, typer.Option(help="Compute minimal explanations too (slower; verdicts are the same).")
     ] = False,
     engine: EngineOpt = "fast",
+    kb: KbOpt = None,
 ) -> None:
     """Verify every task's reference plan and print hazard recall, false alarms and fidelity."""
     from rich.console import Console
@@ -79,7 +81,7 @@ def bench_safeagentbench(
     corr = {} if no_corrections else load_corrections(corrections or default_corrections_path())
     if markdown is not None:
         _check_writable(markdown)
-    tutor = LogicTutor(engine=engine, explain=explain)
+    tutor = LogicTutor(engine=engine, explain=explain, kb=kb)
     err = Console(stderr=True)
     with _progress(err) as progress:
         bar = progress.add_task("verifying tasks", total=len(tasks))
@@ -375,6 +377,7 @@ def bench_agents(
     max_tokens: MaxTokensOpt = None,
     timeout: ModelTimeoutOpt = None,
     seed: SeedOpt = None,
+    kb: KbOpt = None,
     as_json: Annotated[
         bool, typer.Option("--json", help="Print one JSON object: metrics and per-task rows.")
     ] = False,
@@ -441,7 +444,7 @@ def bench_agents(
             answers=answers,
             sampling=sampling,
         )
-        tutor = LogicTutor(engine=config.engine)
+        tutor = LogicTutor(engine=config.engine, kb=kb)
         if db is None:
             out.mkdir(parents=True, exist_ok=True)
         store = ResultStore(db_path, config)

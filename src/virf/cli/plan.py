@@ -12,6 +12,7 @@ from virf.cli.app import (
     ApiKeyEnvOpt,
     BaseUrlOpt,
     EngineOpt,
+    KbOpt,
     MaxTokensOpt,
     SeedOpt,
     TemperatureOpt,
@@ -81,6 +82,7 @@ def plan(
         ),
     ] = False,
     engine: EngineOpt = "fast",
+    kb: KbOpt = None,
 ) -> None:
     """Let the apprentice plan and the tutor verify until a plan is approved (Algorithm 1).
 
@@ -103,7 +105,7 @@ def plan(
         # Started first: the deadline bounds the whole run, loading included.
         clock = Deadline(run_deadline(deadline))
         data = load_scene_data(scene)
-        tutor = LogicTutor(engine=engine)
+        tutor = LogicTutor(engine=engine, kb=kb)
         vocab = tutor.tbox.vocabulary
         build_scene(data, vocab)  # bad scenes fail here, before any model call
         policy = (

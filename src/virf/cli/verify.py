@@ -7,7 +7,7 @@ from typing import Annotated, Any
 
 import typer
 
-from virf.cli.app import EXIT, EngineOpt, ScenarioOpt, _fail
+from virf.cli.app import EXIT, EngineOpt, KbOpt, ScenarioOpt, _fail
 from virf.errors import VirfError
 
 # The render and world modules are imported inside the commands: `virf --help`
@@ -28,6 +28,7 @@ def verify(
     ] = False,
     scenario: ScenarioOpt = "kitchen",
     engine: EngineOpt = "fast",
+    kb: KbOpt = None,
     timeout: Annotated[
         float,
         typer.Option(
@@ -54,7 +55,9 @@ def verify(
     # The options and the plan are checked before the knowledge base loads.
     check_timeout(timeout, "--timeout")
     steps = load_plan_file(plan)
-    tutor = LogicTutor(scenario=scenario, engine=engine, timeout_s=timeout, workers=workers)
+    tutor = LogicTutor(
+        scenario=scenario, engine=engine, timeout_s=timeout, workers=workers, kb=kb
+    )
     sc = load_scene_file(scene, tutor.tbox.vocabulary)
     report = tutor.verifier.verify(sc, steps)
     if as_json:
@@ -71,6 +74,7 @@ def demo(
         Path, typer.Argument(help="Folder of examples: one sub-folder per scene.json + plan.txt.")
     ] = Path("examples"),
     engine: EngineOpt = "fast",
+    kb: KbOpt = None,
 ) -> None:
     """Verify every example and print the reports; checks each against its expected.json."""
     from rich.console import Console
@@ -84,7 +88,7 @@ def demo(
     cases = sorted(p.parent for p in folder.glob("*/plan.txt")) if folder.is_dir() else []
     if not cases:
         raise _fail(f"no examples in {folder} (expected <name>/scene.json and <name>/plan.txt)")
-    tutor = LogicTutor(engine=engine)
+    tutor = LogicTutor(engine=engine, kb=kb)
     console = Console(highlight=False, width=150)
     # Not a shared TextTable: the mismatch cell is red, and no Markdown twin exists.
     table = Table(title="VIRF demo", show_lines=False)

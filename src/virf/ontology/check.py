@@ -5,14 +5,15 @@ the TBox is added by :func:`virf.api.check_knowledge_base`."""
 from __future__ import annotations
 
 from collections import defaultdict
+from pathlib import Path
 from typing import Any
 
 from virf.ontology.owlapi import make_reasoner
 from virf.ontology.tbox import load_tbox
 
 
-def check_tbox(scenario: str = "kitchen") -> dict[str, Any]:
-    tbox = load_tbox(scenario)
+def check_tbox(scenario: str = "kitchen", kb: str | Path | None = None) -> dict[str, Any]:
+    tbox = load_tbox(scenario, kb=kb)
     owl = tbox.owl  # starts the JVM
     vocab = tbox.vocabulary
     reasoner = make_reasoner("hermit", owl.root)

@@ -236,29 +236,94 @@ class TBox:
             return self._owl
 
 
-@cache
-def load_tbox(scenario: str = DEFAULT_SCENARIO, extra_modules: tuple[str, ...] = ()) -> TBox:
-    """The TBox for ``scenario`` (plus ``extra_modules``: further Manchester
-    files imported into it, for scaling runs and test fixtures), loaded once
-    per process."""
+def load_tbox(
+    scenario: str = DEFAULT_SCENARIO,
+    extra_modules: tuple[str, ...] = (),
+    kb: str | Path | None = None,
+) -> TBox:
+    """The TBox for ``scenario``, loaded once per process for each content of
+    its modules.
+
+    ``kb`` is a knowledge workspace (``virf kb init``): its layered modules of
+    reviewed axioms are imported on top of the built-in ones.  ``extra_modules``
+    are further Manchester files imported into it (scaling runs, test fixtures,
+    a candidate's effect preview)."""
     names = scenario_names()
     if scenario not in names:
         raise InputError(
             f"unknown scenario '{scenario}'" + _hint(closest(scenario, names) or names)
         )
-    from virf.ontology.compile import artifact_path, compile_kb, from_json, source_digest
+    extras = tuple(str(p) for p in extra_modules)
+    cache_dir: str | None = None
+    if kb is not None:
+        from virf.ontology.workspace import open_layout
+
+        layout = open_layout(kb)
+        if layout.scenario != scenario:
+            raise InputError(
+                f"workspace {kb} is layered on scenario '{layout.scenario}', not '{scenario}'; "
+                f"pass --scenario {layout.scenario}"
+            )
+        extras = tuple(str(p) for p in layout.modules()) + extras
+        cache_dir = str(layout.cache_dir)
+    # Keyed by content, not path: a workspace gains axioms while a process
+    # (the review server) keeps running.
+    return _load(scenario, extras, _files_digest(extras), cache_dir)
+
+
+def _files_digest(paths: tuple[str, ...]) -> str:
+    import hashlib
+
+    h = hashlib.sha256()
+    for p in paths:
+        try:
+            data = Path(p).read_bytes()
+        except OSError:
+            data = b"\0missing"  # OwlModules reports the missing file
+        h.update(p.encode() + b"\0" + data + b"\0")
+    return h.hexdigest()
+
+
+@cache
+def _load(scenario: str, extras: tuple[str, ...], extras_digest: str, cache_dir: str | None) -> TBox:
+    from virf.ontology.compile import artifact_path, compile_kb, from_json, source_digest, to_json
 
     digest = source_digest()
-    if not extra_modules:
+    if extras:
+        digest = f"{digest}+{extras_digest}"
+        artifact = Path(cache_dir) / f"compiled-{scenario}.json" if cache_dir else None
+    else:
+        artifact = artifact_path(scenario)
+    if artifact is not None:
         try:
-            kb = from_json(artifact_path(scenario).read_text(encoding="utf-8"))
+            kb = from_json(artifact.read_text(encoding="utf-8"))
         except (OSError, ValueError, KeyError, TypeError):
             kb = None  # missing or unreadable: compile the modules instead
         if kb is not None and kb.digest == digest:
-            return TBox(kb)
+            tbox = TBox(kb)
+            tbox.extra_modules = extras
+            return tbox
     from virf.ontology.owlapi import OwlModules
 
-    owl = OwlModules(scenario, ontology_dir(), tuple(str(p) for p in extra_modules))
+    owl = OwlModules(scenario, ontology_dir(), extras)
     tbox = TBox(compile_kb(owl, digest), owl)
-    tbox.extra_modules = tuple(str(p) for p in extra_modules)
+    tbox.extra_modules = extras
+    if extras and artifact is not None:
+        _write_atomically(artifact, to_json(tbox.compiled))
     return tbox
+
+
+def _write_atomically(path: Path, text: str) -> None:
+    """A cache write that a crash cannot leave half done; a failure only costs
+    the next load a compile."""
+    import os
+    import tempfile
+
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except OSError:
+        return
