@@ -7,14 +7,19 @@ from typing import Annotated
 
 import typer
 
-from virf.cli.app import ScenarioOpt
+from virf.cli.app import KbOpt, ScenarioOpt
 
-kb_app = typer.Typer(help="Inspect the safety knowledge base (TBox).", no_args_is_help=True)
+kb_app = typer.Typer(
+    help="Inspect the safety knowledge base (TBox) and grow it from safety documents "
+    "(knowledge acquisition: init, corpus, search, draft, review, decide, audit, coverage).",
+    no_args_is_help=True,
+)
 
 
 @kb_app.command("check")
 def kb_check(
     scenario: ScenarioOpt = "kitchen",
+    kb: KbOpt = None,
     as_json: Annotated[
         bool, typer.Option("--json", help="Print the figures as one JSON object.")
     ] = False,
@@ -25,7 +30,7 @@ def kb_check(
     from virf.api import check_knowledge_base
     from virf.render.tables import Column, TextTable, to_rich
 
-    result = check_knowledge_base(scenario)
+    result = check_knowledge_base(scenario, kb)
     if as_json:
         typer.echo(json.dumps(result, indent=2, sort_keys=True))
     else:
@@ -98,6 +103,7 @@ def kb_check(
 @kb_app.command("rules")
 def kb_rules(
     scenario: ScenarioOpt = "kitchen",
+    kb: KbOpt = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the rules as JSON.")] = False,
 ) -> None:
     """List the Unsafe State Concepts with their definitions and annotations."""
@@ -105,7 +111,7 @@ def kb_rules(
 
     from virf.ontology.tbox import load_tbox
 
-    vocab = load_tbox(scenario).vocabulary
+    vocab = load_tbox(scenario, kb=kb).vocabulary
     rules = sorted(vocab.uscs.values(), key=lambda u: (u.module, u.id))
     if as_json:
         typer.echo(json.dumps([asdict(u) for u in rules], indent=2))
@@ -115,3 +121,16 @@ def kb_rules(
         typer.echo(f"    {u.definition}")
         typer.echo(f"    {u.description}")
         typer.echo(f"    source: {u.source}")
+
+
+def _register_workflow() -> None:
+    # The authoring commands live in their own modules; they join this group here.
+    from virf.cli import kb_coverage, kb_review, kb_workflow
+
+    kb_workflow.register(kb_app)
+    # kb_corpus.register(kb_app)  TODO(lead): restore when kb_corpus lands
+    kb_review.register(kb_app)
+    kb_coverage.register(kb_app)
+
+
+_register_workflow()

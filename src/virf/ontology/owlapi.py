@@ -93,7 +93,7 @@ class OwlModules:
         try:
             self.root = self.manager.loadOntology(IRI.create(MODULE_BASE + f"scenario-{scenario}"))
         except Exception as exc:  # OWLAPI reports every parser it tried; keep the Manchester one
-            raise OntologyLoadError(_manchester_message(str(exc))) from None
+            raise OntologyLoadError(manchester_message(str(exc))) from None
         self.factory = self.manager.getOWLDataFactory()
         for extra in extra_modules:
             if not Path(extra).is_file():
@@ -101,7 +101,7 @@ class OwlModules:
             try:
                 ont = self.manager.loadOntologyFromOntologyDocument(File(extra))
             except Exception as exc:
-                raise OntologyLoadError(_manchester_message(str(exc))) from None
+                raise OntologyLoadError(manchester_message(str(exc))) from None
             iri = ont.getOntologyID().getOntologyIRI().get()
             self.manager.applyChange(
                 AddImport(self.root, self.factory.getOWLImportsDeclaration(iri))
@@ -185,7 +185,7 @@ def _make_renderer() -> Any:
     return renderer
 
 
-def _manchester_message(text: str) -> str:
+def manchester_message(text: str) -> str:
     """The Manchester parser's diagnosis out of OWLAPI's multi-parser report."""
     lines = text.splitlines()
     for i, line in enumerate(lines):

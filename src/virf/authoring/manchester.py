@@ -1,0 +1,121 @@
+"""The little of Manchester syntax a drafted axiom needs before OWLAPI sees it:
+which names it uses, in which role, and the same expression with names
+replaced.  OWLAPI's parser stays the judge of whether the result parses; this
+only finds the names, so they can be matched to the vocabulary first.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Final, Literal
+
+from virf.errors import InputError, clip
+
+KEYWORDS: Final = frozenset(
+    {
+        "and",
+        "or",
+        "not",
+        "some",
+        "only",
+        "value",
+        "min",
+        "max",
+        "exactly",
+        "that",
+        "inverse",
+        "Self",
+    }
+)
+# A property name stands right before one of these (or after ``inverse``).
+_RESTRICTIONS: Final = frozenset({"some", "only", "value", "min", "max", "exactly", "Self"})
+_TOKEN: Final = re.compile(
+    r"\s*(?:(?P<name>[A-Za-z_][A-Za-z0-9_\-]*(?::[A-Za-z_][A-Za-z0-9_\-]*)?|:[A-Za-z_][A-Za-z0-9_\-]*)"
+    r"|(?P<number>[0-9]+)|(?P<punct>[(){},])|(?P<bad>\S))"
+)
+MAX_AXIOM_CHARS: Final = 4000
+# OWL's own top and bottom classes, which Manchester writes without a prefix.
+BUILTIN: Final = {"Thing": "owl:Thing", "Nothing": "owl:Nothing"}
+
+Role = Literal["class", "property", "individual"]
+
+
+@dataclass(frozen=True)
+class Token:
+    kind: Literal["name", "keyword", "number", "punct"]
+    text: str
+
+
+def tokens(expression: str) -> list[Token]:
+    """The tokens of a class expression; names lose any ``prefix:``."""
+    if len(expression) > MAX_AXIOM_CHARS:
+        raise InputError(f"axiom is longer than {MAX_AXIOM_CHARS} characters")
+    out: list[Token] = []
+    for m in _TOKEN.finditer(expression):
+        if m.group("bad") is not None:
+            raise InputError(
+                f"axiom has an unexpected character '{clip(m.group('bad'))}' in "
+                f"'{clip(expression)}'; write a Manchester class expression such as "
+                "Microwave and (hasState some OnState)"
+            )
+        if m.group("name") is not None:
+            text = m.group("name").rpartition(":")[2]
+            out.append(Token("keyword" if text in KEYWORDS else "name", text))
+        elif m.group("number") is not None:
+            out.append(Token("number", m.group("number")))
+        elif m.group("punct") is not None:
+            out.append(Token("punct", m.group("punct")))
+    if not out:
+        raise InputError("axiom is empty; write a Manchester class expression")
+    return out
+
+
+def names(expression: str) -> dict[str, Role]:
+    """Each name the expression uses, with the role its position gives it."""
+    toks = tokens(expression)
+    roles: dict[str, Role] = {}
+    in_braces = False
+    for i, tok in enumerate(toks):
+        if tok.kind == "punct" and tok.text in "{}":
+            in_braces = tok.text == "{"
+            continue
+        if tok.kind != "name" or tok.text in BUILTIN:
+            continue
+        nxt = toks[i + 1] if i + 1 < len(toks) else None
+        prev = toks[i - 1] if i > 0 else None
+        role: Role
+        if (nxt is not None and nxt.kind == "keyword" and nxt.text in _RESTRICTIONS) or (
+            prev is not None and prev.kind == "keyword" and prev.text == "inverse"
+        ):
+            role = "property"
+        elif in_braces or (prev is not None and prev.kind == "keyword" and prev.text == "value"):
+            role = "individual"
+        else:
+            role = "class"
+        roles.setdefault(tok.text, role)
+    return roles
+
+
+def render(expression: str, rename: Mapping[str, str] | None = None, prefix: str = "") -> str:
+    """The expression on one line, names renamed and given ``prefix``."""
+    rename = rename or {}
+    parts: list[str] = []
+    for tok in tokens(expression):
+        text = tok.text
+        if tok.kind == "name" and text in BUILTIN and text not in rename:
+            text = BUILTIN[text]
+        elif tok.kind == "name":
+            text = prefix + rename.get(text, text)
+        if parts and (tok.text in ")}," or parts[-1] in ("(", "{")):
+            parts[-1] += text
+        else:
+            parts.append(text)
+    return " ".join(parts).replace(" ,", ",")
+
+
+def shape(expression: str) -> tuple[str, ...]:
+    """The expression with every name blanked: two axioms of the same shape
+    differ only in the names they use (an edit that aligns names is minor)."""
+    return tuple("N" if t.kind == "name" else t.text for t in tokens(expression))

@@ -1,0 +1,830 @@
+"""A knowledge workspace: the one place the workflow's steps meet.
+
+``Workspace`` owns the folder (see :mod:`virf.ontology.workspace` for the
+part verification reads), the corpus, the database and the layered modules.
+Drafting, a person's proposal, checks, the effect preview and decisions all
+go through it, so the terminal and the review page behave the same.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+import threading
+from collections.abc import Sequence
+from datetime import UTC, datetime
+from importlib import resources
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Final
+
+from virf.authoring import manchester
+from virf.authoring.drafts import Draft, DraftRule, read_draft, rule_json
+from virf.authoring.models import (
+    AcceptedRule,
+    CandidateSummary,
+    CandidateView,
+    CheckItem,
+    CheckReport,
+    DecisionView,
+    Evidence,
+    Layer,
+    Preview,
+    Related,
+    RuleDraft,
+    Status,
+)
+from virf.authoring.normalize import DEFAULT_THRESHOLD, VocabularyIndex, normalise
+from virf.authoring.store import DecisionRow, Store
+from virf.errors import InputError, clip, read_json_file
+from virf.migrations import now
+from virf.ontology.tbox import TBox, load_tbox, ontology_dir, scenario_names
+from virf.ontology.workspace import FORMAT, LAYERS, MARKER, KbLayout, open_layout
+
+if TYPE_CHECKING:
+    from virf.authoring.corpus import Corpus
+    from virf.planner.apprentices import Apprentice
+
+DEFAULT_WORKSPACE: Final = Path("virf-kb")
+DATABASE: Final = "kb.sqlite"
+RUN_LOG: Final = "runs.sqlite"
+CANDIDATE_IRI: Final = "http://virf.dev/ontology/workspace/candidate"
+# The annotations a workspace adds to what every USC carries.
+PROVENANCE: Final = ("evidence", "drafter", "reviewer", "decision", "decidedOn", "candidate")
+_USC_ANNOTATIONS: Final = (
+    "id",
+    "kind",
+    "category",
+    "dangerLevel",
+    "safetyWarning",
+    "triggerReason",
+    "suggestion",
+    "source",
+    "checkAt",
+)
+_PREFIXES: Final = """Prefix: : <http://virf.dev/ontology#>
+Prefix: owl: <http://www.w3.org/2002/07/owl#>
+Prefix: rdf: <http://www.w3.org/1999/02/22-rdf-syntax-ns#>
+Prefix: rdfs: <http://www.w3.org/2000/01/rdf-schema#>
+Prefix: xsd: <http://www.w3.org/2001/XMLSchema#>
+"""
+
+
+def _declarations() -> str:
+    props = [*_USC_ANNOTATIONS, *PROVENANCE]
+    return "\n".join(f"AnnotationProperty: :{p}" for p in props) + (
+        "\nAnnotationProperty: rdfs:comment\nAnnotationProperty: rdfs:label\n"
+    )
+
+
+def _literal(text: str) -> str:
+    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def _builtin_imports(scenario: str) -> list[str]:
+    """The modules the built-in scenario module imports (its domain layer)."""
+    text = (ontology_dir() / f"scenario-{scenario}.omn").read_text(encoding="utf-8")
+    return [
+        line.split("<", 1)[1].rstrip(">").strip() for line in text.splitlines() if "Import:" in line
+    ]
+
+
+def _module_header(layout: KbLayout, layer: str) -> str:
+    base = "http://virf.dev/ontology/"
+    if layer == "core":
+        imports = [f"{base}core"]
+    elif layer == "domain":
+        imports = [layout.module_iri("core"), *_builtin_imports(layout.scenario)]
+    else:
+        imports = [layout.module_iri("domain"), f"{base}scenario-{layout.scenario}"]
+    lines = [_PREFIXES, f"Ontology: <{layout.module_iri(layer)}>"]
+    lines += [f"    Import: <{iri}>" for iri in imports]
+    lines += [
+        "    Annotations:",
+        f'        rdfs:label "Workspace {layer} layer",',
+        '        rdfs:comment "Axioms accepted through VIRF knowledge acquisition (virf kb decide or '
+        'the review page). Written by VIRF, one block per decision; edit through the workflow."',
+        "",
+        _declarations(),
+    ]
+    return "\n".join(lines)
+
+
+def _write_atomically(path: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def starter_corpus_dir() -> Path:
+    return Path(str(resources.files("virf.authoring").joinpath("starter_corpus")))
+
+
+class Workspace:
+    """An open knowledge workspace."""
+
+    def __init__(self, layout: KbLayout) -> None:
+        self.layout = layout
+        self.root = layout.root
+        self.scenario = layout.scenario
+        self.corpus_dir = layout.root / "corpus"
+        self.cache_dir = layout.cache_dir
+        self.config: dict[str, Any] = json.loads((layout.root / MARKER).read_text(encoding="utf-8"))
+        self.threshold = float(self.config.get("similarity_threshold", DEFAULT_THRESHOLD))
+        self.store = Store(layout.root / DATABASE)
+        self._corpus: Corpus | None = None
+        self._index: VocabularyIndex | None = None
+        self._lock = threading.Lock()
+
+    # ------------------------------------------------------------------ making and opening
+    @classmethod
+    def init(
+        cls, path: str | Path, scenario: str = "kitchen", *, starter: bool = True
+    ) -> Workspace:
+        root = Path(path)
+        if scenario not in scenario_names():
+            from virf.errors import unknown_term
+
+            raise unknown_term("scenario", scenario, scenario_names())
+        if root.exists() and (not root.is_dir() or any(root.iterdir())):
+            what = "a workspace already" if (root / MARKER).exists() else "not an empty folder"
+            raise InputError(f"{clip(str(root))} is {what}; choose a new folder")
+        created = not root.exists()
+        try:
+            root.mkdir(parents=True, exist_ok=True)
+            layout = KbLayout(root.resolve(), scenario)
+            layout.module_dir.mkdir()
+            for layer in LAYERS:
+                layout.module_path(layer).write_text(_module_header(layout, layer), "utf-8")
+            (root / "corpus").mkdir()
+            layout.cache_dir.mkdir()
+            if starter:
+                for doc in sorted(starter_corpus_dir().glob("*.md")):
+                    shutil.copyfile(doc, root / "corpus" / doc.name)
+            config = {
+                "format": FORMAT,
+                "scenario": scenario,
+                "similarity_threshold": DEFAULT_THRESHOLD,
+                "created_at": now(),
+            }
+            # The marker last: a folder without it is not a workspace yet.
+            (root / MARKER).write_text(json.dumps(config, indent=2) + "\n", "utf-8")
+        except OSError as exc:
+            if created:
+                shutil.rmtree(root, ignore_errors=True)
+            raise InputError(f"cannot create workspace {root}: {exc.strerror}") from None
+        return cls(layout)
+
+    @classmethod
+    def open(cls, path: str | Path = DEFAULT_WORKSPACE) -> Workspace:
+        return cls(open_layout(path))
+
+    def close(self) -> None:
+        self.store.close()
+
+    def corpus(self) -> Corpus:
+        from virf.authoring.corpus import Corpus
+
+        if self._corpus is None:
+            self._corpus = Corpus(self.corpus_dir, self.cache_dir)
+        return self._corpus
+
+    def tbox(self) -> TBox:
+        """The built-in TBox plus what this workspace has accepted so far."""
+        return load_tbox(self.scenario, kb=self.root)
+
+    def run_log_path(self) -> Path:
+        return self.root / RUN_LOG
+
+    # ------------------------------------------------------------------ candidates in
+    def draft(
+        self, query: str, apprentice: Apprentice, *, k: int = 5, check: bool = True
+    ) -> tuple[list[int], str]:
+        """Retrieve evidence for ``query``, ask the drafter, store each rule
+        as a candidate (and check it).  Returns the candidate ids and, when
+        the reply was unusable, why."""
+        from virf.authoring.draft import ask_drafter
+
+        query = query.strip()
+        if not query:
+            raise InputError("the question is empty; say what the rules should be about")
+        hits = self.corpus().search(query, k=k)
+        drafted = ask_drafter(apprentice, self.tbox().vocabulary, query, hits)
+        self.store.add_event("drafted", actor=apprentice.label, detail=query)
+        if drafted.draft is None:
+            self.store.add_event(
+                "draft_failed", actor=apprentice.label, detail=f"{query}: {drafted.problem}"
+            )
+            return [], drafted.problem
+        ids = self._store_draft(
+            drafted.draft,
+            query=query,
+            drafter=apprentice.label,
+            kind="llm",
+            retrieved=[h.passage.id for h in hits],
+        )
+        if check:
+            for cid in ids:
+                self.check(cid)
+        return ids, ""
+
+    def propose(self, path: Path, author: str, *, check: bool = True) -> list[int]:
+        """A person's candidate rules, from a draft document."""
+        draft = read_draft(read_json_file(path, "proposal"), f"proposal {path}")
+        ids = self._store_draft(
+            draft, query=None, drafter=f"person:{author}", kind="person", retrieved=[]
+        )
+        if check:
+            for cid in ids:
+                self.check(cid)
+        return ids
+
+    def propose_draft(self, draft: Draft, author: str, *, check: bool = True) -> list[int]:
+        ids = self._store_draft(
+            draft, query=None, drafter=f"person:{author}", kind="person", retrieved=[]
+        )
+        if check:
+            for cid in ids:
+                self.check(cid)
+        return ids
+
+    def _store_draft(
+        self, draft: Draft, *, query: str | None, drafter: str, kind: str, retrieved: Sequence[str]
+    ) -> list[int]:
+        ids = []
+        with self.store.transaction() as conn:
+            for rule in draft.rules:
+                ids.append(
+                    self.store.add_candidate(
+                        query=query,
+                        drafter=drafter,
+                        drafter_kind=kind,
+                        name=rule.name,
+                        axiom=rule.definition,
+                        rule=rule.as_rule().model_dump(),
+                        draft=rule_json(draft, rule),
+                        evidence=draft.evidence_of(rule),
+                        retrieved=retrieved,
+                        conn=conn,
+                    )
+                )
+        return ids
+
+    # ------------------------------------------------------------------ checks
+    def _vocabulary_index(self) -> VocabularyIndex:
+        from virf.authoring.embed import default_embedder
+
+        with self._lock:
+            tbox = self.tbox()
+            if self._index is None or self._index.vocab is not tbox.vocabulary:
+                self._index = VocabularyIndex(
+                    tbox.vocabulary, default_embedder().encode, self.cache_dir
+                )
+            return self._index
+
+    def evidence(self, ids: Sequence[str]) -> tuple[Evidence, ...]:
+        corpus = self.corpus()
+        out = []
+        for pid in ids:
+            passage = corpus.passage(pid)
+            if passage is None:
+                out.append(Evidence(passage_id=pid, found=False))
+                continue
+            doc = corpus.document(passage.document)
+            out.append(
+                Evidence(
+                    passage_id=pid,
+                    found=True,
+                    document_id=passage.document,
+                    document_title=doc.title if doc else "",
+                    publisher=doc.publisher if doc else "",
+                    url=doc.url if doc else "",
+                    section=passage.section,
+                    text=passage.text,
+                )
+            )
+        return tuple(out)
+
+    def check(self, cid: int, axiom: str | None = None) -> CheckReport:
+        """Normalise and check the candidate's axiom (or an edited one); the
+        result is stored as the candidate's latest check."""
+        row = self.store.candidate(cid)
+        text = row.axiom if axiom is None else axiom
+        report = self._check(row.id, row.rule, row.draft, row.evidence, text, row.drafter)
+        self.store.add_check(cid, text, report.passed, report.model_dump(mode="json"))
+        return report
+
+    recheck = check
+
+    def _check(
+        self,
+        cid: int,
+        rule: dict[str, Any],
+        draft: dict[str, Any],
+        evidence_ids: Sequence[str],
+        axiom: str,
+        drafter: str,
+        decision: dict[str, str] | None = None,
+    ) -> CheckReport:
+        from virf.ontology.axiom_check import check_candidate
+
+        name = str(rule["name"])
+        parsed_draft = read_draft(draft, f"candidate {cid}")
+        items: list[CheckItem] = []
+        vocab = self.tbox().vocabulary
+        try:
+            normalised = normalise(
+                axiom,
+                vocab,
+                self._vocabulary_index(),
+                declared_parents=parsed_draft.parents(),
+                threshold=self.threshold,
+                own_name=name,
+            )
+        except InputError as exc:
+            items.append(CheckItem(name="parses", ok=False, severity="error", message=str(exc)))
+            return self._report(axiom, axiom, items, (), Related(), "core", "")
+        items.extend(normalised.problems)
+        if name in vocab.classes:
+            items.append(
+                CheckItem(
+                    name="name",
+                    ok=False,
+                    severity="error",
+                    message=f"{name} is already a class of the TBox; a candidate must name a new "
+                    "concept (propose a different name)",
+                )
+            )
+        items.extend(self._annotation_items(rule, vocab.uscs.values()))
+        items.extend(self._evidence_items(parsed_draft, evidence_ids))
+        block = self._block(
+            cid, rule, normalised.axiom, normalised.new_classes, evidence_ids, drafter, decision
+        )
+        if any(i.severity == "error" for i in items):
+            return self._report(
+                axiom, normalised.axiom, items, normalised.terms, Related(), "core", block
+            )
+        used = [t.chosen for t in normalised.terms] + [p for _, p in normalised.new_classes]
+        result = check_candidate(
+            self.scenario,
+            tuple(str(p) for p in self.layout.modules()),
+            self._candidate_module(block),
+            name,
+            used,
+        )
+        if not result.parses:
+            items.append(
+                CheckItem(name="parses", ok=False, severity="error", message=result.parse_error)
+            )
+            return self._report(
+                axiom, normalised.axiom, items, normalised.terms, Related(), "core", block
+            )
+        items.append(CheckItem(name="parses", ok=True, severity="info", message="the axiom parses"))
+        if not result.consistent:
+            items.append(
+                CheckItem(
+                    name="consistent",
+                    ok=False,
+                    severity="error",
+                    message="the TBox becomes inconsistent with this axiom",
+                )
+            )
+        else:
+            items.append(
+                CheckItem(
+                    name="consistent", ok=True, severity="info", message="the TBox stays consistent"
+                )
+            )
+            if result.satisfiable is False:
+                items.append(
+                    CheckItem(
+                        name="satisfiable",
+                        ok=False,
+                        severity="error",
+                        message=f"{name} is unsatisfiable: no situation can ever fall under it",
+                    )
+                )
+            else:
+                items.append(
+                    CheckItem(
+                        name="satisfiable",
+                        ok=True,
+                        severity="info",
+                        message=f"{name} is satisfiable",
+                    )
+                )
+        related = Related(
+            equivalent=result.equivalent, subsumed_by=result.subsumed_by, subsumes=result.subsumes
+        )
+        items.extend(_novelty_items(name, related))
+        order = ("core", "domain", "scenario")
+        layer = max((result.layers.get(t, "core") for t in used), key=order.index, default="core")
+        return self._report(axiom, normalised.axiom, items, normalised.terms, related, layer, block)
+
+    def _report(
+        self,
+        axiom: str,
+        normalised: str,
+        items: Sequence[CheckItem],
+        terms: Sequence[Any],
+        related: Related,
+        layer: str,
+        block: str,
+    ) -> CheckReport:
+        return CheckReport(
+            axiom=axiom,
+            normalised=normalised.replace(":", "") if normalised else normalised,
+            passed=not any(i.severity == "error" for i in items),
+            layer=layer,  # type: ignore[arg-type]
+            threshold=self.threshold,
+            terms=tuple(terms),
+            items=tuple(items),
+            related=related,
+            module_text=block,
+            checked_at=now(),
+        )
+
+    @staticmethod
+    def _annotation_items(rule: dict[str, Any], uscs: Any) -> list[CheckItem]:
+        known = sorted({u.category for u in uscs})
+        if rule["category"] in known:
+            return []
+        return [
+            CheckItem(
+                name="category",
+                ok=False,
+                severity="warning",
+                message=f"category '{rule['category']}' is new to the TBox; known: {', '.join(known)}",
+            )
+        ]
+
+    def _evidence_items(self, draft: Draft, ids: Sequence[str]) -> list[CheckItem]:
+        rule = draft.rules[0]
+        if not ids:
+            if rule.modelling_decision:
+                return [
+                    CheckItem(
+                        name="evidence",
+                        ok=True,
+                        severity="warning",
+                        message="cites no document: a common-sense modelling decision "
+                        f"({rule.modelling_decision})",
+                    )
+                ]
+            return [
+                CheckItem(
+                    name="evidence",
+                    ok=False,
+                    severity="error",
+                    message="cites no evidence: give passage ids, or a 'modellingDecision' "
+                    "saying why no document is needed",
+                )
+            ]
+        corpus = self.corpus()
+        missing = [pid for pid in ids if corpus.passage(pid) is None]
+        if missing:
+            return [
+                CheckItem(
+                    name="evidence",
+                    ok=False,
+                    severity="error",
+                    message=f"cites passages the corpus does not have: {', '.join(missing)}",
+                )
+            ]
+        return [
+            CheckItem(
+                name="evidence", ok=True, severity="info", message=f"{len(ids)} passage(s) found"
+            )
+        ]
+
+    def _source(self, ids: Sequence[str], rule: dict[str, Any], draft: dict[str, Any]) -> str:
+        corpus = self.corpus()
+        by_doc: dict[str, list[str]] = {}
+        for pid in ids:
+            passage = corpus.passage(pid)
+            if passage is not None:
+                by_doc.setdefault(passage.document, []).append(pid)
+        parts = []
+        for doc_id, pids in by_doc.items():
+            doc = corpus.document(doc_id)
+            title = f"{doc.publisher}, {doc.title}" if doc else doc_id
+            url = f" <{doc.url}>" if doc and doc.url else ""
+            parts.append(f"{title}{url}: passages {', '.join(pids)}")
+        if not parts:
+            decision = draft.get("propertyChains", [{}])[0].get("modellingDecision")
+            return f"common-sense modelling decision: {decision}" if decision else "no evidence"
+        return "; ".join(parts)
+
+    def _block(
+        self,
+        cid: int,
+        rule: dict[str, Any],
+        axiom: str,
+        new_classes: Sequence[tuple[str, str]],
+        evidence_ids: Sequence[str],
+        drafter: str,
+        decision: dict[str, str] | None,
+    ) -> str:
+        """The Manchester frames accepting the candidate adds to a layer module."""
+        name = rule["name"]
+        lines = [f"# candidate {cid}: {name}"]
+        # Every term the block uses is declared in it: OWLAPI's Manchester
+        # parser does not look into already-loaded imports when it parses a
+        # document from a string, and the declarations cost nothing.
+        new = {c for c, _ in new_classes}
+        for term, role in sorted(manchester.names(axiom).items()):
+            if term in new:
+                continue
+            keyword = {"class": "Class", "property": "ObjectProperty", "individual": "Individual"}
+            lines.append(f"{keyword[role]}: :{term}")
+        for parent in sorted({p for _, p in new_classes} - new | {"UnsafeStateConcept"}):
+            lines.append(f"Class: :{parent}")
+        lines.append("")
+        for cls, parent in new_classes:
+            lines += [
+                f"Class: :{cls}",
+                f"    Annotations: rdfs:comment {_literal(f'Introduced by candidate {cid} ({name}).')}",
+                f"    SubClassOf: :{parent}",
+                "",
+            ]
+        anns = [
+            f":id {_literal(name)}",
+            f":kind {_literal(rule['kind'])}",
+            f":category {_literal(rule['category'])}",
+            f":dangerLevel {_literal(rule['danger_level'])}",
+            f"rdfs:comment {_literal(rule['description'])}",
+            f":safetyWarning {_literal(rule['safety_warning'])}",
+            f":triggerReason {_literal(rule['trigger_reason'])}",
+            f":suggestion {_literal(rule['suggestion'])}",
+            f":source {_literal(self._source(evidence_ids, rule, {}))}",
+            f":checkAt {_literal(rule['check_at'])}",
+            *(f":evidence {_literal(pid)}" for pid in evidence_ids),
+            f":drafter {_literal(drafter)}",
+            f":candidate {_literal(str(cid))}",
+        ]
+        if decision:
+            anns += [f":{k} {_literal(v)}" for k, v in decision.items()]
+        lines += [f"Class: :{name}", "    Annotations:"]
+        lines += [f"        {a}," for a in anns[:-1]] + [f"        {anns[-1]}"]
+        lines += [
+            "    EquivalentTo:",
+            f"        Annotations: :id {_literal(name + '-def')}",
+            f"        {axiom}",
+            "    SubClassOf: :UnsafeStateConcept",
+            "",
+        ]
+        return "\n".join(lines)
+
+    def _candidate_module(self, block: str) -> str:
+        return "\n".join(
+            [
+                _PREFIXES,
+                f"Ontology: <{CANDIDATE_IRI}>",
+                f"    Import: <{self.layout.module_iri('scenario')}>",
+                "",
+                _declarations(),
+                block,
+            ]
+        )
+
+    # ------------------------------------------------------------------ preview
+    def preview(
+        self,
+        cid: int,
+        axiom: str | None = None,
+        tasks: Path | None = None,
+        examples: Path | None = None,
+    ) -> Preview:
+        from virf.authoring.preview import effect_preview
+
+        row = self.store.candidate(cid)
+        text = axiom if axiom is not None else self._current_axiom(cid, row.axiom)
+        report = self._check(row.id, row.rule, row.draft, row.evidence, text, row.drafter)
+        if not report.passed:
+            failed = next(i for i in report.items if i.severity == "error")
+            raise InputError(f"candidate {cid} does not pass its checks: {failed.message}")
+        self.cache_dir.mkdir(exist_ok=True)
+        module = self.cache_dir / f"preview-{cid}.omn"
+        _write_atomically(module, self._candidate_module(report.module_text))
+        result = effect_preview(self, module, text, tasks=tasks, examples=examples)
+        self.store.add_preview(cid, text, result.model_dump(mode="json"))
+        return result
+
+    def _current_axiom(self, cid: int, drafted: str) -> str:
+        latest = self.store.latest_check(cid)
+        return str(latest["axiom"]) if latest else drafted
+
+    # ------------------------------------------------------------------ arbitration
+    def opened(self, cid: int, reviewer: str) -> None:
+        self.store.candidate(cid)  # an unknown id is an error here too
+        self.store.add_event("opened", cid, actor=reviewer)
+
+    def decide(
+        self,
+        cid: int,
+        decision: str,
+        *,
+        reviewer: str,
+        reason: str | None = None,
+        axiom: str | None = None,
+    ) -> DecisionView:
+        if decision not in ("accept", "reject"):
+            raise InputError(f"unknown decision '{clip(decision)}'; choose accept or reject")
+        if not reviewer.strip():
+            raise InputError("a decision needs a reviewer's name (--reviewer or $USER)")
+        row = self.store.candidate(cid)
+        if self.store.decision(cid) is not None:
+            raise InputError(f"candidate {cid} has already been decided")
+        opened = self.store.last_event(cid, "opened")
+        decided_at = now()
+        seconds = _seconds_between(opened, decided_at) if opened else None
+        if decision == "reject":
+            if not (reason and reason.strip()):
+                raise InputError("a rejection needs a reason (--reason TEXT)")
+            record = DecisionRow(
+                cid, decided_at, "reject", "none", None, None, reason.strip(), reviewer, seconds
+            )
+            with self.store.transaction() as conn:
+                self.store.add_decision(conn, record)
+                self.store.add_event("decided", cid, actor=reviewer, detail="reject")
+            return _decision_view(record)
+        final = axiom if axiom is not None else row.axiom
+        edit = _edit_size(row.axiom, final)
+        label = {
+            "none": "accepted unedited",
+            "minor": "accepted after a minor edit",
+            "major": "accepted after a major edit",
+        }[edit]
+        provenance = {
+            "reviewer": reviewer,
+            "decision": label + (f": {reason.strip()}" if reason and reason.strip() else ""),
+            "decidedOn": decided_at[:10],
+        }
+        report = self._check(
+            row.id, row.rule, row.draft, row.evidence, final, row.drafter, provenance
+        )
+        self.store.add_check(cid, final, report.passed, report.model_dump(mode="json"))
+        if not report.passed:
+            failed = next(i for i in report.items if i.severity == "error")
+            raise InputError(f"candidate {cid} cannot be accepted: {failed.message}")
+        layer: Layer = report.layer
+        record = DecisionRow(
+            cid, decided_at, "accept", edit, final, layer, reason, reviewer, seconds
+        )
+        path = self.layout.module_path(layer)
+        before = path.read_text(encoding="utf-8")
+        with self.store.transaction() as conn:
+            self.store.add_decision(conn, record)
+            self.store.add_event("decided", cid, actor=reviewer, detail=f"accept ({edit})")
+            _write_atomically(path, before.rstrip("\n") + "\n\n" + report.module_text)
+            try:
+                # The module as written must load: a block that parses on
+                # top of the workspace but not in its layer stays out.
+                from virf.ontology.axiom_check import parses_with
+
+                parses_with(self.scenario, tuple(str(p) for p in self.layout.modules()))
+            except BaseException:
+                _write_atomically(path, before)
+                raise
+        return _decision_view(record)
+
+    # ------------------------------------------------------------------ reading
+    def candidates(self, status: Status | None = None) -> list[CandidateSummary]:
+        statuses = self.store.statuses()
+        out = []
+        for cid, st in statuses.items():
+            if status is not None and st != status:
+                continue
+            out.append(self._summary(cid, st))
+        return out
+
+    def _summary(self, cid: int, status: str) -> CandidateSummary:
+        row = self.store.candidate(cid)
+        latest = self.store.latest_check(cid)
+        return CandidateSummary(
+            id=cid,
+            name=row.name,
+            category=str(row.rule["category"]),
+            drafter=row.drafter,
+            query=row.query,
+            created_at=row.created_at,
+            status=status,  # type: ignore[arg-type]
+            passed=None if latest is None else bool(latest["passed"]),
+        )
+
+    def candidate(self, cid: int) -> CandidateView:
+        row = self.store.candidate(cid)
+        status = self.store.statuses()[cid]
+        check = self.store.latest_check(cid)
+        preview = self.store.latest_preview(cid)
+        decision = self.store.decision(cid)
+        return CandidateView(
+            summary=self._summary(cid, status),
+            rule=RuleDraft(**row.rule),
+            evidence=self.evidence(row.evidence),
+            retrieved=row.retrieved,
+            draft=row.draft,
+            check=CheckReport.model_validate(check) if check else None,
+            preview=Preview.model_validate(preview) if preview else None,
+            decision=_decision_view(decision) if decision else None,
+        )
+
+    def rules(self) -> list[AcceptedRule]:
+        out = []
+        for d in self.store.decisions():
+            if d.decision != "accept":
+                continue
+            row = self.store.candidate(d.candidate_id)
+            out.append(
+                AcceptedRule(
+                    id=row.name,
+                    name=row.name,
+                    layer=d.layer or "core",  # type: ignore[arg-type]
+                    axiom=d.axiom or row.axiom,
+                    category=str(row.rule["category"]),
+                    evidence=row.evidence,
+                    drafter=row.drafter,
+                    reviewer=d.reviewer,
+                    edit=d.edit,  # type: ignore[arg-type]
+                    decided_at=d.created_at,
+                    candidate_id=d.candidate_id,
+                )
+            )
+        return out
+
+
+def _novelty_items(name: str, related: Related) -> list[CheckItem]:
+    items = []
+    if related.equivalent:
+        items.append(
+            CheckItem(
+                name="redundancy",
+                ok=False,
+                severity="warning",
+                message=f"redundant: {name} is equivalent to {', '.join(related.equivalent)}",
+            )
+        )
+    if related.subsumed_by:
+        items.append(
+            CheckItem(
+                name="redundancy",
+                ok=False,
+                severity="warning",
+                message=f"redundant: every {name} situation is already a "
+                f"{', '.join(related.subsumed_by)} situation",
+            )
+        )
+    if related.subsumes:
+        items.append(
+            CheckItem(
+                name="generalisation",
+                ok=True,
+                severity="info",
+                message=f"generalises {', '.join(related.subsumes)}",
+            )
+        )
+    if not items:
+        items.append(
+            CheckItem(
+                name="novelty", ok=True, severity="info", message="no existing rule covers it"
+            )
+        )
+    return items
+
+
+def _edit_size(drafted: str, final: str) -> str:
+    """none: the same expression; minor: only names changed (URI alignment,
+    a fixed spelling); major: the structure changed (scope, restrictions)."""
+    try:
+        a, b = manchester.tokens(drafted), manchester.tokens(final)
+    except InputError:
+        return "major"
+    if [t.text for t in a] == [t.text for t in b]:
+        return "none"
+    return "minor" if manchester.shape(drafted) == manchester.shape(final) else "major"
+
+
+def _seconds_between(start: str, end: str) -> float:
+    delta = datetime.fromisoformat(end) - datetime.fromisoformat(start)
+    return round(max(0.0, delta.total_seconds()), 3)
+
+
+def _decision_view(d: DecisionRow) -> DecisionView:
+    return DecisionView(
+        decision=d.decision,  # type: ignore[arg-type]
+        edit=d.edit,  # type: ignore[arg-type]
+        axiom=d.axiom,
+        reason=d.reason,
+        reviewer=d.reviewer,
+        decided_at=d.created_at,
+        seconds=d.seconds,
+    )
+
+
+_ = (UTC, DraftRule)
