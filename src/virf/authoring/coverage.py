@@ -1,0 +1,781 @@
+"""Rule coverage: which Unsafe State Concepts fire on each benchmark task's reference plan.
+
+``virf kb coverage`` answers the knowledge engineer's question "which hazards
+of the benchmark does the knowledge base know about, and with which rules?".
+Each task's reference plan is simulated from the scene the benchmark runner
+builds for it, and every state of the run is classified by the tutor's engine
+against every rule the verifier checks, exactly as the verifier does (same
+snapshots, same one-step lookahead for actions, ``checkAt final`` rules only
+on the final state of a complete run).  Unlike the verifier, which stops at
+the first definite finding and names it, coverage keeps going and collects
+*every* rule that fires, with the steps it fires at.
+
+The result is typed and JSON-serialisable (:meth:`CoverageResult.public`),
+deterministic (no timings, stable ordering), and rendered as terminal tables,
+a Markdown page and a bar chart from one set of :class:`TextTable` rows.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections import Counter
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from virf.api import LogicTutor
+from virf.bench.safeagentbench import CATEGORIES, Task, build_scene, load_tasks, normalise_category
+from virf.errors import InputError, clip
+from virf.reasoning import DeadlineExceeded, ReasonerFailure
+from virf.render.tables import Column, TextTable, to_markdown
+from virf.schema import Fact, Provenance
+from virf.world.plan import PlanStep
+from virf.world.scene import Scene
+from virf.world.simulate import simulate
+from virf.world.simulator import Simulator
+
+TaskStatus = Literal["checked", "no-plan", "unparsed", "error"]
+UNCATEGORISED = "(uncategorised)"
+# How the statuses that are not "checked" read in tables.
+STATUS_TEXT: Mapping[str, str] = {
+    "no-plan": "no reference plan",
+    "unparsed": "plan does not parse",
+    "error": "could not be checked",
+}
+TOP_RULES = 3
+
+
+# ---------------------------------------------------------------------- results
+@dataclass(frozen=True)
+class RuleFiring:
+    """One rule on one task: the steps it fires at (0 is the initial scene),
+    the individuals it fires for, and whether any firing is definite (the
+    verifier would say UNSAFE) rather than uncertain (UNKNOWN, a question)."""
+
+    rule: str
+    steps: tuple[int, ...]
+    subjects: tuple[str, ...]
+    definite: bool
+
+    def public(self) -> dict[str, Any]:
+        return {
+            "rule": self.rule,
+            "steps": list(self.steps),
+            "subjects": list(self.subjects),
+            "definite": self.definite,
+        }
+
+
+@dataclass(frozen=True)
+class TaskRef:
+    """A task as the reader finds it again: file, line, instruction."""
+
+    file: str
+    line: int
+    instruction: str
+
+    @property
+    def where(self) -> str:
+        return f"{self.file}:{self.line}"
+
+    def public(self) -> dict[str, Any]:
+        return {"file": self.file, "line": self.line, "instruction": self.instruction}
+
+
+@dataclass(frozen=True)
+class TaskCoverage:
+    """One task: its label and categories, whether its plan could be checked,
+    and every rule that fired.  ``reason`` says why a task was not checked, or
+    where a checked run stopped early (a failed precondition, a missing
+    object, a contradictory state); it is empty for a run to the end."""
+
+    ref: TaskRef
+    label: str  # "unsafe" | "safe", the benchmark's own label
+    categories: tuple[str, ...]
+    status: TaskStatus
+    reason: str = ""
+    firings: tuple[RuleFiring, ...] = ()
+
+    @property
+    def covered(self) -> bool:
+        return self.status == "checked" and bool(self.firings)
+
+    @property
+    def definite(self) -> bool:
+        return any(f.definite for f in self.firings)
+
+    @property
+    def rules(self) -> tuple[str, ...]:
+        return tuple(f.rule for f in self.firings)
+
+    def public(self) -> dict[str, Any]:
+        return {
+            **self.ref.public(),
+            "label": self.label,
+            "categories": list(self.categories),
+            "status": self.status,
+            "reason": self.reason,
+            "covered": self.covered,
+            "firings": [f.public() for f in self.firings],
+        }
+
+
+@dataclass(frozen=True)
+class CategoryCoverage:
+    """One hazard category over the unsafe tasks whose plan was checked."""
+
+    category: str
+    unsafe_tasks: int
+    covered: int
+    definite: int  # covered by at least one definite firing
+    uncovered: tuple[TaskCoverage, ...]
+    not_checked: int  # unsafe tasks of the category whose plan did not parse or errored
+    rules: tuple[tuple[str, int], ...]  # (rule, tasks it fires on), most first
+
+    @property
+    def ratio(self) -> float | None:
+        return self.covered / self.unsafe_tasks if self.unsafe_tasks else None
+
+    def public(self) -> dict[str, Any]:
+        return {
+            "category": self.category,
+            "unsafe_tasks": self.unsafe_tasks,
+            "covered": self.covered,
+            "definite": self.definite,
+            "coverage": None if self.ratio is None else round(self.ratio, 4),
+            "not_checked": self.not_checked,
+            "uncovered": [{**t.ref.public(), "reason": t.reason} for t in self.uncovered],
+            "rules": [{"rule": r, "tasks": n} for r, n in self.rules],
+        }
+
+
+@dataclass(frozen=True)
+class RuleCoverage:
+    """One rule of the knowledge base and the checked tasks it fires on."""
+
+    id: str
+    name: str
+    module: str
+    category: str
+    kind: str
+    check_at: str
+    unsafe: tuple[TaskRef, ...]
+    safe: tuple[TaskRef, ...]  # false alarms: safe tasks it fires on
+
+    @property
+    def fired(self) -> bool:
+        return bool(self.unsafe or self.safe)
+
+    def public(self) -> dict[str, Any]:
+        return {
+            "id": self.id,
+            "name": self.name,
+            "module": self.module,
+            "category": self.category,
+            "kind": self.kind,
+            "check_at": self.check_at,
+            "unsafe_tasks": len(self.unsafe),
+            "false_alarms": [t.public() for t in self.safe],
+        }
+
+
+@dataclass(frozen=True)
+class CoverageResult:
+    scenario: str
+    kb: str | None
+    files: tuple[str, ...]
+    tasks: tuple[TaskCoverage, ...]
+    categories: tuple[CategoryCoverage, ...]
+    rules: tuple[RuleCoverage, ...]
+
+    @property
+    def checked_unsafe(self) -> list[TaskCoverage]:
+        return [t for t in self.tasks if t.label == "unsafe" and t.status == "checked"]
+
+    @property
+    def alarmed_safe(self) -> list[TaskCoverage]:
+        return [t for t in self.tasks if t.label == "safe" and t.covered]
+
+    @property
+    def never_fired(self) -> list[RuleCoverage]:
+        return [r for r in self.rules if not r.fired]
+
+    @property
+    def not_checked(self) -> list[TaskCoverage]:
+        return [t for t in self.tasks if t.status != "checked"]
+
+    def summary(self) -> dict[str, Any]:
+        unsafe = self.checked_unsafe
+        safe = [t for t in self.tasks if t.label == "safe" and t.status == "checked"]
+        covered = sum(t.covered for t in unsafe)
+        return {
+            "tasks": len(self.tasks),
+            "checked": sum(t.status == "checked" for t in self.tasks),
+            "no_reference_plan": sum(t.status == "no-plan" for t in self.tasks),
+            "plan_does_not_parse": sum(t.status == "unparsed" for t in self.tasks),
+            "errors": sum(t.status == "error" for t in self.tasks),
+            "unsafe_checked": len(unsafe),
+            "unsafe_covered": covered,
+            "unsafe_definite": sum(t.definite for t in unsafe),
+            "coverage": round(covered / len(unsafe), 4) if unsafe else None,
+            "safe_checked": len(safe),
+            "safe_with_firing_rules": len(self.alarmed_safe),
+            "rules": len(self.rules),
+            "rules_never_fired": len(self.never_fired),
+        }
+
+    def public(self) -> dict[str, Any]:
+        """The whole result as JSON-ready data, in a stable order."""
+        return {
+            "scenario": self.scenario,
+            "kb": self.kb,
+            "files": list(self.files),
+            "summary": self.summary(),
+            "categories": [c.public() for c in self.categories],
+            "tasks": [t.public() for t in self.tasks],
+            "rules": [r.public() for r in self.rules],
+            "never_fired": [
+                {"id": r.id, "module": r.module, "category": r.category} for r in self.never_fired
+            ],
+        }
+
+
+# ---------------------------------------------------------------------- input
+@dataclass(frozen=True)
+class SourcedTask:
+    """A benchmark task with the name its file is shown under."""
+
+    task: Task
+    file: str
+
+
+def task_categories(task: Task) -> tuple[str, ...]:
+    """The benchmark categories a task lists ("Fire Hazard, Explosion Hazard"
+    names two), each normalised to one of the ten; a task with none that
+    normalises is uncategorised."""
+    raw = task.data.get("risk_category")
+    if not isinstance(raw, str) or not raw.strip():
+        return (UNCATEGORISED,)
+    found = [c for part in raw.split(",") if (c := normalise_category(part.strip()))]
+    if not found and (whole := normalise_category(raw)):
+        found = [whole]
+    return tuple(dict.fromkeys(found)) or (UNCATEGORISED,)
+
+
+def _display_names(paths: Sequence[Path]) -> list[str]:
+    """The shortest trailing part of each path that tells the files apart, so
+    ``unsafe_detailed.jsonl`` and ``other_rooms/unsafe_detailed.jsonl`` stay
+    distinct without printing whole absolute paths."""
+    parts = [p.parts for p in paths]
+    names = []
+    for own in parts:
+        for n in range(1, len(own) + 1):
+            tail = own[-n:]
+            if sum(1 for other in parts if other[-n:] == tail) == 1 or n == len(own):
+                names.append("/".join(tail))
+                break
+    return names
+
+
+def load_coverage_tasks(files: Sequence[str | Path]) -> list[SourcedTask]:
+    """Every task of ``files``, in file and line order; a file given twice or
+    a set of files without any task is an input error."""
+    paths = [Path(f) for f in files]
+    if not paths:
+        raise InputError("give at least one SafeAgentBench JSONL file")
+    seen: dict[Path, Path] = {}
+    for p in paths:
+        key = p.resolve() if p.exists() else p
+        if key in seen:
+            raise InputError(f"file given twice: {clip(str(p))}")
+        seen[key] = p
+    out = [
+        SourcedTask(task, name)
+        for p, name in zip(paths, _display_names(paths), strict=True)
+        for task in load_tasks(p)
+    ]
+    if not out:
+        raise InputError(f"no tasks in {', '.join(clip(str(p)) for p in paths)}")
+    return out
+
+
+# ---------------------------------------------------------------------- computation
+@dataclass
+class _Hits:
+    steps: set[int] = field(default_factory=set)
+    subjects: set[str] = field(default_factory=set)
+    definite: bool = False
+
+
+def plan_firings(
+    tutor: LogicTutor, scene: Scene, plan: Sequence[PlanStep]
+) -> tuple[tuple[RuleFiring, ...], str]:
+    """Every rule that fires on ``plan`` run in ``scene``, and where
+    the run stopped early ("" when it ran to the end).
+
+    The snapshots are the verifier's own (:meth:`Verifier.snapshots`), and
+    they are classified against the verifier's rule lists, so a rule fires
+    here exactly when the verifier would find it at that step.  Raises
+    DeadlineExceeded or ReasonerFailure when the engine cannot answer."""
+    verifier = tutor.verifier
+    vocab = verifier.vocab
+    # The trace tells which action each snapshot looks ahead to and whether
+    # the run is complete (for checkAt-final rules); the snapshots come from
+    # the verifier so the ABoxes are the ones it classifies.
+    trace = simulate(verifier.sim, verifier.sim.initial(scene), plan)
+    snapshots = verifier.snapshots(scene, plan)
+    n = len(trace.states) - 1
+    deadline = time.monotonic() + verifier.timeout_s
+    hits: dict[str, _Hits] = {}
+    stopped = ""
+    for k, snapshot in enumerate(snapshots):
+        concepts = verifier.always + (verifier.final if trace.complete and k == n else [])
+        result = tutor.engine.classify(snapshot.keys(), concepts, deadline=deadline)
+        if not result.consistent:
+            # Everything is entailed by a contradiction; later states inherit it.
+            stopped = f"state {k} is contradictory; steps from {k} on were not checked"
+            break
+        action = (
+            Simulator.action_individual(trace.resolved[k].step) if k < len(trace.resolved) else None
+        )
+        known: list[Fact] | None = None
+        for concept, individuals in sorted(result.instances.items()):
+            usc = vocab.uscs[concept]
+            for ind in individuals:
+                h = hits.setdefault(usc.id, _Hits())
+                # Action-based findings belong to the action's own step (lookahead).
+                h.steps.add(k + 1 if ind == action else k)
+                h.subjects.add(ind)
+                if h.definite or usc.kind == "uncertainty":
+                    continue
+                # Definite when it holds without the open-world assumptions,
+                # the verifier's own test (virf.verify.explain).
+                if known is None:
+                    known = [f for f, p in snapshot.items() if p is not Provenance.ASSUMED]
+                h.definite = tutor.engine.entails(known, concept, ind, deadline=deadline)
+    if not stopped and trace.stop is not None:
+        stopped = f"simulation stopped at {trace.stop_reason()}"
+    firings = tuple(
+        RuleFiring(rule, tuple(sorted(h.steps)), tuple(sorted(h.subjects)), h.definite)
+        for rule, h in sorted(hits.items())
+    )
+    return firings, stopped
+
+
+def task_coverage(tutor: LogicTutor, sourced: SourcedTask) -> TaskCoverage:
+    task = sourced.task
+    ref = TaskRef(sourced.file, task.line, task.instruction)
+    label = task.label
+    cats = task_categories(task) if label == "unsafe" else ()
+
+    def result(
+        status: TaskStatus, reason: str = "", firings: Iterable[RuleFiring] = ()
+    ) -> TaskCoverage:
+        return TaskCoverage(ref, label, cats, status, reason, tuple(firings))
+
+    if not task.steps:
+        return result("no-plan", STATUS_TEXT["no-plan"])
+    try:
+        plan = task.plan()
+    except InputError as exc:
+        return result("unparsed", f"reference plan does not parse: {exc}")
+    try:
+        scene = tutor.scene(build_scene(task, tutor.tbox.vocabulary))
+    except InputError as exc:
+        return result("error", f"scene could not be built: {exc}")
+    try:
+        firings, stopped = plan_firings(tutor, scene, plan)
+    except DeadlineExceeded as exc:
+        return result("error", f"timed out after {tutor.timeout_s:g}s: {exc}")
+    except ReasonerFailure as exc:
+        return result("error", f"reasoner failure: {exc}")
+    return result("checked", stopped, firings)
+
+
+def _category_order(cat: str) -> tuple[int, str]:
+    if cat in CATEGORIES:
+        return (CATEGORIES.index(cat), cat)
+    return (len(CATEGORIES) + (cat == UNCATEGORISED), cat)
+
+
+def _most_first(counts: Counter[str]) -> tuple[tuple[str, int], ...]:
+    return tuple(sorted(counts.items(), key=lambda kv: (-kv[1], kv[0])))
+
+
+def summarise(
+    tutor: LogicTutor,
+    tasks: Sequence[TaskCoverage],
+    files: Sequence[str],
+    kb: str | None = None,
+) -> CoverageResult:
+    """Per category and per rule, from the per-task results."""
+    cats: dict[str, list[TaskCoverage]] = {}
+    for t in tasks:
+        if t.label == "unsafe" and t.status != "no-plan":
+            for c in t.categories:
+                cats.setdefault(c, []).append(t)
+    categories = []
+    for cat in sorted(cats, key=_category_order):
+        members = cats[cat]
+        checked = [t for t in members if t.status == "checked"]
+        categories.append(
+            CategoryCoverage(
+                category=cat,
+                unsafe_tasks=len(checked),
+                covered=sum(t.covered for t in checked),
+                definite=sum(t.definite for t in checked),
+                uncovered=tuple(t for t in checked if not t.covered),
+                not_checked=len(members) - len(checked),
+                rules=_most_first(Counter(r for t in checked for r in t.rules)),
+            )
+        )
+    verifier = tutor.verifier
+    vocab = verifier.vocab
+    checked_rules = sorted(
+        (vocab.uscs[name] for name in [*verifier.always, *verifier.final]), key=lambda u: u.id
+    )
+    fired_on: dict[str, dict[str, list[TaskRef]]] = {}
+    for t in tasks:
+        for rule in t.rules:
+            fired_on.setdefault(rule, {"unsafe": [], "safe": []})[t.label].append(t.ref)
+    rules = tuple(
+        RuleCoverage(
+            id=u.id,
+            name=u.name,
+            module=u.module,
+            category=u.category,
+            kind=u.kind,
+            check_at=u.check_at,
+            unsafe=tuple(fired_on.get(u.id, {}).get("unsafe", ())),
+            safe=tuple(fired_on.get(u.id, {}).get("safe", ())),
+        )
+        for u in checked_rules
+    )
+    return CoverageResult(
+        scenario=tutor.tbox.scenario,
+        kb=kb,
+        files=tuple(dict.fromkeys(files)),
+        tasks=tuple(tasks),
+        categories=tuple(categories),
+        rules=rules,
+    )
+
+
+def compute_coverage(
+    tutor: LogicTutor,
+    tasks: Sequence[SourcedTask],
+    *,
+    kb: str | None = None,
+    on_task: Callable[[TaskCoverage], object] | None = None,
+) -> CoverageResult:
+    """Check every task's reference plan with ``tutor`` and summarise."""
+    results = []
+    for sourced in tasks:
+        r = task_coverage(tutor, sourced)
+        results.append(r)
+        if on_task is not None:
+            on_task(r)
+    return summarise(tutor, results, [s.file for s in tasks], kb)
+
+
+# ---------------------------------------------------------------------- tables
+def _steps_text(steps: Sequence[int]) -> str:
+    """Steps as runs: 3, 5-9."""
+    runs: list[list[int]] = []
+    for s in steps:
+        if runs and s == runs[-1][-1] + 1:
+            runs[-1].append(s)
+        else:
+            runs.append([s])
+    return ", ".join(str(r[0]) if len(r) == 1 else f"{r[0]}-{r[-1]}" for r in runs)
+
+
+def firing_text(f: RuleFiring) -> str:
+    """``Rule (steps)``; an uncertain-only firing says it would ask."""
+    asks = "" if f.definite else ", asks"
+    return f"{f.rule} (step {_steps_text(f.steps)}{asks})"
+
+
+def _short(text: str, terminal: bool, limit: int = 70) -> str:
+    text = " ".join(text.split())
+    return text if not terminal or len(text) <= limit else text[: limit - 1] + "…"
+
+
+def _pct(x: float | None) -> str:
+    return "n/a" if x is None else f"{100 * x:.0f}%"
+
+
+def category_table(result: CoverageResult) -> TextTable:
+    rows = [
+        (
+            c.category,
+            str(c.unsafe_tasks),
+            str(c.covered),
+            str(c.definite),
+            str(c.unsafe_tasks - c.covered),
+            _pct(c.ratio),
+            str(c.not_checked),
+            ", ".join(f"{r} ({n})" for r, n in c.rules[:TOP_RULES]) or "-",
+        )
+        for c in result.categories
+    ]
+    s = result.summary()
+    rows.append(
+        (
+            "all unsafe tasks",
+            str(s["unsafe_checked"]),
+            str(s["unsafe_covered"]),
+            str(s["unsafe_definite"]),
+            str(s["unsafe_checked"] - s["unsafe_covered"]),
+            _pct(s["coverage"]),
+            str(
+                sum(t.label == "unsafe" and t.status in ("unparsed", "error") for t in result.tasks)
+            ),
+            "",
+        )
+    )
+    return TextTable.of(
+        (
+            "hazard category",
+            Column("unsafe", "right"),
+            Column("covered", "right"),
+            Column("definite", "right"),
+            Column("uncovered", "right"),
+            Column("coverage", "right"),
+            Column("not checked", "right"),
+            "rules firing most (tasks)",
+        ),
+        rows,
+        title="Rule coverage of unsafe tasks per hazard category "
+        "(a task may count in several categories)",
+    )
+
+
+def unsafe_task_table(result: CoverageResult, terminal: bool) -> TextTable:
+    rows = [
+        (
+            t.ref.where,
+            ", ".join(t.categories),
+            "; ".join(firing_text(f) for f in t.firings) or "NONE",
+            _short(t.ref.instruction, terminal),
+        )
+        for t in result.checked_unsafe
+    ]
+    return TextTable.of(
+        ("task", "category", "rules that fire (steps)", "instruction"),
+        rows,
+        title="Unsafe tasks: every rule that fires on the reference plan",
+    )
+
+
+def uncovered_table(result: CoverageResult, terminal: bool) -> TextTable:
+    rows = [
+        (
+            t.ref.where,
+            ", ".join(t.categories),
+            _short(t.ref.instruction, terminal),
+            t.reason or "ran to the end; no rule fired",
+        )
+        for t in result.checked_unsafe
+        if not t.covered
+    ]
+    return TextTable.of(
+        ("task", "category", "instruction", "run"),
+        rows,
+        title="Uncovered unsafe tasks (no rule fires)",
+    )
+
+
+def false_alarm_table(result: CoverageResult) -> TextTable:
+    rows = [
+        (r.id, r.category, str(len(r.safe)), ", ".join(t.where for t in r.safe))
+        for r in sorted(result.rules, key=lambda r: (-len(r.safe), r.id))
+        if r.safe
+    ]
+    return TextTable.of(
+        ("rule", "rule category", Column("safe tasks", "right"), "tasks"),
+        rows,
+        title="False alarms by rule (rules firing on safe tasks)",
+    )
+
+
+def safe_task_table(result: CoverageResult, terminal: bool) -> TextTable:
+    rows = [
+        (
+            t.ref.where,
+            "; ".join(firing_text(f) for f in t.firings),
+            _short(t.ref.instruction, terminal),
+        )
+        for t in result.alarmed_safe
+    ]
+    return TextTable.of(
+        ("task", "rules that fire (steps)", "instruction"),
+        rows,
+        title="Safe tasks where rules fire",
+    )
+
+
+def never_fired_table(result: CoverageResult) -> TextTable:
+    rows = [(r.id, r.module, r.category, r.kind) for r in result.never_fired]
+    return TextTable.of(
+        ("rule", "module", "category", "kind"),
+        rows,
+        title="Rules that never fire on any task",
+    )
+
+
+def not_checked_table(result: CoverageResult, terminal: bool) -> TextTable:
+    rows = [
+        (
+            t.ref.where,
+            t.label,
+            STATUS_TEXT[t.status],
+            _short(t.reason, terminal, 100) if t.status != "no-plan" else "",
+            _short(t.ref.instruction, terminal),
+        )
+        for t in result.not_checked
+    ]
+    return TextTable.of(
+        ("task", "label", "status", "reason", "instruction"),
+        rows,
+        title="Tasks not checked (not counted as covered or uncovered)",
+    )
+
+
+def report_tables(result: CoverageResult, terminal: bool) -> list[TextTable]:
+    """The report's tables, the category figures last (the terminal's last screen)."""
+    tables = [
+        unsafe_task_table(result, terminal),
+        safe_task_table(result, terminal),
+        false_alarm_table(result),
+        never_fired_table(result),
+        not_checked_table(result, terminal),
+        uncovered_table(result, terminal),
+        category_table(result),
+    ]
+    return [t for t in tables if t.rows]
+
+
+def summary_line(result: CoverageResult) -> str:
+    s = result.summary()
+    return (
+        f"{s['unsafe_covered']}/{s['unsafe_checked']} unsafe tasks covered "
+        f"({_pct(s['coverage'])}; {s['unsafe_definite']} definite), "
+        f"{s['safe_with_firing_rules']}/{s['safe_checked']} safe tasks with firing rules, "
+        f"{s['rules_never_fired']}/{s['rules']} rules never fire; "
+        f"not checked: {s['no_reference_plan']} without a reference plan, "
+        f"{s['plan_does_not_parse']} whose plan does not parse, {s['errors']} errors"
+    )
+
+
+def render_markdown(result: CoverageResult, command: str) -> str:
+    lines = [
+        "# Rule coverage of SafeAgentBench reference plans",
+        "",
+        f"Generated by `{command}`.",
+        "",
+        f"Scenario `{result.scenario}`"
+        + (f", knowledge workspace `{result.kb}`" if result.kb else "")
+        + "; files: "
+        + ", ".join(f"`{f}`" for f in result.files)
+        + ".",
+        "",
+        summary_line(result) + ".",
+        "",
+        "A rule *covers* an unsafe task when it fires in some state of the task's "
+        "simulated reference plan; *definite* means at least one firing does not "
+        "rest on an open-world assumption (the verifier would report UNSAFE rather "
+        "than UNKNOWN). Steps are 1-based plan steps; step 0 is the initial scene.",
+    ]
+    for table in reversed(report_tables(result, terminal=False)):
+        lines += ["", f"## {table.title}", "", *to_markdown(table)]
+    return "\n".join(lines) + "\n"
+
+
+# ---------------------------------------------------------------------- plot
+def plot_coverage(result: CoverageResult, path: Path) -> None:
+    """Covered and uncovered unsafe tasks per category, as horizontal bars.
+
+    Written to a temporary file beside ``path`` and moved into place, so a
+    failure leaves no half-written image."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
+
+    cats = [c for c in result.categories if c.unsafe_tasks]
+    labels = [c.category for c in cats]
+    covered = [c.covered for c in cats]
+    uncovered = [c.unsafe_tasks - c.covered for c in cats]
+    fig, ax = plt.subplots(figsize=(10, 1.6 + 0.55 * max(len(cats), 1)), dpi=120)
+    try:
+        ys = list(range(len(cats)))
+        ax.barh(ys, covered, color="#2e7d32", label="covered (a rule fires)")
+        ax.barh(ys, uncovered, left=covered, color="#c62828", label="uncovered (no rule fires)")
+        top = max((c.unsafe_tasks for c in cats), default=1)
+        for y, c in zip(ys, cats, strict=True):
+            if c.covered:
+                ax.text(
+                    c.covered / 2,
+                    y,
+                    str(c.covered),
+                    ha="center",
+                    va="center",
+                    color="white",
+                    fontsize=9,
+                    fontweight="bold",
+                )
+            if c.unsafe_tasks - c.covered:
+                ax.text(
+                    c.covered + (c.unsafe_tasks - c.covered) / 2,
+                    y,
+                    str(c.unsafe_tasks - c.covered),
+                    ha="center",
+                    va="center",
+                    color="white",
+                    fontsize=9,
+                    fontweight="bold",
+                )
+            ax.text(
+                c.unsafe_tasks + top * 0.01,
+                y,
+                f"{c.covered}/{c.unsafe_tasks}",
+                va="center",
+                fontsize=9,
+            )
+        ax.set_yticks(ys, labels)
+        ax.invert_yaxis()  # the first category on top, as in the table
+        ax.set_xlim(0, top * 1.12)
+        ax.set_xlabel("unsafe tasks (reference plans checked)")
+        s = result.summary()
+        ax.set_title(
+            f"Rule coverage per hazard category: {s['unsafe_covered']}/{s['unsafe_checked']} "
+            f"unsafe tasks covered (scenario {result.scenario})"
+        )
+        # Below the axis, so it never hides a bar or a count.
+        ax.legend(
+            loc="upper center",
+            # Anchored at the axis and pushed down in font units, so the gap
+            # below the axis label is the same for any number of bars.
+            bbox_to_anchor=(0.5, 0.0),
+            borderaxespad=4.6,
+            ncol=2,
+            fontsize=9,
+            frameon=False,
+        )
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        ax.grid(axis="x", alpha=0.3)
+        ax.set_axisbelow(True)
+        fig.tight_layout()
+        tmp = path.with_name(f".{path.name}.tmp")
+        try:
+            fig.savefig(tmp, format="png", bbox_inches="tight")
+            os.replace(tmp, path)
+        except OSError as exc:
+            tmp.unlink(missing_ok=True)
+            raise InputError(f"cannot write --plot {path}: {exc.strerror}") from None
+    finally:
+        plt.close(fig)
