@@ -111,10 +111,10 @@ def _variant(name: str, vocab: Vocabulary, role: str) -> str | None:
                 found = vocab.canonical_property(found)
         return found
     candidates = [name]
-    if name.endswith("es"):
-        candidates.append(name[:-2])
-    if name.endswith("s"):
-        candidates.append(name[:-1])
+    # English plurals: knives, batteries, dishes, cups.
+    for plural, singular in (("ves", "fe"), ("ves", "f"), ("ies", "y"), ("es", ""), ("s", "")):
+        if name.endswith(plural):
+            candidates.append(name[: -len(plural)] + singular)
     for c in candidates:
         hit = vocab.canonical_class(c) if role == "class" else None
         if hit is None:

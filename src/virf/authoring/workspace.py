@@ -63,6 +63,11 @@ _USC_ANNOTATIONS: Final = (
     "source",
     "checkAt",
 )
+EDIT_LABELS: Final = {
+    "none": "accepted unedited",
+    "minor": "accepted after a minor edit",
+    "major": "accepted after a major edit",
+}
 _PREFIXES: Final = """Prefix: : <http://virf.dev/ontology#>
 Prefix: owl: <http://www.w3.org/2002/07/owl#>
 Prefix: rdf: <http://www.w3.org/1999/02/22-rdf-syntax-ns#>
@@ -153,7 +158,7 @@ class Workspace:
 
             raise unknown_term("scenario", scenario, scenario_names())
         if root.exists() and (not root.is_dir() or any(root.iterdir())):
-            what = "a workspace already" if (root / MARKER).exists() else "not an empty folder"
+            what = "already a workspace" if (root / MARKER).exists() else "not an empty folder"
             raise InputError(f"{clip(str(root))} is {what}; choose a new folder")
         created = not root.exists()
         try:
@@ -656,11 +661,7 @@ class Workspace:
             return _decision_view(record)
         final = axiom if axiom is not None else row.axiom
         edit = _edit_size(row.axiom, final)
-        label = {
-            "none": "accepted unedited",
-            "minor": "accepted after a minor edit",
-            "major": "accepted after a major edit",
-        }[edit]
+        label = EDIT_LABELS[edit]
         provenance = {
             "reviewer": reviewer,
             "decision": label + (f": {reason.strip()}" if reason and reason.strip() else ""),

@@ -364,6 +364,8 @@ def kb_decide(
     as_json: JsonOpt = False,
 ) -> None:
     """Accept (after re-checking) or reject a candidate; accepted axioms go into the workspace's modules."""
+    from virf.authoring.workspace import EDIT_LABELS
+
     ws = _open(workspace)
     result = ws.decide(
         candidate, decision, reviewer=_reviewer(reviewer), reason=reason, axiom=axiom
@@ -374,7 +376,7 @@ def kb_decide(
     if result.decision == "accept":
         layer = ws.rules()[-1].layer
         typer.echo(
-            f"candidate {candidate} accepted ({result.edit} edit) into the {layer} layer "
+            f"candidate {candidate} {EDIT_LABELS[result.edit]} into the {layer} layer "
             f"({ws.layout.module_path(layer)})"
         )
     else:
