@@ -232,7 +232,7 @@ def test_decisions_are_checked_final_and_rejected_rules_stay_out(
     before = {p: p.read_text() for p in ws.layout.modules()}
     with pytest.raises(InputError, match="needs a reason"):
         ws.decide(cid, "reject", reviewer="bob")
-    with pytest.raises(InputError, match="cannot be accepted: .*unsatisfiable"):
+    with pytest.raises(InputError, match=r"cannot be accepted: .*unsatisfiable"):
         ws.decide(cid, "accept", reviewer="bob", axiom="Candle and (hasMaterial some Cloth)")
     assert {p: p.read_text() for p in ws.layout.modules()} == before
     ws.decide(cid, "reject", reviewer="bob", reason="no evidence speaks of beds")
