@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from virf.errors import EnvironmentProblem, InputError
+from virf.migrations import check_migrations
 from virf.planner import (
     MIGRATIONS,
     Migration,
@@ -18,7 +19,6 @@ from virf.planner import (
     ScriptedApprentice,
     export_replay,
 )
-from virf.migrations import check_migrations
 
 MESSAGES = [{"role": "user", "content": "Slice the apple."}]
 

@@ -125,10 +125,10 @@ def kb_rules(
 
 def _register_workflow() -> None:
     # The authoring commands live in their own modules; they join this group here.
-    from virf.cli import kb_coverage, kb_review, kb_workflow
+    from virf.cli import kb_corpus, kb_coverage, kb_review, kb_workflow
 
     kb_workflow.register(kb_app)
-    # kb_corpus.register(kb_app)  TODO(lead): restore when kb_corpus lands
+    kb_corpus.register(kb_app)
     kb_review.register(kb_app)
     kb_coverage.register(kb_app)
 
