@@ -9,18 +9,16 @@ go through it, so the terminal and the review page behave the same.
 from __future__ import annotations
 
 import json
-import os
 import shutil
-import tempfile
 import threading
 from collections.abc import Sequence
-from datetime import UTC, datetime
+from datetime import datetime
 from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from virf.authoring import manchester
-from virf.authoring.drafts import Draft, DraftRule, read_draft, rule_json
+from virf.authoring.drafts import Draft, read_draft, rule_json
 from virf.authoring.models import (
     AcceptedRule,
     CandidateSummary,
@@ -38,6 +36,7 @@ from virf.authoring.models import (
 from virf.authoring.normalize import DEFAULT_THRESHOLD, VocabularyIndex, normalise
 from virf.authoring.store import DecisionRow, Store
 from virf.errors import InputError, clip, read_json_file
+from virf.files import write_atomically
 from virf.migrations import now
 from virf.ontology.tbox import TBox, load_tbox, ontology_dir, scenario_names
 from virf.ontology.workspace import FORMAT, LAYERS, MARKER, KbLayout, open_layout
@@ -114,17 +113,6 @@ def _module_header(layout: KbLayout, layer: str) -> str:
         _declarations(),
     ]
     return "\n".join(lines)
-
-
-def _write_atomically(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def starter_corpus_dir() -> Path:
@@ -242,13 +230,7 @@ class Workspace:
     def propose(self, path: Path, author: str, *, check: bool = True) -> list[int]:
         """A person's candidate rules, from a draft document."""
         draft = read_draft(read_json_file(path, "proposal"), f"proposal {path}")
-        ids = self._store_draft(
-            draft, query=None, drafter=f"person:{author}", kind="person", retrieved=[]
-        )
-        if check:
-            for cid in ids:
-                self.check(cid)
-        return ids
+        return self.propose_draft(draft, author, check=check)
 
     def propose_draft(self, draft: Draft, author: str, *, check: bool = True) -> list[int]:
         ids = self._store_draft(
@@ -616,7 +598,7 @@ class Workspace:
             raise InputError(f"candidate {cid} does not pass its checks: {failed.message}")
         self.cache_dir.mkdir(exist_ok=True)
         module = self.cache_dir / f"preview-{cid}.omn"
-        _write_atomically(module, self._candidate_module(report.module_text))
+        write_atomically(module, self._candidate_module(report.module_text))
         result = effect_preview(self, module, text, tasks=tasks, examples=examples)
         self.store.add_preview(cid, text, result.model_dump(mode="json"))
         return result
@@ -683,7 +665,7 @@ class Workspace:
         with self.store.transaction() as conn:
             self.store.add_decision(conn, record)
             self.store.add_event("decided", cid, actor=reviewer, detail=f"accept ({edit})")
-            _write_atomically(path, before.rstrip("\n") + "\n\n" + report.module_text)
+            write_atomically(path, before.rstrip("\n") + "\n\n" + report.module_text)
             try:
                 # The module as written must load: a block that parses on
                 # top of the workspace but not in its layer stays out.
@@ -691,7 +673,7 @@ class Workspace:
 
                 parses_with(self.scenario, tuple(str(p) for p in self.layout.modules()))
             except BaseException:
-                _write_atomically(path, before)
+                write_atomically(path, before)
                 raise
         return _decision_view(record)
 
@@ -826,6 +808,3 @@ def _decision_view(d: DecisionRow) -> DecisionView:
         decided_at=d.created_at,
         seconds=d.seconds,
     )
-
-
-_ = (UTC, DraftRule)

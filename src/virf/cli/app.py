@@ -91,9 +91,7 @@ KbOpt = Annotated[
 ]
 WorkspaceOpt = Annotated[
     Path,
-    typer.Option(
-        "--workspace", "-w", help="Knowledge workspace folder (made by 'virf kb init')."
-    ),
+    typer.Option("--workspace", "-w", help="Knowledge workspace folder (made by 'virf kb init')."),
 ]
 EngineOpt = Annotated[
     str,
@@ -192,3 +190,28 @@ def main() -> None:
         exit_code = getattr(ending, "exit_code", EXIT["ERROR"])
         sys.exit(exit_code if isinstance(exit_code, int) else EXIT["ERROR"])
     sys.exit(code if isinstance(code, int) else 0)
+
+
+def write_output(path: Path, text: str) -> None:
+    """A report file a command was asked to write, whole or not at all."""
+    from virf.files import write_atomically
+
+    try:
+        write_atomically(path, text)
+    except OSError as exc:
+        raise _fail(f"cannot write {printable(str(path))}: {exc.strerror}") from None
+
+
+def progress_bar(console: Any) -> Any:
+    """The progress bar of long runs, on stderr, only when it is a terminal."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    return Progress(
+        TextColumn("[progress.description]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+        transient=True,
+        disable=not console.is_terminal,
+    )

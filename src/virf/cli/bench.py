@@ -20,7 +20,8 @@ from virf.cli.app import (
     SeedOpt,
     TemperatureOpt,
     TopPOpt,
-    _fail,
+    progress_bar,
+    write_output,
 )
 from virf.errors import VirfError
 
@@ -83,7 +84,7 @@ def bench_safeagentbench(
         _check_writable(markdown)
     tutor = LogicTutor(engine=engine, explain=explain, kb=kb)
     err = Console(stderr=True)
-    with _progress(err) as progress:
+    with progress_bar(err) as progress:
         bar = progress.add_task("verifying tasks", total=len(tasks))
 
         def tick(result: object) -> None:
@@ -101,7 +102,7 @@ def bench_safeagentbench(
         # The command as typed, so the report says how to regenerate it.
         command = " ".join(["virf", *sys.argv[1:]])
         text = render_markdown(results, summary, corr, command, tutor.engine.name, explain)
-        _write_atomically(markdown, text)
+        write_output(markdown, text)
         err.print(f"wrote {markdown}")
 
 
@@ -194,7 +195,7 @@ def bench_latency(
     if markdown is not None:
         _check_writable(markdown)
     err = Console(stderr=True)
-    with _progress(err) as progress:
+    with progress_bar(err) as progress:
 
         def bar(label: str, total: int) -> Any:
             task = progress.add_task(label, total=total)
@@ -221,7 +222,7 @@ def bench_latency(
     if markdown:
         from virf.bench.latency import render_markdown
 
-        _write_atomically(markdown, render_markdown(figures, " ".join(["virf", *sys.argv[1:]])))
+        write_output(markdown, render_markdown(figures, " ".join(["virf", *sys.argv[1:]])))
         typer.echo(f"wrote {markdown}", err=True)
 
 
@@ -275,32 +276,6 @@ def _print_latency(fig: dict[str, Any]) -> None:
     # The containment-chain and deadline figures, as the Markdown report has them.
     for line in chain_markdown(fig):
         console.print(line, markup=False)
-
-
-def _write_atomically(path: Path, text: str) -> None:
-    """No half-written file on failure."""
-    tmp = path.with_name(path.name + ".tmp")
-    try:
-        tmp.write_text(text, encoding="utf-8")
-        tmp.replace(path)
-    except OSError as exc:
-        tmp.unlink(missing_ok=True)
-        raise _fail(f"cannot write {path}: {exc.strerror}") from None
-
-
-def _progress(console: Any) -> Any:
-    """The progress bar of long runs, on stderr, only when it is a terminal."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
-    return Progress(
-        TextColumn("[progress.description]{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=console,
-        transient=True,
-        disable=not console.is_terminal,
-    )
 
 
 def _check_writable(path: Path) -> None:
@@ -454,7 +429,7 @@ def bench_agents(
             judge.run_log = store
         harness = Harness(tutor, apprentice, store, critic=judge, answer=policy)
         stored = 0
-        with _progress(err) as progress:
+        with progress_bar(err) as progress:
             bar = progress.add_task("planning", total=len(methods) * len(task_list))
 
             def tick(row: Any, resumed: bool) -> None:

@@ -11,12 +11,11 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from virf.cli.app import WorkspaceOpt
+from virf.cli.app import WorkspaceOpt, progress_bar
 from virf.errors import printable
 
 if TYPE_CHECKING:
-    from rich.console import Console
-    from rich.progress import Progress, TaskID
+    from rich.progress import TaskID
 
     from virf.authoring.corpus import Corpus, Hit
 
@@ -115,7 +114,7 @@ def kb_search(
     from rich.console import Console
 
     err = Console(stderr=True)
-    with _corpus(workspace) as corpus, _progress(err) as bar:
+    with _corpus(workspace) as corpus, progress_bar(err) as bar:
         tasks: list[TaskID] = []
 
         def advance(done: int, total: int) -> None:
@@ -159,18 +158,3 @@ def _print_hit(hit: Hit) -> None:
     for line in textwrap.wrap(printable(hit.passage.text), width=96):
         typer.echo(f"   {line}")
     typer.echo("")
-
-
-def _progress(console: Console) -> Progress:
-    """The progress bar, on stderr, only when stderr is a terminal."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
-    return Progress(
-        TextColumn("[progress.description]{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=console,
-        transient=True,
-        disable=not console.is_terminal,
-    )

@@ -11,13 +11,10 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from virf.cli.app import KbOpt, ScenarioOpt
+from virf.cli.app import KbOpt, ScenarioOpt, progress_bar, write_output
 from virf.errors import InputError, clip
 
 if TYPE_CHECKING:
-    from rich.console import Console
-    from rich.progress import Progress
-
     from virf.api import LogicTutor
 
 
@@ -75,7 +72,7 @@ def kb_coverage(
     started = time.perf_counter()
     tutor = _tutor(scenario, kb)
     err = Console(stderr=True)
-    with _progress(err) as progress:
+    with progress_bar(err) as progress:
         bar = progress.add_task("checking reference plans", total=len(tasks))
         result = compute_coverage(
             tutor,
@@ -94,7 +91,7 @@ def kb_coverage(
     if markdown is not None:
         # The command as typed, so the page says how to regenerate it.
         command = " ".join(["virf", *sys.argv[1:]])
-        _write_atomically(markdown, render_markdown(result, command))
+        write_output(markdown, render_markdown(result, command))
         err.print(f"wrote {markdown}", markup=False, highlight=False)
     if plot is not None:
         plot_coverage(result, plot)
@@ -121,29 +118,3 @@ def _check_output(option: str, path: Path) -> None:
         raise InputError(
             f"{option} {clip(str(path))}: folder {clip(str(path.parent))} is not writable"
         )
-
-
-def _write_atomically(path: Path, text: str) -> None:
-    """No half-written file on failure."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    try:
-        tmp.write_text(text, encoding="utf-8")
-        tmp.replace(path)
-    except OSError as exc:
-        tmp.unlink(missing_ok=True)
-        raise InputError(f"cannot write {clip(str(path))}: {exc.strerror}") from None
-
-
-def _progress(console: Console) -> Progress:
-    """The progress bar, on stderr, only when stderr is a terminal."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
-    return Progress(
-        TextColumn("[progress.description]{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=console,
-        transient=True,
-        disable=not console.is_terminal,
-    )

@@ -55,9 +55,7 @@ def verify(
     # The options and the plan are checked before the knowledge base loads.
     check_timeout(timeout, "--timeout")
     steps = load_plan_file(plan)
-    tutor = LogicTutor(
-        scenario=scenario, engine=engine, timeout_s=timeout, workers=workers, kb=kb
-    )
+    tutor = LogicTutor(scenario=scenario, engine=engine, timeout_s=timeout, workers=workers, kb=kb)
     sc = load_scene_file(scene, tutor.tbox.vocabulary)
     report = tutor.verifier.verify(sc, steps)
     if as_json:

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from virf.errors import InputError, closest, unknown_term
+from virf.files import write_atomically
 from virf.names import term_key
 
 if TYPE_CHECKING:  # the Java bridge and the compiler load only when used
@@ -285,7 +286,9 @@ def _files_digest(paths: tuple[str, ...]) -> str:
 
 
 @cache
-def _load(scenario: str, extras: tuple[str, ...], extras_digest: str, cache_dir: str | None) -> TBox:
+def _load(
+    scenario: str, extras: tuple[str, ...], extras_digest: str, cache_dir: str | None
+) -> TBox:
     from virf.ontology.compile import artifact_path, compile_kb, from_json, source_digest, to_json
 
     digest = source_digest()
@@ -309,21 +312,9 @@ def _load(scenario: str, extras: tuple[str, ...], extras_digest: str, cache_dir:
     tbox = TBox(compile_kb(owl, digest), owl)
     tbox.extra_modules = extras
     if extras and artifact is not None:
-        _write_atomically(artifact, to_json(tbox.compiled))
+        try:
+            artifact.parent.mkdir(parents=True, exist_ok=True)
+            write_atomically(artifact, to_json(tbox.compiled))
+        except OSError:
+            pass  # a cache: failing to write it only costs the next load a compile
     return tbox
-
-
-def _write_atomically(path: Path, text: str) -> None:
-    """A cache write that a crash cannot leave half done; a failure only costs
-    the next load a compile."""
-    import os
-    import tempfile
-
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except OSError:
-        return
