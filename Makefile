@@ -22,6 +22,16 @@ demo: $(STAMP)
 	  --planner replay:examples/dialogue/replay.jsonl --task-id demo-fridge
 	$(BIN)/virf bench agents --method impulsive,virf --planner replay:examples/agents/replay.jsonl \
 	  --tasks examples/agents/tasks.jsonl --out runs/agents-demo
+	# Knowledge acquisition offline: a recorded LLM draft from the starter corpus,
+	# checked, accepted, and then used to verify a plan (UNSAFE, exit 1, is the point).
+	rm -rf runs/kb-demo
+	$(BIN)/virf kb init runs/kb-demo
+	$(BIN)/virf kb draft -w runs/kb-demo --query "candles near curtains and bedding" \
+	  --drafter replay:examples/knowledge-acquisition/drafts.jsonl --k 3
+	$(BIN)/virf kb decide 1 accept -w runs/kb-demo --reviewer demo
+	$(BIN)/virf verify examples/knowledge-acquisition/candle/scene.json \
+	  examples/knowledge-acquisition/candle/plan.txt --kb runs/kb-demo || test $$? -eq 1
+	$(BIN)/virf kb audit -w runs/kb-demo
 
 test: $(STAMP) chromium
 	$(BIN)/ruff check src tests
