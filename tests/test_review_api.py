@@ -1,0 +1,596 @@
+"""The review server's JSON API, against an in-memory stand-in for the
+workspace (fast: no Java, no store).  The browser test drives the real
+workspace; these pin the HTTP contract: status codes, one-line errors,
+which workspace call each request makes, and the local-only guards."""
+
+from __future__ import annotations
+
+import re
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pytest
+from fastapi.testclient import TestClient
+
+from virf.authoring.models import (
+    AcceptedRule,
+    CandidateSummary,
+    CandidateView,
+    CheckItem,
+    CheckReport,
+    Decision,
+    DecisionView,
+    Evidence,
+    Preview,
+    PreviewChange,
+    Related,
+    RuleDraft,
+    Status,
+    TermChoice,
+)
+from virf.authoring.review import STATIC_DIR, ReviewWorkspace, create_app
+from virf.errors import EnvironmentProblem, InputError
+
+NOW = "2025-01-02T03:04:05+00:00"
+DRAFT = "StoveBurner and (hasState some OnState) and (supports some PaperTowel)"
+
+
+@dataclass
+class FakeCandidate:
+    id: int
+    name: str
+    axiom: str
+    status: Status = "pending"
+    evidence: tuple[Evidence, ...] = ()
+    check: CheckReport | None = None
+    decision: DecisionView | None = None
+
+
+@dataclass
+class FakeWorkspace:
+    """The review API of ``Workspace`` over a dict; records what it was asked.
+
+    An axiom containing ``Broken`` fails its checks; one containing ``NoJava``
+    raises the error a missing Java runtime raises."""
+
+    items: dict[int, FakeCandidate] = field(default_factory=dict)
+    calls: list[tuple[Any, ...]] = field(default_factory=list)
+
+    def add(self, name: str, axiom: str = DRAFT, **kw: Any) -> FakeCandidate:
+        cid = len(self.items) + 1
+        self.items[cid] = FakeCandidate(cid, name, axiom, **kw)
+        return self.items[cid]
+
+    def _get(self, cid: int) -> FakeCandidate:
+        if cid not in self.items:
+            raise InputError(f"no candidate {cid}; the workspace has 1-{len(self.items)}")
+        return self.items[cid]
+
+    def _summary(self, c: FakeCandidate) -> CandidateSummary:
+        return CandidateSummary(
+            id=c.id,
+            name=c.name,
+            category="fire",
+            drafter="person:ana",
+            query="paper towel near a burner",
+            created_at=NOW,
+            status=c.status,
+            passed=None if c.check is None else c.check.passed,
+        )
+
+    def candidates(self, status: Status | None = None) -> list[CandidateSummary]:
+        self.calls.append(("candidates", status))
+        return [self._summary(c) for c in self.items.values() if status in (None, c.status)]
+
+    def candidate(self, cid: int) -> CandidateView:
+        c = self._get(cid)
+        return CandidateView(
+            summary=self._summary(c),
+            rule=RuleDraft(
+                name=c.name,
+                definition=c.axiom,
+                kind="state",
+                category="fire",
+                danger_level="high",
+                description="A paper towel on a lit burner can catch fire.",
+                safety_warning="Keep paper and cloth away from a lit burner.",
+                trigger_reason="A paper towel lies on a burner that is on.",
+                suggestion="Move the paper towel away before turning the burner on.",
+                check_at="any",
+            ),
+            evidence=c.evidence,
+            retrieved=tuple(e.passage_id for e in c.evidence),
+            draft={"name": c.name},
+            check=c.check,
+            preview=None,
+            decision=c.decision,
+        )
+
+    def opened(self, cid: int, reviewer: str) -> None:
+        self._get(cid)
+        self.calls.append(("opened", cid, reviewer))
+
+    def recheck(self, cid: int, axiom: str) -> CheckReport:
+        c = self._get(cid)
+        self.calls.append(("recheck", cid, axiom))
+        if "NoJava" in axiom:
+            raise EnvironmentProblem("Java is not installed; install a Java 11+ runtime")
+        c.check = report(axiom)
+        return c.check
+
+    def preview(self, cid: int, axiom: str | None = None, tasks: Path | None = None) -> Preview:
+        c = self._get(cid)
+        self.calls.append(("preview", cid, axiom))
+        return Preview(
+            axiom=axiom or c.axiom,
+            examples=3,
+            tasks=0,
+            tasks_file=None,
+            changes=(
+                PreviewChange(
+                    item="example walkthrough",
+                    instruction="heat the pan",
+                    before="SAFE",
+                    after="UNSAFE",
+                    concept=c.name,
+                ),
+            ),
+            computed_at=NOW,
+        )
+
+    def decide(
+        self,
+        cid: int,
+        decision: Decision,
+        *,
+        reviewer: str,
+        reason: str | None = None,
+        axiom: str | None = None,
+    ) -> DecisionView:
+        c = self._get(cid)
+        self.calls.append(("decide", cid, decision, reviewer, reason, axiom))
+        if c.status != "pending":
+            raise InputError(f"candidate {cid} was already decided")
+        if decision == "reject" and not reason:
+            raise InputError("rejecting needs a reason")
+        if decision == "accept":
+            checked = report(axiom or c.axiom)
+            if not checked.passed:
+                raise InputError(f"cannot accept candidate {cid}: {checked.items[-1].message}")
+        c.status = "accepted" if decision == "accept" else "rejected"
+        if axiom is not None:
+            c.axiom = axiom
+        c.decision = DecisionView(
+            decision=decision,
+            edit="minor" if axiom is not None else "none",
+            axiom=axiom or c.axiom,
+            reason=reason,
+            reviewer=reviewer,
+            decided_at=NOW,
+            seconds=12.5,
+        )
+        return c.decision
+
+    def rules(self) -> list[AcceptedRule]:
+        return [
+            AcceptedRule(
+                id=f"KB-{c.id}",
+                name=c.name,
+                layer="scenario",
+                axiom=c.axiom,
+                category="fire",
+                evidence=tuple(e.passage_id for e in c.evidence),
+                drafter="person:ana",
+                reviewer=c.decision.reviewer,
+                edit=c.decision.edit,
+                decided_at=NOW,
+                candidate_id=c.id,
+            )
+            for c in self.items.values()
+            if c.status == "accepted" and c.decision is not None
+        ]
+
+
+def report(axiom: str) -> CheckReport:
+    broken = "Broken" in axiom
+    return CheckReport(
+        axiom=axiom,
+        normalised=axiom.replace("PaperTowel", "Towel"),
+        passed=not broken,
+        layer="scenario",
+        threshold=0.8,
+        terms=(
+            TermChoice(
+                term="PaperTowel",
+                role="class",
+                match="similar",
+                chosen="Towel",
+                score=0.86,
+                alternatives=(("Towel", 0.86), ("Paper", 0.71)),
+            ),
+            TermChoice(
+                term="Kindling",
+                role="class",
+                match="new",
+                chosen="Kindling",
+                parent="FlammableObject",
+                layer="domain",
+            ),
+        ),
+        items=(
+            CheckItem(name="syntax", ok=True, severity="error", message="parsed"),
+            CheckItem(
+                name="satisfiable",
+                ok=not broken,
+                severity="error",
+                message="" if not broken else "the concept is unsatisfiable",
+            ),
+        ),
+        related=Related(subsumed_by=("FlammableOnLitBurnerDanger",)),
+        module_text=f"Class: PaperTowelOnBurnerDanger\n    EquivalentTo: {axiom}",
+        checked_at=NOW,
+    )
+
+
+def found(pid: str) -> Evidence:
+    return Evidence(
+        passage_id=pid,
+        found=True,
+        document_id="nfpa-cooking-safety",
+        document_title="Cooking safety",
+        publisher="NFPA",
+        section="Keep it clear",
+        text="Keep anything that can catch fire away from the stovetop.",
+    )
+
+
+def sample_workspace() -> FakeWorkspace:
+    ws = FakeWorkspace()
+    ws.add("PaperTowelOnBurnerDanger", evidence=(found("nfpa-cooking-safety#3"),))
+    ws.add(
+        "CurtainNearBurnerDanger",
+        evidence=(found("nfpa-cooking-safety#4"), Evidence(passage_id="gone#1", found=False)),
+    )
+    done = ws.add("KnifeOnFloorDanger", status="rejected")
+    done.decision = DecisionView(
+        decision="reject",
+        edit="none",
+        axiom=None,
+        reason="duplicate of an existing rule",
+        reviewer="bo",
+        decided_at=NOW,
+        seconds=3.0,
+    )
+    return ws
+
+
+@pytest.fixture
+def ws() -> FakeWorkspace:
+    return sample_workspace()
+
+
+@pytest.fixture
+def client(ws: FakeWorkspace) -> TestClient:
+    fake: ReviewWorkspace = ws  # the fake must satisfy the protocol the app takes
+    return TestClient(create_app(fake, "ana"), base_url="http://127.0.0.1")
+
+
+def one_line_error(response: Any, status: int) -> str:
+    assert response.status_code == status, response.text
+    body = response.json()
+    assert set(body) == {"detail"}, body
+    detail = body["detail"]
+    assert isinstance(detail, str) and detail and "\n" not in detail
+    return detail
+
+
+# -- the page ------------------------------------------------------------------
+
+
+def test_the_page_and_its_assets_are_served_locally(client: TestClient) -> None:
+    page = client.get("/")
+    assert page.status_code == 200
+    assert page.headers["content-type"].startswith("text/html")
+    assert "default-src 'self'" in page.headers["content-security-policy"]
+    assert 'id="queue"' in page.text
+    for asset in ("/static/review.js", "/static/review.css"):
+        assert asset in page.text
+        assert client.get(asset).status_code == 200
+
+
+def test_the_page_loads_nothing_from_the_internet() -> None:
+    # The review page must work offline: no CDN script, font or style.
+    for path in STATIC_DIR.iterdir():
+        text = path.read_text(encoding="utf-8")
+        loads = re.findall(r"(?:src|href)\s*=\s*[\"'](https?:)?//", text) + re.findall(
+            r"@import|url\(\s*[\"']?https?:", text
+        )
+        assert not loads, f"{path.name} loads from outside: {loads}"
+
+
+# -- the queue and a candidate ------------------------------------------------
+
+
+def test_queue_defaults_to_pending_and_filters(client: TestClient) -> None:
+    pending = client.get("/api/candidates").json()
+    assert [(c["id"], c["status"]) for c in pending] == [(1, "pending"), (2, "pending")]
+    everything = client.get("/api/candidates?status=all").json()
+    assert [c["status"] for c in everything] == ["pending", "pending", "rejected"]
+    assert [c["id"] for c in client.get("/api/candidates?status=rejected").json()] == [3]
+
+
+def test_an_unknown_status_filter_names_the_choices(client: TestClient) -> None:
+    detail = one_line_error(client.get("/api/candidates?status=pendign"), 400)
+    assert "pendign" in detail and "pending, accepted, rejected, all" in detail
+
+
+def test_opening_a_pending_candidate_records_the_reviewer(
+    client: TestClient, ws: FakeWorkspace
+) -> None:
+    view = client.get("/api/candidates/2").json()
+    assert view["rule"]["name"] == "CurtainNearBurnerDanger"
+    assert [e["found"] for e in view["evidence"]] == [True, False]
+    assert ("opened", 2, "ana") in ws.calls
+    # A decided candidate is only looked at: no review time starts.
+    client.get("/api/candidates/3")
+    assert ("opened", 3, "ana") not in ws.calls
+
+
+def test_an_unknown_candidate_is_404_in_the_workspace_words(client: TestClient) -> None:
+    assert one_line_error(client.get("/api/candidates/42"), 404) == (
+        "no candidate 42; the workspace has 1-3"
+    )
+    one_line_error(client.post("/api/candidates/42/check", json={"axiom": DRAFT}), 404)
+    one_line_error(client.post("/api/candidates/42/decision", json={"decision": "accept"}), 404)
+
+
+def test_a_candidate_id_must_be_a_number(client: TestClient) -> None:
+    detail = one_line_error(client.get("/api/candidates/abc"), 400)
+    assert "'abc'" in detail
+    # Too large for the store's integers: still just an unknown candidate.
+    one_line_error(client.get(f"/api/candidates/{2**70}"), 404)
+
+
+def test_an_unknown_endpoint_is_a_json_404(client: TestClient) -> None:
+    assert "/api/candidatez" in one_line_error(client.get("/api/candidatez"), 404)
+
+
+# -- checks and previews ------------------------------------------------------
+
+
+def test_check_runs_the_edited_axiom(client: TestClient, ws: FakeWorkspace) -> None:
+    edited = DRAFT.replace("PaperTowel", "Napkin")
+    body = client.post("/api/candidates/1/check", json={"axiom": edited})
+    assert body.status_code == 200
+    got = body.json()
+    assert got["axiom"] == edited and got["passed"] is True
+    assert got["terms"][0]["alternatives"] == [["Towel", 0.86], ["Paper", 0.71]]
+    assert ws.calls[-1] == ("recheck", 1, edited)
+
+
+@pytest.mark.parametrize(
+    ("body", "words"),
+    [
+        ({"axiom": DRAFT, "axoim": "x"}, "unknown key 'axoim'"),
+        ({}, "the request body needs 'axiom'"),
+        ({"axiom": "x" * 4_001}, "'axiom' is longer than 4000 characters"),
+        ({"axiom": 3}, "'axiom' must be Manchester-syntax text"),
+        ({"axiom": ""}, "'axiom' must not be empty"),
+        ([DRAFT], "must be a JSON object"),
+    ],
+)
+def test_a_bad_check_body_is_one_line(client: TestClient, body: object, words: str) -> None:
+    detail = one_line_error(client.post("/api/candidates/1/check", json=body), 400)
+    assert words in detail
+
+
+def test_a_body_that_is_not_json_is_refused(client: TestClient) -> None:
+    bad = client.post(
+        "/api/candidates/1/check",
+        content=b"{axiom: nope",
+        headers={"Content-Type": "application/json"},
+    )
+    assert one_line_error(bad, 400) == "the request body is not valid JSON"
+    # A form post (what another site's page could send) is not JSON.
+    form = client.post("/api/candidates/1/check", data={"axiom": DRAFT})
+    assert "must be JSON" in one_line_error(form, 400)
+
+
+def test_a_missing_java_is_503(client: TestClient) -> None:
+    detail = one_line_error(
+        client.post("/api/candidates/1/check", json={"axiom": "NoJava and Thing"}), 503
+    )
+    assert detail.startswith("Java is not installed")
+
+
+def test_preview_passes_the_edited_axiom_or_none(client: TestClient, ws: FakeWorkspace) -> None:
+    got = client.post("/api/candidates/1/preview", json={"axiom": None}).json()
+    assert got["changes"][0]["after"] == "UNSAFE"
+    client.post("/api/candidates/1/preview", json={"axiom": "Edited"})
+    previews = [call for call in ws.calls if call[0] == "preview"]
+    assert previews == [("preview", 1, None), ("preview", 1, "Edited")]
+
+
+# -- decisions ----------------------------------------------------------------
+
+
+def test_accept_records_the_reviewer_and_lists_the_rule(
+    client: TestClient, ws: FakeWorkspace
+) -> None:
+    got = client.post("/api/candidates/1/decision", json={"decision": "accept"})
+    assert got.status_code == 200, got.text
+    assert got.json()["reviewer"] == "ana" and got.json()["decision"] == "accept"
+    assert ws.calls[-1] == ("decide", 1, "accept", "ana", None, None)
+    assert [r["name"] for r in client.get("/api/rules").json()] == ["PaperTowelOnBurnerDanger"]
+    assert [c["id"] for c in client.get("/api/candidates").json()] == [2]
+
+
+def test_accept_edited_sends_the_axiom(client: TestClient, ws: FakeWorkspace) -> None:
+    edited = DRAFT.replace("PaperTowel", "Napkin")
+    got = client.post(
+        "/api/candidates/1/decision", json={"decision": "accept", "reason": None, "axiom": edited}
+    )
+    assert got.json()["edit"] == "minor"
+    assert ws.calls[-1] == ("decide", 1, "accept", "ana", None, edited)
+
+
+def test_a_decided_candidate_is_a_conflict(client: TestClient, ws: FakeWorkspace) -> None:
+    detail = one_line_error(
+        client.post("/api/candidates/3/decision", json={"decision": "accept"}), 409
+    )
+    assert "already rejected" in detail
+    assert not any(call[0] == "decide" for call in ws.calls)
+
+
+def test_deciding_in_a_race_is_a_conflict(client: TestClient, ws: FakeWorkspace) -> None:
+    # Another reviewer decides between this server's look-up and its call.
+    real = ws.decide
+
+    def late(cid: int, decision: Decision, **kw: Any) -> DecisionView:
+        ws.items[cid].status = "accepted"
+        return real(cid, decision, **kw)
+
+    ws.decide = late  # type: ignore[method-assign]
+    one_line_error(client.post("/api/candidates/1/decision", json={"decision": "accept"}), 409)
+
+
+def test_reject_needs_a_reason(client: TestClient, ws: FakeWorkspace) -> None:
+    for reason in (None, "", "   "):
+        detail = one_line_error(
+            client.post(
+                "/api/candidates/1/decision", json={"decision": "reject", "reason": reason}
+            ),
+            400,
+        )
+        assert "reason" in detail
+    ok = client.post(
+        "/api/candidates/1/decision", json={"decision": "reject", "reason": " not a hazard "}
+    )
+    assert ok.status_code == 200 and ok.json()["reason"] == "not a hazard"
+
+
+def test_a_failing_check_refuses_the_accept_in_the_workspace_words(client: TestClient) -> None:
+    detail = one_line_error(
+        client.post(
+            "/api/candidates/1/decision", json={"decision": "accept", "axiom": "Broken and Thing"}
+        ),
+        400,
+    )
+    assert detail == "cannot accept candidate 1: the concept is unsatisfiable"
+
+
+def test_an_unknown_decision_names_the_choices(client: TestClient) -> None:
+    detail = one_line_error(
+        client.post("/api/candidates/1/decision", json={"decision": "maybe"}), 400
+    )
+    assert detail == "'decision' must be 'accept' or 'reject', not \"maybe\""
+
+
+# -- local only ---------------------------------------------------------------
+
+
+def test_a_foreign_host_is_refused(client: TestClient) -> None:
+    # DNS rebinding: a page on evil.example resolved to 127.0.0.1.
+    got = client.get("/api/candidates", headers={"Host": "evil.example:8765"})
+    assert "127.0.0.1" in one_line_error(got, 403)
+    assert client.get("/api/candidates", headers={"Host": "localhost:8765"}).status_code == 200
+
+
+def test_a_post_from_another_site_is_refused(client: TestClient, ws: FakeWorkspace) -> None:
+    got = client.post(
+        "/api/candidates/1/decision",
+        json={"decision": "accept"},
+        headers={"Origin": "https://evil.example"},
+    )
+    assert "evil.example" in one_line_error(got, 403)
+    assert not any(call[0] == "decide" for call in ws.calls)
+    same = client.post(
+        "/api/candidates/1/check",
+        json={"axiom": DRAFT},
+        headers={"Origin": "http://127.0.0.1:8765"},
+    )
+    assert same.status_code == 200
+
+
+def test_an_empty_reviewer_name_is_refused(ws: FakeWorkspace) -> None:
+    with pytest.raises(InputError, match="reviewer"):
+        create_app(ws, "  ")
+
+
+# -- the command ----------------------------------------------------------------
+
+
+def test_review_needs_a_workspace(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from virf.cli.main import app
+
+    got = CliRunner().invoke(app, ["kb", "review", "--workspace", str(tmp_path / "none")])
+    assert got.exit_code == 2
+    assert "virf kb init" in got.output
+    assert "Traceback" not in got.output
+
+
+def test_review_serves_until_ctrl_c(tmp_path: Path) -> None:
+    """The real command in its own process: it prints its address, answers,
+    and stops cleanly (exit 0, no traceback) on SIGINT, with Java started
+    (whose own Ctrl-C handler would end the process with 130)."""
+    import json
+    import signal
+    import subprocess
+    import sys
+    import urllib.request
+
+    from virf.authoring.workspace import Workspace
+
+    Workspace.init(tmp_path / "kb", starter=False).close()
+    cmd = [sys.executable, "-m", "virf.cli.main", "kb", "review", "-w", str(tmp_path / "kb")]
+    proc = subprocess.Popen(
+        [*cmd, "--port", "0", "--reviewer", "ana"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    # A server that never prints its address must not hang the suite.
+    watchdog = threading.Timer(60, proc.kill)
+    watchdog.start()
+    try:
+        assert proc.stdout is not None
+        # A warning (no Java) may come first; the address is on its own line.
+        line = proc.stdout.readline()
+        if line.startswith("warning:"):
+            line = proc.stdout.readline()
+        found = re.search(r"http://127\.0\.0\.1:(\d+)/", line)
+        assert found, f"no address in {line!r}; stderr: {proc.stderr.read() if proc.stderr else ''}"
+        assert "ana" in line
+        with urllib.request.urlopen(f"{found.group(0)}api/candidates?status=all") as answer:
+            assert json.load(answer) == []
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        watchdog.cancel()
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0, err
+    assert "stopped" in out
+    assert "Traceback" not in err
+
+
+def test_an_empty_real_workspace(tmp_path: Path) -> None:
+    # The real store, without Java: an empty queue, and ids it has not got,
+    # including one too large for SQLite's integers, are plain 404s.
+    from virf.authoring.workspace import Workspace
+
+    ws = Workspace.init(tmp_path / "kb", starter=False)
+    try:
+        client = TestClient(create_app(ws, "ana"), base_url="http://127.0.0.1")
+        assert client.get("/api/candidates?status=all").json() == []
+        assert client.get("/api/rules").json() == []
+        assert "no candidate 1" in one_line_error(client.get("/api/candidates/1"), 404)
+        one_line_error(client.get(f"/api/candidates/{2**70}"), 404)
+        one_line_error(client.post("/api/candidates/1/check", json={"axiom": DRAFT}), 404)
+    finally:
+        ws.close()

@@ -1,0 +1,251 @@
+"""The review page in a real headless Chromium (Debian's, driven by Playwright).
+
+One test walks the page over the in-memory workspace of the API tests (the
+page's own behaviour: evidence flags, stale checks, refusals, the banner);
+the other drives the real workspace end to end, from a person's proposal to
+the rule listed by ``virf kb rules --kb DIR``."""
+
+from __future__ import annotations
+
+import importlib.util
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import pytest
+
+from virf.authoring.review import ReviewWorkspace, bind, create_app, url_of
+
+if TYPE_CHECKING:
+    from playwright.sync_api import Browser, Page
+
+CHROMIUM = Path("/usr/bin/chromium")
+SHOTS = Path("/tmp/virf-review-screens")
+
+pytestmark = [
+    pytest.mark.skipif(
+        not CHROMIUM.is_file(),
+        reason="Chromium is not installed at /usr/bin/chromium (apt-get install chromium)",
+    ),
+    pytest.mark.skipif(
+        importlib.util.find_spec("playwright") is None,
+        reason="Playwright for Python is not installed (pip install playwright)",
+    ),
+]
+
+# Seconds the page may take for one step; a check against the real workspace
+# starts Java, the first one in a process takes the longest.
+STEP_MS = 60_000
+
+
+@contextmanager
+def serving(workspace: ReviewWorkspace, reviewer: str) -> Iterator[str]:
+    """The review server on a free loopback port, in a thread; yields its address."""
+    import uvicorn
+
+    sock = bind("127.0.0.1", 0)
+    url = url_of(sock)
+    config = uvicorn.Config(create_app(workspace, reviewer), log_level="warning", lifespan="off")
+    server = uvicorn.Server(config)
+    thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
+    thread.start()
+    try:
+        for _ in range(500):
+            if server.started or not thread.is_alive():
+                break
+            threading.Event().wait(0.01)
+        assert server.started, "the review server did not start"
+        yield url
+    finally:
+        server.should_exit = True
+        thread.join(timeout=10)
+        sock.close()
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Browser]:
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as pw:
+        chromium = pw.chromium.launch(
+            executable_path=str(CHROMIUM),
+            args=[
+                "--headless=new",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--disable-background-networking",
+                "--disable-component-update",
+                "--disable-sync",
+                "--no-first-run",
+            ],
+        )
+        try:
+            yield chromium
+        finally:
+            chromium.close()
+
+
+@contextmanager
+def page_at(browser: Browser, url: str) -> Iterator[Page]:
+    context = browser.new_context(viewport={"width": 1280, "height": 900})
+    page = context.new_page()
+    page.set_default_timeout(STEP_MS)
+    # A script error in the page fails the test, not only a missing element.
+    errors: list[str] = []
+    page.on("pageerror", lambda exc: errors.append(str(exc)))
+    try:
+        page.goto(url)
+        page.wait_for_selector("body[data-ready=true]")
+        yield page
+        assert not errors, f"script errors on the page: {errors}"
+    finally:
+        context.close()
+
+
+def shot(page: Page, name: str) -> Path:
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    path = SHOTS / f"{name}.png"
+    page.screenshot(path=str(path), full_page=True)
+    return path
+
+
+def test_the_page_over_a_stand_in_workspace(browser: Browser) -> None:
+    from playwright.sync_api import expect
+    from test_review_api import sample_workspace
+
+    ws = sample_workspace()
+    with serving(ws, "ana") as url, page_at(browser, url) as page:
+        queue = page.get_by_test_id("queue")
+        # Pending only by default; the first is opened.
+        expect(queue.locator(".queue-item")).to_have_count(2)
+        expect(page.get_by_test_id("rule-name")).to_have_text("PaperTowelOnBurnerDanger")
+        expect(page.get_by_test_id("rule-safety-warning")).to_contain_text("Keep paper")
+
+        # "all" shows the rejected one too, after the pending ones.
+        page.get_by_test_id("filter-all").check()
+        expect(queue.locator(".queue-item")).to_have_count(3)
+        assert queue.locator(".queue-item").last.get_attribute("data-status") == "rejected"
+
+        # Keyboard: down from the first opens the second, whose second passage is gone.
+        page.get_by_test_id("queue-item-1").focus()
+        page.keyboard.press("ArrowDown")
+        expect(page.get_by_test_id("rule-name")).to_have_text("CurtainNearBurnerDanger")
+        missing = page.get_by_test_id("evidence-missing")
+        expect(missing).to_contain_text("gone#1")
+        expect(missing).to_have_css("color", "rgb(179, 38, 30)")
+        expect(page.get_by_test_id("evidence-item")).to_contain_text("Keep anything")
+        assert ("opened", 2, "ana") in ws.calls
+
+        # An edit that fails its check: the result shows, and accepting it is off.
+        axiom = page.get_by_test_id("axiom")
+        axiom.fill("Broken and (supports some Curtain)")
+        expect(page.get_by_test_id("check-summary")).to_have_class("check-summary stale")
+        page.get_by_test_id("check").click()
+        expect(page.get_by_test_id("check-summary")).to_contain_text("A check failed")
+        expect(page.locator("[data-testid=check-item][data-ok=false]")).to_contain_text(
+            "unsatisfiable"
+        )
+        expect(page.get_by_test_id("related")).to_contain_text("FlammableOnLitBurnerDanger")
+        expect(page.get_by_test_id("terms").locator("tbody tr")).to_have_count(2)
+        expect(page.get_by_test_id("terms")).to_contain_text("FlammableObject / domain")
+        expect(page.get_by_test_id("accept-edited")).to_be_disabled()
+
+        # The effect preview lists the changed verdicts.
+        page.get_by_test_id("preview").click()
+        expect(page.get_by_test_id("preview-change")).to_contain_text("SAFE → UNSAFE")
+        assert ws.calls[-1] == ("preview", 2, "Broken and (supports some Curtain)")
+
+        # Rejecting without a reason is refused on the page, with the API untouched.
+        page.get_by_test_id("reject").click()
+        expect(page.get_by_test_id("error-banner")).to_be_visible()
+        expect(page.get_by_test_id("error-text")).to_contain_text("needs a reason")
+        assert not any(call[0] == "decide" for call in ws.calls)
+
+        page.get_by_test_id("reason").fill("curtains are covered by the general rule")
+        page.get_by_test_id("reject").click()
+        expect(page.get_by_test_id("decision-text")).to_contain_text("Rejected by ana")
+        expect(page.get_by_test_id("error-banner")).to_be_hidden()
+        expect(page.get_by_test_id("queue-item-2")).to_have_attribute("data-status", "rejected")
+        expect(page.get_by_test_id("decide")).to_be_hidden()
+        shot(page, "stand-in-after-reject")
+
+        # An API error reaches the banner: the server's one line, verbatim.
+        page.get_by_test_id("queue-item-1").click()
+        expect(page.get_by_test_id("rule-name")).to_have_text("PaperTowelOnBurnerDanger")
+        axiom.fill("NoJava and Thing")
+        page.get_by_test_id("check").click()
+        expect(page.get_by_test_id("error-text")).to_have_text(
+            "Java is not installed; install a Java 11+ runtime"
+        )
+
+
+PASSAGE = "nfpa-cooking-safety:around-the-stove-flammables-clothing-and-children:1"
+DRAFTED = "StoveBurner and (hasState some OnState) and (supports some Towl)"
+EDITED = "StoveBurner and (hasState some OnState) and (supports some Towel)"
+
+
+def test_review_over_the_real_workspace(browser: Browser, tmp_path: Path) -> None:
+    """A person's proposal, opened, edited, checked and accepted on the page,
+    ends up among the rules ``virf kb rules --kb DIR`` lists."""
+    import json
+
+    from playwright.sync_api import expect
+    from typer.testing import CliRunner
+
+    from virf.authoring.workspace import Workspace
+    from virf.cli.main import app
+
+    root = tmp_path / "kb"
+    ws = Workspace.init(root)
+    proposal = tmp_path / "proposal.json"
+    rule = {
+        "equivalentClass": "TowelOnLitBurnerDanger",
+        # A misspelt class, for the reviewer to fix.
+        "definition": DRAFTED,
+        "category": "Fire Hazard",
+        "dangerLevel": "high",
+        "description": "A towel lying on a burner that is on can catch fire.",
+        "safetyWarning": "Do not leave a towel on a lit burner.",
+        "triggerReason": "A towel is on a burner that is switched on.",
+        "suggestion": "Move the towel off the burner before switching it on.",
+        "evidence": [PASSAGE],
+    }
+    proposal.write_text(json.dumps({"propertyChains": [rule]}), encoding="utf-8")
+    [cid] = ws.propose(proposal, "ana", check=False)
+
+    with serving(ws, "bo") as url, page_at(browser, url) as page:
+        item = page.get_by_test_id(f"queue-item-{cid}")
+        expect(item).to_have_attribute("data-status", "pending")
+        item.click()
+        expect(page.get_by_test_id("rule-name")).to_have_text("TowelOnLitBurnerDanger")
+        expect(page.get_by_test_id("evidence-item")).to_contain_text("potholders")
+        expect(page.get_by_test_id("evidence-item")).to_contain_text("NFPA")
+
+        axiom = page.get_by_test_id("axiom")
+        expect(axiom).to_have_value(DRAFTED)
+        axiom.fill(EDITED)
+        page.get_by_test_id("check").click()
+        summary = page.get_by_test_id("check-summary")
+        expect(summary).to_have_class("check-summary pass", timeout=STEP_MS)
+        expect(page.get_by_test_id("terms")).to_contain_text("Towel")
+        shot(page, "real-after-check")
+
+        page.get_by_test_id("accept-edited").click()
+        expect(page.get_by_test_id("decision-text")).to_contain_text("Accepted", timeout=STEP_MS)
+        expect(page.get_by_test_id("decision-text")).to_contain_text("by bo")
+        expect(page.get_by_test_id("candidate-status")).to_have_text("accepted")
+        row = page.locator("[data-testid=rule-row][data-name=TowelOnLitBurnerDanger]")
+        expect(row).to_contain_text(EDITED)
+        expect(row).to_contain_text(PASSAGE)
+        expect(row.locator("td").nth(7)).to_have_text("bo")
+        # The queue (pending only) no longer holds it.
+        expect(page.get_by_test_id(f"queue-item-{cid}")).to_have_count(0)
+        shot(page, "real-after-accept")
+
+    listed = CliRunner().invoke(app, ["kb", "rules", "--kb", str(root)])
+    assert listed.exit_code == 0, listed.output
+    assert "TowelOnLitBurnerDanger" in listed.output
+    listed_rule = listed.output.split("TowelOnLitBurnerDanger", 1)[1]
+    assert "supports some Towel)" in listed_rule.splitlines()[1], listed.output
