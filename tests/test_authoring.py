@@ -367,3 +367,13 @@ def test_the_workflow_from_the_terminal(cli: Callable[..., Result], tmp_path: Pa
     assert {s["stage"]: s["count"] for s in funnel}["Accepted (no edit)"] == 1
     missing = cli("kb", "candidates", "-w", tmp_path / "none")
     assert missing.exit_code == 2 and "not a VIRF knowledge workspace" in missing.output
+
+
+def test_a_block_without_a_decision_is_refused_on_open(tmp_path: Path) -> None:
+    ws = Workspace.init(tmp_path / "kb", starter=False)
+    module = ws.layout.module_path("core")
+    module.write_text(module.read_text() + "\n# candidate 3: Stray\n")
+    with pytest.raises(InputError, match="hold candidate 3, which has no accept decision"):
+        Workspace.open(ws.root)
+    with pytest.raises(InputError, match="candidate ids are positive whole numbers"):
+        ws.candidate(2**70)

@@ -183,6 +183,8 @@ class Store:
         return int(cur.lastrowid)
 
     def candidate(self, cid: int) -> CandidateRow:
+        if not 0 < cid < 2**63:  # SQLite's integers; beyond them sqlite3 overflows
+            raise InputError(f"no candidate {cid}; candidate ids are positive whole numbers")
         with self._lock:
             row = self._conn.execute(
                 "SELECT id, created_at, query, drafter, drafter_kind, name, axiom, rule, draft, "

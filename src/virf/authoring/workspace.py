@@ -134,6 +134,34 @@ class Workspace:
         self._corpus: Corpus | None = None
         self._index: VocabularyIndex | None = None
         self._lock = threading.Lock()
+        self._check_modules_match_decisions()
+
+    def _check_modules_match_decisions(self) -> None:
+        """The modules hold exactly the accepted candidates.  An accepted block
+        is written before its decision is committed, so a crash between the
+        two leaves a block without a decision: say so rather than verify with
+        a rule nobody accepted."""
+        written: set[int] = set()
+        for path in self.layout.modules():
+            for line in path.read_text(encoding="utf-8").splitlines():
+                if line.startswith("# candidate ") and ":" in line:
+                    number = line.removeprefix("# candidate ").split(":", 1)[0]
+                    if number.isdigit():
+                        written.add(int(number))
+        accepted = {d.candidate_id for d in self.store.decisions() if d.decision == "accept"}
+        stray = sorted(written - accepted)
+        lost = sorted(accepted - written)
+        if stray:
+            raise InputError(
+                f"workspace {self.root}: the modules hold candidate {stray[0]}, which has no "
+                "accept decision (an interrupted decision?); remove its block from "
+                f"{self.layout.module_dir} and decide it again"
+            )
+        if lost:
+            raise InputError(
+                f"workspace {self.root}: candidate {lost[0]} was accepted but its block is "
+                f"missing from {self.layout.module_dir}; restore the module file"
+            )
 
     # ------------------------------------------------------------------ making and opening
     @classmethod
