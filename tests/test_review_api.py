@@ -120,7 +120,13 @@ class FakeWorkspace:
         c.check = report(axiom)
         return c.check
 
-    def preview(self, cid: int, axiom: str | None = None, tasks: Path | None = None) -> Preview:
+    def preview(
+        self,
+        cid: int,
+        axiom: str | None = None,
+        tasks: Path | None = None,
+        examples: Path | None = None,
+    ) -> Preview:
         c = self._get(cid)
         self.calls.append(("preview", cid, axiom))
         return Preview(

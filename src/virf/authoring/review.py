@@ -63,7 +63,13 @@ class ReviewWorkspace(Protocol):
 
     def recheck(self, cid: int, axiom: str) -> CheckReport: ...
 
-    def preview(self, cid: int, axiom: str | None = None, tasks: Path | None = None) -> Preview: ...
+    def preview(
+        self,
+        cid: int,
+        axiom: str | None = None,
+        tasks: Path | None = None,
+        examples: Path | None = None,
+    ) -> Preview: ...
 
     def decide(
         self,
@@ -137,8 +143,11 @@ def create_app(
     reviewer: str,
     *,
     allowed_hosts: Sequence[str] = LOCAL_HOSTS,
+    preview_tasks: Path | None = None,
+    examples: Path | None = None,
 ) -> FastAPI:
     """The review server for ``workspace``; decisions are recorded as ``reviewer``'s.
+    The effect preview runs over ``examples`` and the tasks of ``preview_tasks``.
 
     ``allowed_hosts`` are the host names the page may be reached by (the Host
     and Origin headers are checked against them); ``("*",)`` allows any, for a
@@ -261,7 +270,7 @@ def create_app(
     @app.post("/api/candidates/{cid}/preview")
     def preview(cid: int, body: PreviewBody) -> Preview:
         known(cid)
-        return ws.preview(cid, body.axiom)
+        return ws.preview(cid, body.axiom, tasks=preview_tasks, examples=examples)
 
     @app.post("/api/candidates/{cid}/decision")
     def decide(cid: int, body: DecisionBody) -> DecisionView:
@@ -356,6 +365,8 @@ def serve(
     reviewer: str = "reviewer",
     *,
     announce: Callable[[str], None] | None = None,
+    preview_tasks: Path | None = None,
+    examples: Path | None = None,
 ) -> None:
     """Serve the review page until Ctrl-C (or SIGTERM), then return.
 
@@ -367,7 +378,9 @@ def serve(
     wildcard = host in ("0.0.0.0", "::", "")
     allowed: Sequence[str] = ("*",) if wildcard else (*LOCAL_HOSTS, host)
     say = announce or print
-    app = create_app(workspace, reviewer, allowed_hosts=allowed)
+    app = create_app(
+        workspace, reviewer, allowed_hosts=allowed, preview_tasks=preview_tasks, examples=examples
+    )
     sock = bind(host, port)
     try:
         # Java installs its own Ctrl-C handler when it starts, which ends the

@@ -2,25 +2,19 @@
 
 from __future__ import annotations
 
-import getpass
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
+from virf.cli.app import default_reviewer
+from virf.cli.kb_workflow import ExamplesOpt, PreviewOpt, examples_or_default
 from virf.errors import InputError
 
 
 def register(kb_app: typer.Typer) -> None:
     """Add the ``review`` command to the ``virf kb`` group."""
     kb_app.command("review")(kb_review)
-
-
-def _default_reviewer() -> str:
-    try:
-        return getpass.getuser()
-    except (KeyError, OSError):  # no login name (a container without a passwd entry)
-        return "reviewer"
 
 
 def kb_review(
@@ -44,15 +38,25 @@ def kb_review(
         str | None,
         typer.Option(help="Name recorded with each decision (default: your login name)."),
     ] = None,
+    preview: PreviewOpt = None,
+    examples: ExamplesOpt = None,
 ) -> None:
     """Serve the review page: the queue of drafted rules, their evidence, checks and
     effect, and Accept / Reject.  Open the printed address in a browser; Ctrl-C stops."""
     from virf.authoring.review import serve
     from virf.authoring.workspace import Workspace
 
-    name = (reviewer if reviewer is not None else _default_reviewer()).strip()
+    name = (reviewer if reviewer is not None else default_reviewer()).strip()
     if not name:
         raise InputError("--reviewer must not be empty")
     ws = Workspace.open(workspace)
-    serve(ws, host=host, port=port, reviewer=name, announce=typer.echo)
+    serve(
+        ws,
+        host=host,
+        port=port,
+        reviewer=name,
+        announce=typer.echo,
+        preview_tasks=preview,
+        examples=examples_or_default(examples),
+    )
     typer.echo("Review server stopped.")

@@ -3,9 +3,7 @@ decide | audit``: the knowledge-acquisition workflow from the terminal."""
 
 from __future__ import annotations
 
-import getpass
 import json
-import os
 import textwrap
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
@@ -21,6 +19,7 @@ from virf.cli.app import (
     SeedOpt,
     TemperatureOpt,
     WorkspaceOpt,
+    default_reviewer,
 )
 
 if TYPE_CHECKING:
@@ -45,12 +44,7 @@ ExamplesOpt = Annotated[
 
 
 def _reviewer(given: str | None) -> str:
-    if given:
-        return given
-    try:
-        return os.environ.get("USER") or getpass.getuser()
-    except (KeyError, OSError):
-        return "reviewer"
+    return given or default_reviewer()
 
 
 def _open(workspace: Path) -> Workspace:
@@ -59,7 +53,7 @@ def _open(workspace: Path) -> Workspace:
     return Workspace.open(workspace)
 
 
-def _examples(given: Path | None) -> Path | None:
+def examples_or_default(given: Path | None) -> Path | None:
     if given is not None:
         return given
     default = Path("examples")
@@ -214,7 +208,9 @@ def kb_draft(
     if preview is not None or examples is not None:
         for cid in ids:
             if ws.candidate(cid).check and ws.candidate(cid).check.passed:  # type: ignore[union-attr]
-                previews[cid] = ws.preview(cid, tasks=preview, examples=_examples(examples))
+                previews[cid] = ws.preview(
+                    cid, tasks=preview, examples=examples_or_default(examples)
+                )
     if as_json:
         typer.echo(
             json.dumps(
@@ -344,7 +340,7 @@ def kb_preview(
 ) -> None:
     """Which examples and benchmark tasks change verdict if the candidate is accepted."""
     ws = _open(workspace)
-    result = ws.preview(candidate, axiom, tasks=tasks, examples=_examples(examples))
+    result = ws.preview(candidate, axiom, tasks=tasks, examples=examples_or_default(examples))
     if as_json:
         _dump(result)
     else:
