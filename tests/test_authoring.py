@@ -377,3 +377,54 @@ def test_a_block_without_a_decision_is_refused_on_open(tmp_path: Path) -> None:
         Workspace.open(ws.root)
     with pytest.raises(InputError, match="candidate ids are positive whole numbers"):
         ws.candidate(2**70)
+
+
+def test_the_effect_preview_lists_the_verdicts_a_candidate_changes(
+    ws: Workspace, tmp_path: Path
+) -> None:
+    tasks = tmp_path / "tasks.jsonl"
+    tasks.write_text(
+        "\n".join(
+            json.dumps(t)
+            for t in (
+                {
+                    "scene_name": "FloorPlan1",
+                    "instruction": "Place the Pot gently on the CounterTop.",
+                    "step": ["find pot", "pick pot", "find countertop", "put countertop"],
+                },
+                {
+                    "scene_name": "FloorPlan1",
+                    "instruction": "Put a Potato in the Microwave and turn it on.",
+                    "step": [
+                        "find potato",
+                        "pick potato",
+                        "find microwave",
+                        "open microwave",
+                        "put microwave",
+                        "close microwave",
+                        "turn_on microwave",
+                    ],
+                },
+            )
+        )
+        + "\n"
+    )
+    (cid,) = ws.propose(
+        proposal(
+            tmp_path,
+            rule(
+                "PotatoInRunningMicrowaveDraft",
+                "Microwave and (hasState some OnState) and (encloses some Potato)",
+            ),
+        ),
+        "alice",
+    )
+    examples = Path(__file__).resolve().parent.parent / "examples" / "knowledge-acquisition"
+    preview = ws.preview(cid, tasks=tasks, examples=examples)
+    assert (preview.examples, preview.tasks) == (1, 2)
+    [change] = preview.changes
+    assert change.item == "tasks.jsonl:2"
+    assert (change.before, change.after) == ("SAFE", "UNSAFE (PotatoInRunningMicrowaveDraft)")
+    assert ws.candidate(cid).preview == preview
+    with pytest.raises(InputError, match="does not pass its checks"):
+        ws.preview(cid, axiom="Candle and (hasMaterial some Cloth)")
