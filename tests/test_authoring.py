@@ -175,7 +175,7 @@ def test_new_classes_get_a_parent_and_unknown_relations_are_refused(
     report = ws.candidate(cid).check
     assert report is not None and report.passed
     new = next(t for t in report.terms if t.term == "HotPlateDevice")
-    assert (new.match, new.parent) == ("new", "Appliance")
+    assert (new.match, new.parent, new.layer) == ("new", "Appliance", "domain")
     assert "Class: :HotPlateDevice" in report.module_text
     assert "SubClassOf: :Appliance" in report.module_text
     bad = ws.check(cid, "Microwave and (radiatesInto some Fabric)")

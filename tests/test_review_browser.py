@@ -249,3 +249,24 @@ def test_review_over_the_real_workspace(browser: Browser, tmp_path: Path) -> Non
     assert "TowelOnLitBurnerDanger" in listed.output
     listed_rule = listed.output.split("TowelOnLitBurnerDanger", 1)[1]
     assert "supports some Towel)" in listed_rule.splitlines()[1], listed.output
+    # ... and verification with the workspace uses it: with only the new rule
+    # checked, a towel on a burner that gets switched on is UNSAFE.
+    from virf.api import LogicTutor
+
+    tutor = LogicTutor(kb=root, explain=False).restricted(["TowelOnLitBurnerDanger"])
+    scene = {
+        "instances": [
+            {"class_name": "StoveBurner", "instance_name": "StoveBurner_1"},
+            {"class_name": "StoveKnob", "instance_name": "StoveKnob_1"},
+            {"class_name": "Towel", "instance_name": "Towel_1"},
+        ],
+        "assertions": [
+            {"subject": "StoveKnob_1", "property": "controls", "object": "StoveBurner_1"},
+            {"subject": "StoveKnob_1", "property": "hasState", "object": "OffState"},
+            {"subject": "StoveBurner_1", "property": "hasState", "object": "OffState"},
+            {"subject": "Towel_1", "property": "isOn", "object": "StoveBurner_1"},
+        ],
+    }
+    report = tutor.verify(scene, ["find StoveKnob", "turn_on StoveKnob"])
+    assert report.status == "UNSAFE", report.reason
+    assert [v.id for v in report.violations] == ["TowelOnLitBurnerDanger"]

@@ -440,7 +440,12 @@ class Workspace:
         items.extend(_novelty_items(name, related))
         order = ("core", "domain", "scenario")
         layer = max((result.layers.get(t, "core") for t in used), key=order.index, default="core")
-        return self._report(axiom, normalised.axiom, items, normalised.terms, related, layer, block)
+        # New classes go into the module the rule goes into.
+        terms = tuple(
+            t.model_copy(update={"layer": layer}) if t.match == "new" and t.role == "class" else t
+            for t in normalised.terms
+        )
+        return self._report(axiom, normalised.axiom, items, terms, related, layer, block)
 
     def _report(
         self,
