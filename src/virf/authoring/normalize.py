@@ -41,7 +41,8 @@ def words(name: str) -> str:
 
 @dataclass(frozen=True)
 class Normalised:
-    axiom: str  # Manchester, names prefixed with ':'
+    axiom: str  # Manchester, names prefixed with ':' (for OWLAPI)
+    display: str  # the same with the vocabulary's short names (for people)
     terms: tuple[TermChoice, ...]
     new_classes: tuple[tuple[str, str], ...]  # (class, parent)
     problems: tuple[CheckItem, ...]
@@ -224,6 +225,7 @@ def normalise(
         resolved.append(choice.model_copy(update={"parent": parent}))
     return Normalised(
         axiom=manchester.render(axiom, rename, prefix=":"),
+        display=manchester.render(axiom, rename),
         terms=tuple(resolved),
         new_classes=tuple(new_classes),
         problems=tuple(problems),

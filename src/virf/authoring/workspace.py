@@ -383,7 +383,7 @@ class Workspace:
         )
         if any(i.severity == "error" for i in items):
             return self._report(
-                axiom, normalised.axiom, items, normalised.terms, Related(), "core", block
+                axiom, normalised.display, items, normalised.terms, Related(), "core", block
             )
         used = [t.chosen for t in normalised.terms] + [p for _, p in normalised.new_classes]
         result = check_candidate(
@@ -398,7 +398,7 @@ class Workspace:
                 CheckItem(name="parses", ok=False, severity="error", message=result.parse_error)
             )
             return self._report(
-                axiom, normalised.axiom, items, normalised.terms, Related(), "core", block
+                axiom, normalised.display, items, normalised.terms, Related(), "core", block
             )
         items.append(CheckItem(name="parses", ok=True, severity="info", message="the axiom parses"))
         if not result.consistent:
@@ -445,7 +445,7 @@ class Workspace:
             t.model_copy(update={"layer": layer}) if t.match == "new" and t.role == "class" else t
             for t in normalised.terms
         )
-        return self._report(axiom, normalised.axiom, items, terms, related, layer, block)
+        return self._report(axiom, normalised.display, items, terms, related, layer, block)
 
     def _report(
         self,
@@ -459,7 +459,7 @@ class Workspace:
     ) -> CheckReport:
         return CheckReport(
             axiom=axiom,
-            normalised=normalised.replace(":", "") if normalised else normalised,
+            normalised=normalised,
             passed=not any(i.severity == "error" for i in items),
             layer=layer,  # type: ignore[arg-type]
             threshold=self.threshold,
