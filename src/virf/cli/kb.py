@@ -124,12 +124,17 @@ def kb_rules(
 
 
 def _register_workflow() -> None:
-    # The authoring commands live in their own modules; they join this group here.
+    # The authoring commands live in their own modules; they join this group
+    # here, in the order of the workflow.
     from virf.cli import kb_corpus, kb_coverage, kb_review, kb_workflow
 
-    kb_workflow.register(kb_app)
+    kb_app.command("init")(kb_workflow.kb_init)
     kb_corpus.register(kb_app)
+    for name in ("draft", "propose", "candidates", "show", "recheck", "preview"):
+        kb_app.command(name)(getattr(kb_workflow, f"kb_{name}"))
     kb_review.register(kb_app)
+    kb_app.command("decide")(kb_workflow.kb_decide)
+    kb_app.command("audit")(kb_workflow.kb_audit)
     kb_coverage.register(kb_app)
 
 

@@ -41,8 +41,9 @@ def kb_review(
     preview: PreviewOpt = None,
     examples: ExamplesOpt = None,
 ) -> None:
-    """Serve the review page: the queue of drafted rules, their evidence, checks and
-    effect, and Accept / Reject.  Open the printed address in a browser; Ctrl-C stops."""
+    """Serve the review page: the queue of drafted rules, their evidence, checks and effect, and Accept / Reject.
+
+    Open the printed address in a browser; Ctrl-C stops."""
     from virf.authoring.review import serve
     from virf.authoring.workspace import Workspace
 

@@ -129,18 +129,6 @@ def _print_candidate(view: CandidateView) -> None:
         )
 
 
-def register(kb_app: typer.Typer) -> None:
-    kb_app.command("init")(kb_init)
-    kb_app.command("draft")(kb_draft)
-    kb_app.command("propose")(kb_propose)
-    kb_app.command("candidates")(kb_candidates)
-    kb_app.command("show")(kb_show)
-    kb_app.command("recheck")(kb_recheck)
-    kb_app.command("preview")(kb_preview)
-    kb_app.command("decide")(kb_decide)
-    kb_app.command("audit")(kb_audit)
-
-
 def kb_init(
     folder: Annotated[Path, typer.Argument(help="New folder for the workspace.")] = Path("virf-kb"),
     scenario: ScenarioOpt = "kitchen",
