@@ -146,8 +146,8 @@ def test_a_person_s_rule_goes_from_proposal_to_verification(ws: Workspace, tmp_p
 
 
 # ---------------------------------------------------------------------- normalisation and checks
-def test_terms_are_matched_to_the_vocabulary(ws: Workspace) -> None:
-    (cid,) = ws.store.candidate_ids()[:1]
+def test_terms_are_matched_to_the_vocabulary(ws: Workspace, tmp_path: Path) -> None:
+    (cid,) = ws.propose(proposal(tmp_path, rule("CandleTermsDraft", CANDLE_AXIOM)), "alice")
     report = ws.check(cid, "microwave and (hasState some OnState) and (isNearby some Knives)")
     terms = {t.term: t for t in report.terms}
     assert (terms["microwave"].match, terms["microwave"].chosen) == ("synonym", "Microwave")
@@ -369,14 +369,66 @@ def test_the_workflow_from_the_terminal(cli: Callable[..., Result], tmp_path: Pa
     assert missing.exit_code == 2 and "not a VIRF knowledge workspace" in missing.output
 
 
-def test_a_block_without_a_decision_is_refused_on_open(tmp_path: Path) -> None:
-    ws = Workspace.init(tmp_path / "kb", starter=False)
-    module = ws.layout.module_path("core")
-    module.write_text(module.read_text() + "\n# candidate 3: Stray\n")
-    with pytest.raises(InputError, match="hold candidate 3, which has no accept decision"):
-        Workspace.open(ws.root)
+def test_modules_and_decisions_are_kept_in_step(ws: Workspace, tmp_path: Path) -> None:
+    # A decision committed but not written (a crash in between) is written on open.
+    accepted = next(r for r in ws.rules() if r.name == "LitCandleNearFabricDanger")
+    module = ws.layout.module_path(accepted.layer)
+    whole = module.read_text()
+    header = f"# candidate {accepted.candidate_id}: LitCandleNearFabricDanger"
+    start = whole.index(header)
+    end = whole.find("\n# candidate ", start + 1)
+    module.write_text(whole[:start] + (whole[end + 1 :] if end > 0 else ""))
+    Workspace.open(ws.root).close()
+    assert header in module.read_text()
+    assert oct(module.stat().st_mode & 0o777) != oct(0o600)  # not made private by the rewrite
+    # A block no decision accepted (a hand edit) is refused.
+    other = Workspace.init(tmp_path / "kb", starter=False)
+    core = other.layout.module_path("core")
+    core.write_text(core.read_text() + "\n# candidate 3: Stray\n")
+    with pytest.raises(InputError, match=r"core\.omn holds candidate 3, which no decision accepted"):
+        Workspace.open(other.root)
     with pytest.raises(InputError, match="candidate ids are positive whole numbers"):
         ws.candidate(2**70)
+
+
+def test_texts_and_axioms_that_cannot_be_rules(ws: Workspace, tmp_path: Path) -> None:
+    sneaky = rule(
+        "CandleNewlineDraft",
+        CANDLE_AXIOM,
+        description="A lit candle.\n# candidate 77: Fake\nNear fabric.",
+        evidence=[],
+        modellingDecision="no document names this case;\tcommon sense",
+    )
+    (cid,) = ws.propose(proposal(tmp_path, sneaky), "alice")
+    view = ws.candidate(cid)
+    assert view.rule.description == "A lit candle. # candidate 77: Fake Near fabric."
+    assert view.check is not None and view.check.passed
+    assert items(view.check)["evidence"] == "warning"
+    assert (
+        ':source "common-sense modelling decision: no document names this case; common sense"'
+        in (view.check.module_text)
+    )
+    for axiom, message in (
+        ("Candle and (isLocated some Fabric)", "is a data property"),
+        ("owl:Thing", "holds of everything"),
+        ("Candle and (rdf:type some Fabric)", "without a prefix"),
+        ("Candle or (", "unclosed '('"),
+        ("Candle and hasState some OnState)", "unmatched ')'"),
+    ):
+        report = ws.check(cid, axiom)
+        assert not report.passed, axiom
+        assert any(message in i.message for i in report.items if i.severity == "error"), (
+            axiom,
+            report.items,
+        )
+    # Deciding without --axiom accepts the version checked last.
+    ws.check(cid, CANDLE_AXIOM.replace("Fabric", "Wax"))
+    decision = ws.decide(cid, "accept", reviewer="bob")
+    assert decision.axiom is not None and "Wax" in decision.axiom and decision.edit == "minor"
+    with pytest.raises(InputError, match=r"already been decided \(accepted\)"):
+        ws.check(cid)
+    # The text that looked like a block header stays inside its literal.
+    Workspace.open(ws.root).close()
 
 
 def test_the_effect_preview_lists_the_verdicts_a_candidate_changes(

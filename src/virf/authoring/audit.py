@@ -46,7 +46,7 @@ def audit(ws: Workspace) -> Audit:
         first = store.first_check(cid)
         if first is not None:
             problems = [i for i in first["items"] if i["name"] == "normalisation" and not i["ok"]]
-            normalised += not problems
+            normalised += bool(first["normalised"]) and not problems
             passed += bool(first["passed"])
         row = store.candidate(cid)
         d = decisions.get(cid)

@@ -17,7 +17,7 @@ from typing import Any, Final, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from virf.authoring.models import RuleDraft
-from virf.errors import InputError, clip, parse_json
+from virf.errors import InputError, clip, hidden_char, parse_json, printable
 from virf.ontology.tbox import DANGER_LEVELS, USC_KINDS
 
 MAX_RULES: Final = 20
@@ -50,6 +50,29 @@ class DraftRule(_Edge):
     suggestion: str = Field(min_length=1, max_length=500)
     evidence: tuple[str, ...] = ()
     modelling_decision: str | None = Field(default=None, alias="modellingDecision", max_length=500)
+
+    @field_validator(
+        "category",
+        "description",
+        "safety_warning",
+        "trigger_reason",
+        "suggestion",
+        "modelling_decision",
+        "definition",
+    )
+    @classmethod
+    def _one_line(cls, value: str | None) -> str | None:
+        # Annotation texts become one-line Manchester literals and report
+        # lines: line breaks and tabs are spaces, other hidden characters refused.
+        if value is None:
+            return None
+        flat = " ".join(value.split())
+        bad = hidden_char(flat)
+        if bad is not None:
+            raise ValueError(f"contains the hidden character {printable(bad)}")
+        if not flat:
+            raise ValueError("must not be blank")
+        return flat
 
     @field_validator("name")
     @classmethod

@@ -61,7 +61,12 @@ def tokens(expression: str) -> list[Token]:
                 "Microwave and (hasState some OnState)"
             )
         if m.group("name") is not None:
-            text = m.group("name").rpartition(":")[2]
+            prefix, _, text = m.group("name").rpartition(":")
+            if prefix and f"{prefix}:{text}" not in ("owl:Thing", "owl:Nothing"):
+                raise InputError(
+                    f"axiom uses '{clip(m.group('name'))}': write the ontology's own names "
+                    "without a prefix (Microwave, hasState)"
+                )
             out.append(Token("keyword" if text in KEYWORDS else "name", text))
         elif m.group("number") is not None:
             out.append(Token("number", m.group("number")))
@@ -69,7 +74,24 @@ def tokens(expression: str) -> list[Token]:
             out.append(Token("punct", m.group("punct")))
     if not out:
         raise InputError("axiom is empty; write a Manchester class expression")
+    _balanced(out, expression)
     return out
+
+
+def _balanced(toks: list[Token], expression: str) -> None:
+    """Unbalanced brackets found here name the problem in the reviewer's own
+    text; OWLAPI would point into the module the axiom was wrapped in."""
+    depth: list[str] = []
+    pairs = {")": "(", "}": "{"}
+    for tok in toks:
+        if tok.kind != "punct" or tok.text == ",":
+            continue
+        if tok.text in "({":
+            depth.append(tok.text)
+        elif not depth or depth.pop() != pairs[tok.text]:
+            raise InputError(f"axiom has an unmatched '{tok.text}' in '{clip(expression)}'")
+    if depth:
+        raise InputError(f"axiom has an unclosed '{depth[-1]}' in '{clip(expression)}'")
 
 
 def names(expression: str) -> dict[str, Role]:

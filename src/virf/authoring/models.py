@@ -68,7 +68,7 @@ class CheckReport(View):
     """Normalisation and logical checks of one version of a candidate's axiom."""
 
     axiom: str  # as given (drafted or edited)
-    normalised: str  # after term matching, Manchester syntax with short names
+    normalised: str  # after term matching, Manchester syntax with short names ("" if unreadable)
     passed: bool  # no check failed with severity "error"
     layer: Layer
     threshold: float  # embedding similarity a term needed to be matched
@@ -107,6 +107,7 @@ class DecisionView(View):
     reviewer: str
     decided_at: str
     seconds: float | None
+    layer: Layer | None = None  # where an accepted axiom went
 
 
 class CandidateSummary(View):

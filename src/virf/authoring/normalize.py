@@ -63,7 +63,7 @@ class VocabularyIndex:
         self._np = np
         self.entries: dict[str, tuple[str, ...]] = {
             "class": tuple(sorted(c for c in vocab.classes if c not in vocab.class_synonyms)),
-            "property": tuple(sorted(vocab.object_properties | vocab.data_properties)),
+            "property": tuple(sorted(vocab.object_properties)),
             "individual": tuple(sorted(vocab.individuals)),
         }
         everything = sorted({n for names in self.entries.values() for n in names})
@@ -106,11 +106,11 @@ def _variant(name: str, vocab: Vocabulary, role: str) -> str | None:
     if role == "property":
         found = vocab.canonical_property(name)
         if found is None:
-            lowered = {p.lower(): p for p in vocab.object_properties | vocab.data_properties}
+            lowered = {p.lower(): p for p in vocab.object_properties}
             found = lowered.get(name.lower())
             if found is not None:
                 found = vocab.canonical_property(found)
-        return found
+        return found if found in vocab.object_properties else None
     candidates = [name]
     # English plurals: knives, batteries, dishes, cups.
     for plural, singular in (("ves", "fe"), ("ves", "f"), ("ies", "y"), ("es", ""), ("s", "")):
@@ -157,12 +157,23 @@ def normalise(
                 )
             )
             continue
+        if role == "property" and term in vocab.data_properties:
+            problems.append(
+                CheckItem(
+                    name="normalisation",
+                    ok=False,
+                    severity="error",
+                    message=f"'{term}' is a data property; a rule relates objects, states and "
+                    "materials through object properties (hasState, hasMaterial, isNear...)",
+                )
+            )
+            continue
         known = (
             vocab.classes
             if role == "class"
             else vocab.individuals
             if role == "individual"
-            else vocab.object_properties | vocab.data_properties
+            else vocab.object_properties
         )
         if term in known and term not in vocab.class_synonyms:
             choices.append(TermChoice(term=term, role=role, match="exact", chosen=term, score=1.0))

@@ -224,16 +224,10 @@ def create_app(
 
     def known(cid: int) -> CandidateSummary:
         """The candidate's queue entry; 404 with the workspace's own words if there is none."""
-        if abs(cid) >= 2**63:  # beyond what the store's integers hold
-            raise HttpProblem(404, f"no candidate {clip(str(cid))}")
-        for summary in ws.candidates(None):
-            if summary.id == cid:
-                return summary
         try:
-            ws.candidate(cid)
+            return ws.candidate(cid).summary
         except InputError as exc:
             raise HttpProblem(404, str(exc)) from None
-        raise HttpProblem(404, f"no candidate {cid}")
 
     def refuse_if_decided(summary: CandidateSummary) -> None:
         if summary.status != "pending":
@@ -264,12 +258,12 @@ def create_app(
 
     @app.post("/api/candidates/{cid}/check")
     def check(cid: int, body: CheckBody) -> CheckReport:
-        known(cid)
+        refuse_if_decided(known(cid))
         return ws.recheck(cid, body.axiom)
 
     @app.post("/api/candidates/{cid}/preview")
     def preview(cid: int, body: PreviewBody) -> Preview:
-        known(cid)
+        refuse_if_decided(known(cid))
         return ws.preview(cid, body.axiom, tasks=preview_tasks, examples=examples)
 
     @app.post("/api/candidates/{cid}/decision")

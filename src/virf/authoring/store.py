@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any, Final
 
 from virf.errors import EnvironmentProblem, InputError
-from virf.migrations import Migration, check_migrations, migrate, now
+from virf.migrations import Migration, check_migrations, migrate, now, rollback
 
 # Append only.  Never edit or reorder an entry once it has been committed.
 MIGRATIONS: Final[tuple[Migration, ...]] = (
@@ -63,7 +63,8 @@ MIGRATIONS: Final[tuple[Migration, ...]] = (
             layer        TEXT,
             reason       TEXT,
             reviewer     TEXT    NOT NULL,
-            seconds      REAL
+            seconds      REAL,
+            block        TEXT
         );
         CREATE TRIGGER decisions_are_final_update BEFORE UPDATE ON decisions
         BEGIN SELECT RAISE(ABORT, 'decisions are final'); END;
@@ -109,6 +110,7 @@ class DecisionRow:
     reason: str | None
     reviewer: str
     seconds: float | None
+    block: str | None = None  # the Manchester block an acceptance wrote
 
 
 class Store:
@@ -141,10 +143,10 @@ class Store:
             self._conn.execute("BEGIN IMMEDIATE")
             try:
                 yield self._conn
+                self._conn.execute("COMMIT")
             except BaseException:
-                self._conn.execute("ROLLBACK")
+                rollback(self._conn)
                 raise
-            self._conn.execute("COMMIT")
 
     # ------------------------------------------------------------ candidates
     def add_candidate(
@@ -256,7 +258,7 @@ class Store:
         try:
             conn.execute(
                 "INSERT INTO decisions (candidate_id, created_at, decision, edit, axiom, layer, "
-                "reason, reviewer, seconds) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                "reason, reviewer, seconds, block) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 (
                     d.candidate_id,
                     d.created_at,
@@ -267,6 +269,7 @@ class Store:
                     d.reason,
                     d.reviewer,
                     d.seconds,
+                    d.block,
                 ),
             )
         except sqlite3.IntegrityError:
@@ -279,7 +282,7 @@ class Store:
     def decisions(self, cid: int | None = None) -> list[DecisionRow]:
         sql = (
             "SELECT candidate_id, created_at, decision, edit, axiom, layer, reason, reviewer, "
-            "seconds FROM decisions"
+            "seconds, block FROM decisions"
         )
         args: tuple[int, ...] = ()
         if cid is not None:
@@ -311,12 +314,12 @@ class Store:
                 (cid, now(), kind, actor, detail),
             )
 
-    def last_event(self, cid: int, kind: str) -> str | None:
-        """When ``kind`` last happened to the candidate (ISO time)."""
+    def first_event(self, cid: int, kind: str) -> str | None:
+        """When ``kind`` first happened to the candidate (ISO time)."""
         with self._lock:
             row = self._conn.execute(
                 "SELECT created_at FROM events WHERE candidate_id = ? AND kind = ? "
-                "ORDER BY id DESC LIMIT 1",
+                "ORDER BY id LIMIT 1",
                 (cid, kind),
             ).fetchone()
         return None if row is None else str(row[0])

@@ -9,9 +9,12 @@ go through it, so the terminal and the review page behave the same.
 from __future__ import annotations
 
 import json
+import os
+import re
 import shutil
 import threading
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from datetime import datetime
 from importlib import resources
 from pathlib import Path
@@ -62,6 +65,8 @@ _USC_ANNOTATIONS: Final = (
     "source",
     "checkAt",
 )
+# The first line of every block a decision writes (see _block).
+_BLOCK_HEADER: Final = re.compile(r"^# candidate ([0-9]+): [A-Za-z][A-Za-z0-9_]*$", re.MULTILINE)
 EDIT_LABELS: Final = {
     "none": "accepted unedited",
     "minor": "accepted after a minor edit",
@@ -129,7 +134,14 @@ class Workspace:
         self.corpus_dir = layout.root / "corpus"
         self.cache_dir = layout.cache_dir
         self.config: dict[str, Any] = json.loads((layout.root / MARKER).read_text(encoding="utf-8"))
-        self.threshold = float(self.config.get("similarity_threshold", DEFAULT_THRESHOLD))
+        threshold = self.config.get("similarity_threshold", DEFAULT_THRESHOLD)
+        if isinstance(threshold, bool) or not isinstance(threshold, int | float):
+            raise InputError(f"{layout.root / MARKER}: similarity_threshold must be a number")
+        if not 0 < threshold <= 1:
+            raise InputError(
+                f"{layout.root / MARKER}: similarity_threshold {threshold} is not in (0, 1]"
+            )
+        self.threshold = float(threshold)
         self.store = Store(layout.root / DATABASE)
         self._corpus: Corpus | None = None
         self._index: VocabularyIndex | None = None
@@ -137,31 +149,31 @@ class Workspace:
         self._check_modules_match_decisions()
 
     def _check_modules_match_decisions(self) -> None:
-        """The modules hold exactly the accepted candidates.  An accepted block
-        is written before its decision is committed, so a crash between the
-        two leaves a block without a decision: say so rather than verify with
-        a rule nobody accepted."""
-        written: set[int] = set()
+        """The modules hold exactly the accepted candidates.  A block whose
+        decision was committed but not yet written (a crash in between) is
+        written now; a block no decision accepted (a hand edit) is refused,
+        so no command works with a rule nobody accepted."""
+        written: dict[int, Path] = {}
         for path in self.layout.modules():
-            for line in path.read_text(encoding="utf-8").splitlines():
-                if line.startswith("# candidate ") and ":" in line:
-                    number = line.removeprefix("# candidate ").split(":", 1)[0]
-                    if number.isdigit():
-                        written.add(int(number))
-        accepted = {d.candidate_id for d in self.store.decisions() if d.decision == "accept"}
-        stray = sorted(written - accepted)
-        lost = sorted(accepted - written)
+            try:
+                text = path.read_text(encoding="utf-8")
+            except (OSError, UnicodeDecodeError) as exc:
+                raise InputError(f"workspace module {path} is unreadable: {exc}") from None
+            written.update((int(n), path) for n in _BLOCK_HEADER.findall(text))
+        accepted = {d.candidate_id: d for d in self.store.decisions() if d.decision == "accept"}
+        stray = sorted(set(written) - set(accepted))
         if stray:
             raise InputError(
-                f"workspace {self.root}: the modules hold candidate {stray[0]}, which has no "
-                "accept decision (an interrupted decision?); remove its block from "
-                f"{self.layout.module_dir} and decide it again"
+                f"workspace {self.root}: {written[stray[0]].name} holds candidate {stray[0]}, "
+                "which no decision accepted; remove its block (from '# candidate "
+                f"{stray[0]}:' to the next block) or restore the module"
             )
-        if lost:
-            raise InputError(
-                f"workspace {self.root}: candidate {lost[0]} was accepted but its block is "
-                f"missing from {self.layout.module_dir}; restore the module file"
-            )
+        for cid in sorted(set(accepted) - set(written)):
+            d = accepted[cid]
+            if not d.block or not d.layer:
+                raise InputError(f"workspace {self.root}: accepted candidate {cid} has no block")
+            path = self.layout.module_path(d.layer)
+            write_atomically(path, _append_block(path.read_text("utf-8"), d.block))
 
     # ------------------------------------------------------------------ making and opening
     @classmethod
@@ -330,6 +342,7 @@ class Workspace:
         """Normalise and check the candidate's axiom (or an edited one); the
         result is stored as the candidate's latest check."""
         row = self.store.candidate(cid)
+        self._undecided(cid)
         text = row.axiom if axiom is None else axiom
         report = self._check(row.id, row.rule, row.draft, row.evidence, text, row.drafter)
         self.store.add_check(cid, text, report.passed, report.model_dump(mode="json"))
@@ -364,7 +377,7 @@ class Workspace:
             )
         except InputError as exc:
             items.append(CheckItem(name="parses", ok=False, severity="error", message=str(exc)))
-            return self._report(axiom, axiom, items, (), Related(), "core", "")
+            return self._report(axiom, "", items, (), Related(), "core", "")
         items.extend(normalised.problems)
         if name in vocab.classes:
             items.append(
@@ -379,7 +392,14 @@ class Workspace:
         items.extend(self._annotation_items(rule, vocab.uscs.values()))
         items.extend(self._evidence_items(parsed_draft, evidence_ids))
         block = self._block(
-            cid, rule, normalised.axiom, normalised.new_classes, evidence_ids, drafter, decision
+            cid,
+            rule,
+            normalised.axiom,
+            normalised.new_classes,
+            evidence_ids,
+            parsed_draft.rules[0].modelling_decision,
+            drafter,
+            decision,
         )
         if any(i.severity == "error" for i in items):
             return self._report(
@@ -392,6 +412,7 @@ class Workspace:
             self._candidate_module(block),
             name,
             used,
+            vocab.uscs,
         )
         if not result.parses:
             items.append(
@@ -434,12 +455,20 @@ class Workspace:
                         message=f"{name} is satisfiable",
                     )
                 )
+            if result.every_state:
+                items.append(
+                    CheckItem(
+                        name="trivial",
+                        ok=False,
+                        severity="error",
+                        message=f"{name} holds of everything: every state would be unsafe",
+                    )
+                )
         related = Related(
             equivalent=result.equivalent, subsumed_by=result.subsumed_by, subsumes=result.subsumes
         )
         items.extend(_novelty_items(name, related))
-        order = ("core", "domain", "scenario")
-        layer = max((result.layers.get(t, "core") for t in used), key=order.index, default="core")
+        layer = max((result.layers.get(t, "core") for t in used), key=LAYERS.index, default="core")
         # New classes go into the module the rule goes into.
         terms = tuple(
             t.model_copy(update={"layer": layer}) if t.match == "new" and t.role == "class" else t
@@ -523,7 +552,7 @@ class Workspace:
             )
         ]
 
-    def _source(self, ids: Sequence[str], rule: dict[str, Any], draft: dict[str, Any]) -> str:
+    def _source(self, ids: Sequence[str], modelling_decision: str | None) -> str:
         corpus = self.corpus()
         by_doc: dict[str, list[str]] = {}
         for pid in ids:
@@ -536,10 +565,9 @@ class Workspace:
             title = f"{doc.publisher}, {doc.title}" if doc else doc_id
             url = f" <{doc.url}>" if doc and doc.url else ""
             parts.append(f"{title}{url}: passages {', '.join(pids)}")
-        if not parts:
-            decision = draft.get("propertyChains", [{}])[0].get("modellingDecision")
-            return f"common-sense modelling decision: {decision}" if decision else "no evidence"
-        return "; ".join(parts)
+        if modelling_decision:
+            parts.append(f"common-sense modelling decision: {modelling_decision}")
+        return "; ".join(parts) or "no evidence"
 
     def _block(
         self,
@@ -548,6 +576,7 @@ class Workspace:
         axiom: str,
         new_classes: Sequence[tuple[str, str]],
         evidence_ids: Sequence[str],
+        modelling_decision: str | None,
         drafter: str,
         decision: dict[str, str] | None,
     ) -> str:
@@ -558,11 +587,16 @@ class Workspace:
         # parser does not look into already-loaded imports when it parses a
         # document from a string, and the declarations cost nothing.
         new = {c for c, _ in new_classes}
+        vocab = self.tbox().vocabulary
         for term, role in sorted(manchester.names(axiom).items()):
             if term in new:
                 continue
-            keyword = {"class": "Class", "property": "ObjectProperty", "individual": "Individual"}
-            lines.append(f"{keyword[role]}: :{term}")
+            keyword = {"class": "Class", "property": "ObjectProperty", "individual": "Individual"}[
+                role
+            ]
+            if term in vocab.data_properties:
+                keyword = "DataProperty"
+            lines.append(f"{keyword}: :{term}")
         for parent in sorted({p for _, p in new_classes} - new | {"UnsafeStateConcept"}):
             lines.append(f"Class: :{parent}")
         lines.append("")
@@ -582,7 +616,7 @@ class Workspace:
             f":safetyWarning {_literal(rule['safety_warning'])}",
             f":triggerReason {_literal(rule['trigger_reason'])}",
             f":suggestion {_literal(rule['suggestion'])}",
-            f":source {_literal(self._source(evidence_ids, rule, {}))}",
+            f":source {_literal(self._source(evidence_ids, modelling_decision))}",
             f":checkAt {_literal(rule['check_at'])}",
             *(f":evidence {_literal(pid)}" for pid in evidence_ids),
             f":drafter {_literal(drafter)}",
@@ -624,6 +658,11 @@ class Workspace:
         from virf.authoring.preview import effect_preview
 
         row = self.store.candidate(cid)
+        self._undecided(cid)
+        if examples is not None and not examples.is_dir():
+            raise InputError(f"examples folder {clip(str(examples))} does not exist")
+        if tasks is not None and not tasks.is_file():
+            raise InputError(f"benchmark file {clip(str(tasks))} does not exist")
         text = axiom if axiom is not None else self._current_axiom(cid, row.axiom)
         report = self._check(row.id, row.rule, row.draft, row.evidence, text, row.drafter)
         if not report.passed:
@@ -654,61 +693,101 @@ class Workspace:
         reason: str | None = None,
         axiom: str | None = None,
     ) -> DecisionView:
+        """Record a decision.  Accepting checks the final axiom (``axiom``, or
+        the one checked last) once more and writes its block into its layer's
+        module; a candidate whose checks fail is refused.
+
+        The database is the record: the decision is committed first and the
+        module replaced after, so a crash in between leaves an accepted rule
+        out of the TBox (restored when the workspace is next opened), never a
+        rule nobody accepted in it."""
         if decision not in ("accept", "reject"):
             raise InputError(f"unknown decision '{clip(decision)}'; choose accept or reject")
         if not reviewer.strip():
             raise InputError("a decision needs a reviewer's name (--reviewer or $USER)")
+        if decision == "reject" and not (reason and reason.strip()):
+            raise InputError("a rejection needs a reason (--reason TEXT)")
         row = self.store.candidate(cid)
-        if self.store.decision(cid) is not None:
-            raise InputError(f"candidate {cid} has already been decided")
-        opened = self.store.last_event(cid, "opened")
-        decided_at = now()
-        seconds = _seconds_between(opened, decided_at) if opened else None
-        if decision == "reject":
-            if not (reason and reason.strip()):
-                raise InputError("a rejection needs a reason (--reason TEXT)")
-            record = DecisionRow(
-                cid, decided_at, "reject", "none", None, None, reason.strip(), reviewer, seconds
+        with self._exclusive():
+            self._undecided(cid)
+            opened = self.store.first_event(cid, "opened")
+            decided_at = now()
+            seconds = _seconds_between(opened, decided_at) if opened else None
+            if decision == "reject":
+                assert reason is not None
+                record = DecisionRow(
+                    cid, decided_at, "reject", "none", None, None, reason.strip(), reviewer, seconds
+                )
+                with self.store.transaction() as conn:
+                    self.store.add_decision(conn, record)
+                    self.store.add_event("decided", cid, actor=reviewer, detail="reject")
+                return _decision_view(record)
+            final = axiom if axiom is not None else self._current_axiom(cid, row.axiom)
+            edit = _edit_size(row.axiom, final)
+            provenance = {
+                "reviewer": reviewer,
+                "decision": EDIT_LABELS[edit]
+                + (f": {' '.join(reason.split())}" if reason and reason.strip() else ""),
+                "decidedOn": decided_at[:10],
+            }
+            report = self._check(
+                row.id, row.rule, row.draft, row.evidence, final, row.drafter, provenance
             )
-            with self.store.transaction() as conn:
-                self.store.add_decision(conn, record)
-                self.store.add_event("decided", cid, actor=reviewer, detail="reject")
-            return _decision_view(record)
-        final = axiom if axiom is not None else row.axiom
-        edit = _edit_size(row.axiom, final)
-        label = EDIT_LABELS[edit]
-        provenance = {
-            "reviewer": reviewer,
-            "decision": label + (f": {reason.strip()}" if reason and reason.strip() else ""),
-            "decidedOn": decided_at[:10],
-        }
-        report = self._check(
-            row.id, row.rule, row.draft, row.evidence, final, row.drafter, provenance
-        )
-        self.store.add_check(cid, final, report.passed, report.model_dump(mode="json"))
-        if not report.passed:
-            failed = next(i for i in report.items if i.severity == "error")
-            raise InputError(f"candidate {cid} cannot be accepted: {failed.message}")
-        layer: Layer = report.layer
-        record = DecisionRow(
-            cid, decided_at, "accept", edit, final, layer, reason, reviewer, seconds
-        )
-        path = self.layout.module_path(layer)
-        before = path.read_text(encoding="utf-8")
-        with self.store.transaction() as conn:
-            self.store.add_decision(conn, record)
-            self.store.add_event("decided", cid, actor=reviewer, detail=f"accept ({edit})")
-            write_atomically(path, before.rstrip("\n") + "\n\n" + report.module_text)
+            self.store.add_check(cid, final, report.passed, report.model_dump(mode="json"))
+            if not report.passed:
+                failed = next(i for i in report.items if i.severity == "error")
+                raise InputError(f"candidate {cid} cannot be accepted: {failed.message}")
+            layer: Layer = report.layer
+            record = DecisionRow(
+                cid,
+                decided_at,
+                "accept",
+                edit,
+                final,
+                layer,
+                reason,
+                reviewer,
+                seconds,
+                report.module_text,
+            )
+            path = self.layout.module_path(layer)
+            staged = path.with_name(f".{path.name}.staged")
             try:
-                # The module as written must load: a block that parses on
-                # top of the workspace but not in its layer stays out.
+                write_atomically(staged, _append_block(path.read_text("utf-8"), report.module_text))
+                # The modules as they will be must load: a block that parses
+                # on top of the workspace but not in its layer stays out.
                 from virf.ontology.axiom_check import parses_with
 
-                parses_with(self.scenario, tuple(str(p) for p in self.layout.modules()))
-            except BaseException:
-                write_atomically(path, before)
-                raise
+                parses_with(
+                    self.scenario,
+                    tuple(str(staged if p == path else p) for p in self.layout.modules()),
+                )
+                with self.store.transaction() as conn:
+                    self.store.add_decision(conn, record)
+                    self.store.add_event("decided", cid, actor=reviewer, detail=f"accept ({edit})")
+                os.replace(staged, path)
+            finally:
+                staged.unlink(missing_ok=True)
         return _decision_view(record)
+
+    @contextmanager
+    def _exclusive(self) -> Iterator[None]:
+        """One decision at a time, across the review server's threads and
+        every process using the workspace."""
+        import fcntl
+
+        with open(self.root / ".lock", "a+") as fh:
+            fcntl.flock(fh, fcntl.LOCK_EX)
+            try:
+                yield
+            finally:
+                fcntl.flock(fh, fcntl.LOCK_UN)
+
+    def _undecided(self, cid: int) -> None:
+        decided = self.store.decision(cid)
+        if decided is not None:
+            what = "accepted" if decided.decision == "accept" else "rejected"
+            raise InputError(f"candidate {cid} has already been decided ({what})")
 
     # ------------------------------------------------------------------ reading
     def candidates(self, status: Status | None = None) -> list[CandidateSummary]:
@@ -773,6 +852,10 @@ class Workspace:
                 )
             )
         return out
+
+
+def _append_block(module: str, block: str) -> str:
+    return module.rstrip("\n") + "\n\n" + block
 
 
 def _novelty_items(name: str, related: Related) -> list[CheckItem]:
@@ -840,4 +923,5 @@ def _decision_view(d: DecisionRow) -> DecisionView:
         reviewer=d.reviewer,
         decided_at=d.created_at,
         seconds=d.seconds,
+        layer=d.layer,  # type: ignore[arg-type]
     )

@@ -50,6 +50,8 @@ def kb_review(
     name = (reviewer if reviewer is not None else default_reviewer()).strip()
     if not name:
         raise InputError("--reviewer must not be empty")
+    if preview is not None and not preview.is_file():
+        raise InputError(f"--preview: benchmark file {preview} does not exist")
     ws = Workspace.open(workspace)
     serve(
         ws,

@@ -21,6 +21,7 @@ from virf.cli.app import (
     WorkspaceOpt,
     default_reviewer,
 )
+from virf.errors import InputError
 
 if TYPE_CHECKING:
     from virf.authoring.models import CandidateView, CheckReport, Preview
@@ -55,6 +56,8 @@ def _open(workspace: Path) -> Workspace:
 
 def examples_or_default(given: Path | None) -> Path | None:
     if given is not None:
+        if not given.is_dir():
+            raise InputError(f"examples folder {given} does not exist")
         return given
     default = Path("examples")
     return default if default.is_dir() else None
@@ -358,7 +361,7 @@ def kb_decide(
         _dump(result)
         return
     if result.decision == "accept":
-        layer = ws.rules()[-1].layer
+        layer = result.layer or "core"
         typer.echo(
             f"candidate {candidate} {EDIT_LABELS[result.edit]} into the {layer} layer "
             f"({ws.layout.module_path(layer)})"

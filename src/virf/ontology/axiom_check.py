@@ -19,7 +19,7 @@ from typing import Any
 from virf.ontology.iri import NS, iri_short
 from virf.ontology.owlapi import OwlModules, make_reasoner, manchester_message
 from virf.ontology.tbox import ontology_dir
-from virf.ontology.workspace import WORKSPACE_BASE
+from virf.ontology.workspace import LAYERS, WORKSPACE_BASE
 
 # Java objects are not shared between checks, but OWLAPI's parser and HermiT
 # keep static state: one check at a time.
@@ -32,6 +32,7 @@ class AxiomCheck:
     parse_error: str = ""
     consistent: bool | None = None
     satisfiable: bool | None = None
+    every_state: bool = False  # the concept is owl:Thing: everything would be unsafe
     equivalent: tuple[str, ...] = ()
     subsumed_by: tuple[str, ...] = ()
     subsumes: tuple[str, ...] = ()
@@ -57,12 +58,15 @@ def check_candidate(
     module_text: str,
     concept: str,
     terms: Iterable[str],
+    rules: Iterable[str],
 ) -> AxiomCheck:
     """Check ``module_text`` (a whole Manchester ontology document) on top of
-    the scenario and ``extra_modules`` (the workspace's layers, in order)."""
+    the scenario and ``extra_modules`` (the workspace's layers, in order);
+    ``rules`` are the Unsafe State Concepts the TBox has, which the new
+    concept is compared with."""
     with _LOCK:
         owl = OwlModules(scenario, ontology_dir(), extra_modules)
-        return _check(owl, module_text, concept, tuple(terms))
+        return _check(owl, module_text, concept, tuple(terms), frozenset(rules))
 
 
 def parses_with(scenario: str, extra_modules: tuple[str, ...]) -> None:
@@ -71,7 +75,9 @@ def parses_with(scenario: str, extra_modules: tuple[str, ...]) -> None:
         OwlModules(scenario, ontology_dir(), extra_modules)
 
 
-def _check(owl: OwlModules, module_text: str, concept: str, terms: tuple[str, ...]) -> AxiomCheck:
+def _check(
+    owl: OwlModules, module_text: str, concept: str, terms: tuple[str, ...], rules: frozenset[str]
+) -> AxiomCheck:
     from org.semanticweb.owlapi.io import StringDocumentSource
     from org.semanticweb.owlapi.model import AddImport
 
@@ -89,9 +95,13 @@ def _check(owl: OwlModules, module_text: str, concept: str, terms: tuple[str, ..
         cls = owl.owl_class(concept)
         if not reasoner.isSatisfiable(cls):
             return AxiomCheck(parses=True, consistent=True, satisfiable=False, layers=layers)
-        uscs = _names(reasoner.getSubClasses(owl.owl_class("UnsafeStateConcept"), False))
-        uscs.discard(concept)
-        equivalent = _names(reasoner.getEquivalentClasses(cls).getEntities()) & uscs
+        uscs = set(rules) - {concept}
+        same = reasoner.getEquivalentClasses(cls)
+        if same.isTopNode():
+            return AxiomCheck(
+                parses=True, consistent=True, satisfiable=True, every_state=True, layers=layers
+            )
+        equivalent = _names(same.getEntities()) & uscs
         supers = _names(reasoner.getSuperClasses(cls, False)) & uscs - equivalent
         subs = _names(reasoner.getSubClasses(cls, False)) & uscs - equivalent
         return AxiomCheck(
@@ -138,10 +148,7 @@ def _declaring_layers(owl: OwlModules, candidate: Any, terms: tuple[str, ...]) -
     return out
 
 
-_ORDER = ("core", "domain", "scenario")
-
-
 def _lowest(a: str | None, b: str) -> str:
     if a is None:
         return b
-    return a if _ORDER.index(a) <= _ORDER.index(b) else b
+    return a if LAYERS.index(a) <= LAYERS.index(b) else b

@@ -28,6 +28,7 @@ from types import MappingProxyType
 from typing import Any
 
 from virf.errors import InputError
+from virf.files import write_atomically
 from virf.ontology.fragment import Axiom, Fragment, fragment_from, load_fragment
 from virf.ontology.iri import MODULE_BASE, NS, THING, iri_short
 from virf.ontology.owlapi import (
@@ -474,9 +475,7 @@ def write_artifacts(scenarios: list[str] | None = None) -> list[Path]:
     for scenario in scenarios or scenario_names():
         kb = compile_kb(OwlModules(scenario, ontology_dir()), digest)
         path = artifact_path(scenario)
-        tmp = path.with_suffix(".json.tmp")
-        tmp.write_text(to_json(kb), encoding="utf-8")
-        tmp.replace(path)
+        write_atomically(path, to_json(kb))
         written.append(path)
     return written
 

@@ -102,7 +102,10 @@ class OwlModules:
                 ont = self.manager.loadOntologyFromOntologyDocument(File(extra))
             except Exception as exc:
                 raise OntologyLoadError(manchester_message(str(exc))) from None
-            iri = ont.getOntologyID().getOntologyIRI().get()
+            found = ont.getOntologyID().getOntologyIRI()
+            if not found.isPresent():
+                raise OntologyLoadError(f"ontology module {extra} has no 'Ontology: <IRI>' header")
+            iri = found.get()
             self.manager.applyChange(
                 AddImport(self.root, self.factory.getOWLImportsDeclaration(iri))
             )

@@ -265,8 +265,10 @@ def load_tbox(
                 f"workspace {kb} is layered on scenario '{layout.scenario}', not '{scenario}'; "
                 f"pass --scenario {layout.scenario}"
             )
+        # Cached only as the workspace itself: a load with further modules (a
+        # candidate's preview) must not replace the workspace's artifact.
+        cache_dir = None if extras else str(layout.cache_dir)
         extras = tuple(str(p) for p in layout.modules()) + extras
-        cache_dir = str(layout.cache_dir)
     # Keyed by content, not path: a workspace gains axioms while a process
     # (the review server) keeps running.
     return _load(scenario, extras, _files_digest(extras), cache_dir)

@@ -19,8 +19,8 @@ from virf.errors import InputError, clip
 MARKER: Final = "virf-kb.json"
 FORMAT: Final = 1
 LAYERS: Final = ("core", "domain", "scenario")
-# Each workspace module is an ontology of its own, named after the workspace
-# folder's layer, so two workspaces never share an IRI.
+# Each workspace module is an ontology of its own, named after its layer; one
+# workspace is loaded at a time, so the names need not differ between workspaces.
 WORKSPACE_BASE: Final = "http://virf.dev/ontology/workspace/"
 
 
@@ -69,8 +69,12 @@ def open_layout(root: str | Path) -> KbLayout:
             f" is not {FORMAT}; this VIRF cannot read it"
         )
     scenario = config.get("scenario")
-    if not isinstance(scenario, str) or not scenario:
-        raise InputError(f"{marker}: no scenario named")
+    from virf.ontology.tbox import scenario_names
+
+    if not isinstance(scenario, str) or scenario not in scenario_names():
+        raise InputError(
+            f"{marker}: scenario {scenario!r} is not one of {', '.join(scenario_names())}"
+        )
     layout = KbLayout(path.resolve(), scenario)
     missing = [p.name for p in layout.modules() if not p.is_file()]
     if missing:

@@ -50,6 +50,7 @@ MIGRATIONS: Final[tuple[Migration, ...]] = (
     ),
 )
 
+
 @dataclass(frozen=True)
 class CallRecord:
     """One logged model call, as stored."""
