@@ -385,7 +385,9 @@ def test_modules_and_decisions_are_kept_in_step(ws: Workspace, tmp_path: Path) -
     other = Workspace.init(tmp_path / "kb", starter=False)
     core = other.layout.module_path("core")
     core.write_text(core.read_text() + "\n# candidate 3: Stray\n")
-    with pytest.raises(InputError, match=r"core\.omn holds candidate 3, which no decision accepted"):
+    with pytest.raises(
+        InputError, match=r"core\.omn holds candidate 3, which no decision accepted"
+    ):
         Workspace.open(other.root)
     with pytest.raises(InputError, match="candidate ids are positive whole numbers"):
         ws.candidate(2**70)
