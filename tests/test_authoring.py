@@ -482,3 +482,23 @@ def test_the_effect_preview_lists_the_verdicts_a_candidate_changes(
     assert ws.candidate(cid).preview == preview
     with pytest.raises(InputError, match="does not pass its checks"):
         ws.preview(cid, axiom="Candle and (hasMaterial some Cloth)")
+
+
+def test_a_module_that_makes_the_tbox_inconsistent_is_reported(ws: Workspace) -> None:
+    from virf.ontology.axiom_check import check_candidate
+
+    module = ws._candidate_module(
+        "Class: :Microwave\nClass: :UnsafeStateConcept\nIndividual: :Metal\n"
+        "    Types: :Microwave\n"
+        "Class: :MetalMicrowaveDraft\n    EquivalentTo: {:Metal}\n"
+        "    SubClassOf: :UnsafeStateConcept\n"
+    )
+    result = check_candidate(
+        ws.scenario,
+        tuple(str(p) for p in ws.layout.modules()),
+        module,
+        "MetalMicrowaveDraft",
+        ["Microwave"],
+        ws.tbox().vocabulary.uscs,
+    )
+    assert result.parses and result.consistent is False  # a material is not an object

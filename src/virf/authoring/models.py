@@ -55,6 +55,18 @@ class CheckItem(View):
     severity: Severity
     message: str
 
+    @classmethod
+    def error(cls, name: str, message: str) -> CheckItem:
+        return cls(name=name, ok=False, severity="error", message=message)
+
+    @classmethod
+    def warning(cls, name: str, message: str, *, ok: bool = True) -> CheckItem:
+        return cls(name=name, ok=ok, severity="warning", message=message)
+
+    @classmethod
+    def info(cls, name: str, message: str) -> CheckItem:
+        return cls(name=name, ok=True, severity="info", message=message)
+
 
 class Related(View):
     """Existing Unsafe State Concepts the candidate's concept coincides with."""

@@ -149,21 +149,14 @@ def normalise(
     for term, role in roles.items():
         if term == own_name:
             problems.append(
-                CheckItem(
-                    name="normalisation",
-                    ok=False,
-                    severity="error",
-                    message=f"the definition of {term} uses {term} itself",
-                )
+                CheckItem.error("normalisation", f"the definition of {term} uses {term} itself")
             )
             continue
         if role == "property" and term in vocab.data_properties:
             problems.append(
-                CheckItem(
-                    name="normalisation",
-                    ok=False,
-                    severity="error",
-                    message=f"'{term}' is a data property; a rule relates objects, states and "
+                CheckItem.error(
+                    "normalisation",
+                    f"'{term}' is a data property; a rule relates objects, states and "
                     "materials through object properties (hasState, hasMaterial, isNear...)",
                 )
             )
@@ -201,11 +194,9 @@ def normalise(
             hint = f"; closest known: {', '.join(n for n, _ in near)}" if near else ""
             what = "relation" if role == "property" else "individual"
             problems.append(
-                CheckItem(
-                    name="normalisation",
-                    ok=False,
-                    severity="error",
-                    message=f"unknown {what} '{term}': a new {what} has no meaning in the "
+                CheckItem.error(
+                    "normalisation",
+                    f"unknown {what} '{term}': a new {what} has no meaning in the "
                     f"simulator; use a known one{hint}",
                 )
             )

@@ -376,16 +376,14 @@ class Workspace:
                 own_name=name,
             )
         except InputError as exc:
-            items.append(CheckItem(name="parses", ok=False, severity="error", message=str(exc)))
+            items.append(CheckItem.error("parses", str(exc)))
             return self._report(axiom, "", items, (), Related(), "core", "")
         items.extend(normalised.problems)
         if name in vocab.classes:
             items.append(
-                CheckItem(
-                    name="name",
-                    ok=False,
-                    severity="error",
-                    message=f"{name} is already a class of the TBox; a candidate must name a new "
+                CheckItem.error(
+                    "name",
+                    f"{name} is already a class of the TBox; a candidate must name a new "
                     "concept (propose a different name)",
                 )
             )
@@ -415,53 +413,30 @@ class Workspace:
             vocab.uscs,
         )
         if not result.parses:
-            items.append(
-                CheckItem(name="parses", ok=False, severity="error", message=result.parse_error)
-            )
+            items.append(CheckItem.error("parses", result.parse_error))
             return self._report(
                 axiom, normalised.display, items, normalised.terms, Related(), "core", block
             )
-        items.append(CheckItem(name="parses", ok=True, severity="info", message="the axiom parses"))
+        items.append(CheckItem.info("parses", "the axiom parses"))
         if not result.consistent:
             items.append(
-                CheckItem(
-                    name="consistent",
-                    ok=False,
-                    severity="error",
-                    message="the TBox becomes inconsistent with this axiom",
-                )
+                CheckItem.error("consistent", "the TBox becomes inconsistent with this axiom")
             )
         else:
-            items.append(
-                CheckItem(
-                    name="consistent", ok=True, severity="info", message="the TBox stays consistent"
-                )
-            )
+            items.append(CheckItem.info("consistent", "the TBox stays consistent"))
             if result.satisfiable is False:
                 items.append(
-                    CheckItem(
-                        name="satisfiable",
-                        ok=False,
-                        severity="error",
-                        message=f"{name} is unsatisfiable: no situation can ever fall under it",
+                    CheckItem.error(
+                        "satisfiable",
+                        f"{name} is unsatisfiable: no situation can ever fall under it",
                     )
                 )
             else:
-                items.append(
-                    CheckItem(
-                        name="satisfiable",
-                        ok=True,
-                        severity="info",
-                        message=f"{name} is satisfiable",
-                    )
-                )
+                items.append(CheckItem.info("satisfiable", f"{name} is satisfiable"))
             if result.every_state:
                 items.append(
-                    CheckItem(
-                        name="trivial",
-                        ok=False,
-                        severity="error",
-                        message=f"{name} holds of everything: every state would be unsafe",
+                    CheckItem.error(
+                        "trivial", f"{name} holds of everything: every state would be unsafe"
                     )
                 )
         related = Related(
@@ -505,11 +480,10 @@ class Workspace:
         if rule["category"] in known:
             return []
         return [
-            CheckItem(
-                name="category",
+            CheckItem.warning(
+                "category",
+                f"category '{rule['category']}' is new to the TBox; known: {', '.join(known)}",
                 ok=False,
-                severity="warning",
-                message=f"category '{rule['category']}' is new to the TBox; known: {', '.join(known)}",
             )
         ]
 
@@ -518,20 +492,16 @@ class Workspace:
         if not ids:
             if rule.modelling_decision:
                 return [
-                    CheckItem(
-                        name="evidence",
-                        ok=True,
-                        severity="warning",
-                        message="cites no document: a common-sense modelling decision "
+                    CheckItem.warning(
+                        "evidence",
+                        "cites no document: a common-sense modelling decision "
                         f"({rule.modelling_decision})",
                     )
                 ]
             return [
-                CheckItem(
-                    name="evidence",
-                    ok=False,
-                    severity="error",
-                    message="cites no evidence: give passage ids, or a 'modellingDecision' "
+                CheckItem.error(
+                    "evidence",
+                    "cites no evidence: give passage ids, or a 'modellingDecision' "
                     "saying why no document is needed",
                 )
             ]
@@ -539,18 +509,11 @@ class Workspace:
         missing = [pid for pid in ids if corpus.passage(pid) is None]
         if missing:
             return [
-                CheckItem(
-                    name="evidence",
-                    ok=False,
-                    severity="error",
-                    message=f"cites passages the corpus does not have: {', '.join(missing)}",
+                CheckItem.error(
+                    "evidence", f"cites passages the corpus does not have: {', '.join(missing)}"
                 )
             ]
-        return [
-            CheckItem(
-                name="evidence", ok=True, severity="info", message=f"{len(ids)} passage(s) found"
-            )
-        ]
+        return [CheckItem.info("evidence", f"{len(ids)} passage(s) found")]
 
     def _source(self, ids: Sequence[str], modelling_decision: str | None) -> str:
         corpus = self.corpus()
@@ -862,38 +825,25 @@ def _novelty_items(name: str, related: Related) -> list[CheckItem]:
     items = []
     if related.equivalent:
         items.append(
-            CheckItem(
-                name="redundancy",
+            CheckItem.warning(
+                "redundancy",
+                f"redundant: {name} is equivalent to {', '.join(related.equivalent)}",
                 ok=False,
-                severity="warning",
-                message=f"redundant: {name} is equivalent to {', '.join(related.equivalent)}",
             )
         )
     if related.subsumed_by:
         items.append(
-            CheckItem(
-                name="redundancy",
-                ok=False,
-                severity="warning",
-                message=f"redundant: every {name} situation is already a "
+            CheckItem.warning(
+                "redundancy",
+                f"redundant: every {name} situation is already a "
                 f"{', '.join(related.subsumed_by)} situation",
+                ok=False,
             )
         )
     if related.subsumes:
-        items.append(
-            CheckItem(
-                name="generalisation",
-                ok=True,
-                severity="info",
-                message=f"generalises {', '.join(related.subsumes)}",
-            )
-        )
+        items.append(CheckItem.info("generalisation", f"generalises {', '.join(related.subsumes)}"))
     if not items:
-        items.append(
-            CheckItem(
-                name="novelty", ok=True, severity="info", message="no existing rule covers it"
-            )
-        )
+        items.append(CheckItem.info("novelty", "no existing rule covers it"))
     return items
 
 
