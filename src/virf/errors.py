@@ -79,28 +79,35 @@ def unknown_term(kind: str, term: str, choices: Iterable[str]) -> InputError:
 MAX_FILE_BYTES = 32 * 1024 * 1024
 
 
-def read_input_file(path: str | Path, what: str, limit: int = MAX_FILE_BYTES) -> str:
-    """Read a user's file, turning I/O failures into one-line input errors.
+def read_input_bytes(path: str | Path, what: str, limit: int = MAX_FILE_BYTES) -> bytes:
+    """Read a user's file as bytes, turning I/O failures into one-line input errors.
 
     Only regular files are read, and at most ``limit`` bytes: a FIFO would block
     forever and a device such as /dev/zero would never end."""
     p = Path(path)
     try:
         if not p.exists():
-            raise InputError(f"{what} file not found: {p}")
+            raise InputError(f"{what} file not found: {printable(str(p))}")
         if not p.is_file():
-            raise InputError(f"{what} path {p} is not a regular file")
+            raise InputError(f"{what} path {printable(str(p))} is not a regular file")
         with p.open("rb") as fh:
             raw = fh.read(limit + 1)
-        if len(raw) > limit:
-            size = f"{limit // 2**20} MiB" if limit >= 2**20 else f"{limit} bytes"
-            raise InputError(f"{what} file {p} is larger than {size}")
+    except OSError as exc:
+        raise InputError(f"cannot read {what} file {printable(str(p))}: {exc.strerror}") from None
+    if len(raw) > limit:
+        size = f"{limit // 2**20} MiB" if limit >= 2**20 else f"{limit} bytes"
+        raise InputError(f"{what} file {printable(str(p))} is larger than {size}")
+    return raw
+
+
+def read_input_file(path: str | Path, what: str, limit: int = MAX_FILE_BYTES) -> str:
+    """Read a user's text file (UTF-8) with :func:`read_input_bytes`' checks."""
+    raw = read_input_bytes(path, what, limit)
+    try:
         # utf-8-sig: a byte-order mark (Windows editors write one) is not text.
         return raw.decode("utf-8-sig")
     except UnicodeDecodeError:
-        raise InputError(f"{what} file {p} is not UTF-8 text") from None
-    except OSError as exc:
-        raise InputError(f"cannot read {what} file {p}: {exc.strerror}") from None
+        raise InputError(f"{what} file {printable(str(path))} is not UTF-8 text") from None
 
 
 def _no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:

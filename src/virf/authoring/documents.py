@@ -28,7 +28,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
-from virf.errors import MAX_FILE_BYTES, InputError, clip, closest, printable, read_input_file
+from virf.errors import (
+    MAX_FILE_BYTES,
+    InputError,
+    clip,
+    closest,
+    printable,
+    read_input_bytes,
+    read_input_file,
+)
 
 if TYPE_CHECKING:
     from bs4 import BeautifulSoup, Tag
@@ -405,24 +413,8 @@ def _html_blocks(root: Tag) -> Iterator[_Block]:
 
 
 def read_document_bytes(path: Path) -> bytes:
-    """A document's bytes, with read_input_file's checks (regular file, size)."""
-    try:
-        if not path.exists():
-            raise InputError(f"document file not found: {shown(path)}")
-        if not path.is_file():
-            raise InputError(f"document path {shown(path)} is not a regular file")
-        with path.open("rb") as fh:
-            raw = fh.read(MAX_FILE_BYTES + 1)
-    except OSError as exc:
-        raise InputError(f"cannot read document file {shown(path)}: {exc.strerror}") from None
-    if len(raw) > MAX_FILE_BYTES:
-        size = (
-            f"{MAX_FILE_BYTES // 2**20} MiB"
-            if MAX_FILE_BYTES >= 2**20
-            else f"{MAX_FILE_BYTES} bytes"
-        )
-        raise InputError(f"document file {shown(path)} is larger than {size}")
-    return raw
+    """A document's bytes, with the checks every user file gets (regular file, size)."""
+    return read_input_bytes(path, "document", MAX_FILE_BYTES)
 
 
 def _read_pdf(path: Path) -> _Parsed:
