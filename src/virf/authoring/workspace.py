@@ -146,7 +146,9 @@ class Workspace:
         self._corpus: Corpus | None = None
         self._index: VocabularyIndex | None = None
         self._lock = threading.Lock()
-        self._check_modules_match_decisions()
+        # Under the decisions' lock: a decision being written is not a lost one.
+        with self._exclusive():
+            self._check_modules_match_decisions()
 
     def _check_modules_match_decisions(self) -> None:
         """The modules hold exactly the accepted candidates.  A block whose
