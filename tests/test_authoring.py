@@ -369,9 +369,12 @@ def test_the_workflow_from_the_terminal(cli: Callable[..., Result], tmp_path: Pa
     assert missing.exit_code == 2 and "not a VIRF knowledge workspace" in missing.output
 
 
-def test_modules_and_decisions_are_kept_in_step(ws: Workspace, tmp_path: Path) -> None:
+def test_modules_and_decisions_are_kept_in_step(tmp_path: Path) -> None:
+    ws = small_workspace(tmp_path / "own")
+    (cid,) = ws.propose(proposal(tmp_path, rule("LitCandleNearFabricDanger", CANDLE_AXIOM)), "al")
+    ws.decide(cid, "accept", reviewer="bob")
     # A decision committed but not written (a crash in between) is written on open.
-    accepted = next(r for r in ws.rules() if r.name == "LitCandleNearFabricDanger")
+    [accepted] = ws.rules()
     module = ws.layout.module_path(accepted.layer)
     whole = module.read_text()
     header = f"# candidate {accepted.candidate_id}: LitCandleNearFabricDanger"
