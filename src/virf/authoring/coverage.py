@@ -18,7 +18,6 @@ a Markdown page and a bar chart from one set of :class:`TextTable` rows.
 from __future__ import annotations
 
 import os
-import time
 from collections import Counter
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -30,11 +29,9 @@ from virf.bench.safeagentbench import CATEGORIES, Task, build_scene, load_tasks,
 from virf.errors import InputError, clip
 from virf.reasoning import DeadlineExceeded, ReasonerFailure
 from virf.render.tables import Column, TextTable, to_markdown
-from virf.schema import Fact, Provenance
+from virf.verify.findings import INCONSISTENT
 from virf.world.plan import PlanStep
 from virf.world.scene import Scene
-from virf.world.simulate import simulate
-from virf.world.simulator import Simulator
 
 TaskStatus = Literal["checked", "no-plan", "unparsed", "error"]
 UNCATEGORISED = "(uncategorised)"
@@ -50,8 +47,10 @@ TOP_RULES = 3
 # ---------------------------------------------------------------------- results
 @dataclass(frozen=True)
 class RuleFiring:
-    """One rule on one task: the steps it fires at (0 is the initial scene),
-    the individuals it fires for, and whether any firing is definite (the
+    """One rule on one task: the steps at which it starts to hold for one of
+    its individuals (0 is the initial scene; a hazard that persists is
+    counted where it begins, as the verifier reports it), the individuals it
+    fires for, and whether any firing is definite (the
     verifier would say UNSAFE) rather than uncertain (UNKNOWN, a question)."""
 
     rule: str
@@ -312,51 +311,30 @@ class _Hits:
 def plan_firings(
     tutor: LogicTutor, scene: Scene, plan: Sequence[PlanStep]
 ) -> tuple[tuple[RuleFiring, ...], str]:
-    """Every rule that fires on ``plan`` run in ``scene``, and where
-    the run stopped early ("" when it ran to the end).
+    """Every rule that fires on ``plan`` run in ``scene``, at the steps where
+    it starts to hold, and where the run stopped early ("" when it ran to
+    the end).
 
-    The snapshots are the verifier's own (:meth:`Verifier.snapshots`), and
-    they are classified against the verifier's rule lists, so a rule fires
-    here exactly when the verifier would find it at that step.  Raises
-    DeadlineExceeded or ReasonerFailure when the engine cannot answer."""
-    verifier = tutor.verifier
-    vocab = verifier.vocab
-    # The trace tells which action each snapshot looks ahead to and whether
-    # the run is complete (for checkAt-final rules); the snapshots come from
-    # the verifier so the ABoxes are the ones it classifies.
-    trace = simulate(verifier.sim, verifier.sim.initial(scene), plan)
-    snapshots = verifier.snapshots(scene, plan)
-    n = len(trace.states) - 1
-    deadline = time.monotonic() + verifier.timeout_s
+    The findings are the verifier's own (:meth:`Verifier.findings`, the
+    protocol's loop without the stop at the first definite finding), so a
+    rule fires here exactly when the verifier would find it at that step.
+    Raises DeadlineExceeded or ReasonerFailure when the engine cannot answer."""
+    walk = tutor.verifier.findings(scene, plan)
+    uscs = tutor.tbox.vocabulary.uscs
     hits: dict[str, _Hits] = {}
     stopped = ""
-    for k, snapshot in enumerate(snapshots):
-        concepts = verifier.always + (verifier.final if trace.complete and k == n else [])
-        result = tutor.engine.classify(snapshot.keys(), concepts, deadline=deadline)
-        if not result.consistent:
-            # Everything is entailed by a contradiction; later states inherit it.
-            stopped = f"state {k} is contradictory; steps from {k} on were not checked"
-            break
-        action = (
-            Simulator.action_individual(trace.resolved[k].step) if k < len(trace.resolved) else None
-        )
-        known: list[Fact] | None = None
-        for concept, individuals in sorted(result.instances.items()):
-            usc = vocab.uscs[concept]
-            for ind in individuals:
-                h = hits.setdefault(usc.id, _Hits())
-                # Action-based findings belong to the action's own step (lookahead).
-                h.steps.add(k + 1 if ind == action else k)
-                h.subjects.add(ind)
-                if h.definite or usc.kind == "uncertainty":
-                    continue
-                # Definite when it holds without the open-world assumptions,
-                # the verifier's own test (virf.verify.explain).
-                if known is None:
-                    known = [f for f, p in snapshot.items() if p is not Provenance.ASSUMED]
-                h.definite = tutor.engine.entails(known, concept, ind, deadline=deadline)
-    if not stopped and trace.stop is not None:
-        stopped = f"simulation stopped at {trace.stop_reason()}"
+    for step, found in sorted(walk.findings.items()):
+        for f in found:
+            if f.concept.name not in uscs:  # the verifier's own: a contradiction, a stop
+                if f.concept.id == INCONSISTENT.id:
+                    stopped = f"state {step} is contradictory; later steps were not checked"
+                continue
+            h = hits.setdefault(f.concept.id, _Hits())
+            h.steps.add(f.step)
+            h.subjects.add(f.subject)
+            h.definite = h.definite or f.definite
+    if not stopped and walk.trace.stop is not None:
+        stopped = f"simulation stopped at {walk.trace.stop_reason()}"
     firings = tuple(
         RuleFiring(rule, tuple(sorted(h.steps)), tuple(sorted(h.subjects)), h.definite)
         for rule, h in sorted(hits.items())

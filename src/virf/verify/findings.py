@@ -116,7 +116,7 @@ def requirement_concept(n: int, text: str, reason: str) -> UnsafeStateConcept:
     )
 
 
-_INCONSISTENT = UnsafeStateConcept(
+INCONSISTENT = UnsafeStateConcept(
     id="InconsistentWorldModel",
     name="InconsistentWorldModel",
     kind="logical-inconsistency",
@@ -134,7 +134,7 @@ def inconsistency(facts: list[Fact], snapshot: Mapping[Fact, Provenance], k: int
     """Snapshot ``k`` is inconsistent; ``facts`` is a minimal contradictory subset."""
     listed = "; ".join(f.render() for f in facts)
     return Finding(
-        _INCONSISTENT,
+        INCONSISTENT,
         k,
         "inconsistency",
         facts[0].subject if facts else "",

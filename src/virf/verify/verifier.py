@@ -29,6 +29,7 @@ from __future__ import annotations
 import time
 from collections.abc import Collection, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
 from queue import Queue
 
 from virf.ontology.tbox import TBox
@@ -46,6 +47,17 @@ from virf.world.simulator import Simulator
 
 class VerificationTimeout(Exception):
     pass
+
+
+@dataclass(frozen=True)
+class Walk:
+    """What the protocol's loop found: the trace, the findings by step, the
+    first step with a definite finding, and the last snapshot classified."""
+
+    trace: Trace
+    findings: dict[int, list[Finding]]
+    first_definite: int | None
+    checked: int
 
 
 class Verifier:
@@ -130,6 +142,21 @@ class Verifier:
         trace = simulate(self.sim, self.sim.initial(scene), plan)
         return [self._snapshot(trace, k) for k in range(len(trace.states))]
 
+    def findings(self, scene: Scene, plan: Sequence[PlanStep]) -> Walk:
+        """Every finding of the plan, at every step, not only up to the first
+        definite one (rule coverage and other tools).  Findings carry no
+        explanation unless they are uncertain or left at the end; raises
+        when the engine cannot answer, instead of making an ERROR report."""
+        self._step = -1
+        deadline = time.monotonic() + self.timeout_s
+        self._deadline = deadline
+        try:
+            return self._walk(scene, plan, (), deadline, explain=False, until_definite=False)
+        finally:
+            for pending in self._pending:
+                pending.cancel()
+            self._pending = []
+
     # ------------------------------------------------------------------ protocol
     def _verify(
         self,
@@ -139,6 +166,34 @@ class Verifier:
     ) -> Report:
         deadline = time.monotonic() + self.timeout_s
         self._deadline = deadline
+        walk = self._walk(
+            scene, plan, requirements, deadline, explain=self.explain, until_definite=True
+        )
+        return build_report(
+            plan,
+            walk.trace,
+            walk.findings,
+            walk.first_definite,
+            scene.spelling,
+            checked=walk.checked,
+            rules=len(self.always) + len(self.final),
+            scenario=self.tbox.scenario,
+            engine=self.engine.name,
+        )
+
+    def _walk(
+        self,
+        scene: Scene,
+        plan: Sequence[PlanStep],
+        requirements: Sequence[Requirement | Unreadable],
+        deadline: float,
+        *,
+        explain: bool,
+        until_definite: bool,
+    ) -> Walk:
+        """The protocol's one loop: simulate the plan, classify each step's
+        snapshot, place each finding at its step (an action's at the action),
+        and stop at the first definite finding when ``until_definite``."""
         explainer = Explainer(self.engine, self.vocab, deadline, self._tick)
         trace = simulate(self.sim, self.sim.initial(scene), plan)
         states, resolved, stop = trace.states, trace.resolved, trace.stop
@@ -192,7 +247,7 @@ class Verifier:
                         continue
                     seen.add(key)
                     # Final findings need their facts for the onset, even in batch runs.
-                    full = self.explain or phase == "final"
+                    full = explain or phase == "final"
                     f = explainer.finding(usc, ind, at, phase, snapshot, full=full)
                     if phase == "final":
                         # A hazard left behind belongs to the end of the plan.
@@ -205,20 +260,11 @@ class Verifier:
             # Step k is complete once snapshot k is in (its action findings came from k-1).
             done = [s for s in findings if s <= k or (stop is not None and k == n)]
             definite = [s for s in done if any(f.definite for f in findings[s])]
-            if definite:
+            if definite and first_definite is None:
                 first_definite = min(definite)
+            if first_definite is not None and until_definite:
                 break
-        return build_report(
-            plan,
-            trace,
-            findings,
-            first_definite,
-            scene.spelling,
-            checked=checked,
-            rules=len(self.always) + len(self.final),
-            scenario=self.tbox.scenario,
-            engine=self.engine.name,
-        )
+        return Walk(trace, findings, first_definite, checked)
 
     def _snapshot(self, trace: Trace, k: int) -> dict[Fact, Provenance]:
         """State k, its closure facts, and action k+1 (the one-step lookahead)."""
