@@ -1,0 +1,59 @@
+"""``virf serve``: the Logic Tutor as an HTTP service."""
+
+from __future__ import annotations
+
+import os
+from typing import Annotated
+
+import typer
+
+from virf.cli.app import EngineOpt, KbOpt, ScenarioOpt
+from virf.errors import InputError
+
+LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
+
+
+def serve(
+    host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
+    port: Annotated[int, typer.Option(min=0, max=65535, help="TCP port (0: any free one).")] = 8000,
+    workers: Annotated[
+        int, typer.Option(min=1, max=64, help="Processes, each with its own warm tutor.")
+    ] = 1,
+    scenario: ScenarioOpt = "kitchen",
+    engine: EngineOpt = "fast",
+    kb: KbOpt = None,
+    api_key: Annotated[
+        str | None,
+        typer.Option(
+            envvar="VIRF_API_KEY",
+            help="Key clients send in the X-API-Key header (default $VIRF_API_KEY). Without "
+            "one the service listens on this machine only.",
+        ),
+    ] = None,
+) -> None:
+    """Serve POST /v1/verify, GET /v1/rules and GET /v1/health (OpenAPI docs at /docs)."""
+    import uvicorn
+
+    if api_key is None and host not in LOCAL_HOSTS:
+        raise InputError(
+            f"--host {host} without an API key would let anyone verify through this machine; "
+            "set --api-key or VIRF_API_KEY, or keep --host 127.0.0.1"
+        )
+    if api_key is None:
+        typer.echo("no API key: listening on this machine only", err=True)
+    # Each worker process builds its own app (and tutor) from these settings.
+    os.environ["VIRF_SERVE_SETTINGS"] = repr((scenario, engine, str(kb) if kb else None, api_key))
+    if workers == 1:
+        from virf.service.app import create_app
+
+        app = create_app(scenario=scenario, engine=engine, kb=kb, api_key=api_key)
+        uvicorn.run(app, host=host, port=port, log_level="warning")
+    else:
+        uvicorn.run(
+            "virf.service.app:app_from_environment",
+            factory=True,
+            host=host,
+            port=port,
+            workers=workers,
+            log_level="warning",
+        )

@@ -1,0 +1,177 @@
+"""The HTTP service: ``POST /v1/verify``, ``GET /v1/rules``, ``GET /v1/health``.
+
+The tutor is loaded once per process and kept warm; a request costs one
+verification.  ``/v1/verify`` answers with exactly the JSON ``virf verify
+--json`` prints for the same scene and plan, byte for byte.  Errors a client
+can fix are 4xx with one line, ``{"status": "BAD_INPUT", "error": "..."}``,
+the shape of the CLI's JSON errors; what the service cannot do is 5xx.  A
+verification that fails (a timeout, a reasoner failure) is an ERROR report,
+never SAFE.
+
+Handlers are plain functions, run in FastAPI's thread pool; a verifier is not
+safe to share between threads, so each tutor verifies one request at a time
+(the work is CPU-bound: more threads would not make it faster, more
+processes do, ``--workers``).
+"""
+
+from __future__ import annotations
+
+import hmac
+import threading
+from collections.abc import Awaitable, Callable
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any, Final
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse, Response
+from pydantic import BaseModel, ConfigDict
+
+from virf.api import LogicTutor
+from virf.errors import EnvironmentProblem, InputError, VirfError
+from virf.ontology.tbox import DEFAULT_SCENARIO
+from virf.world.plan import parse_plan, parse_plan_text
+
+# A scene of MAX_INSTANCES objects with their relations is far below this.
+MAX_REQUEST_BYTES: Final = 8 * 1024 * 1024
+API_KEY_HEADER: Final = "x-api-key"
+
+
+class VerifyRequest(BaseModel):
+    """``POST /v1/verify``: a scene (the scene-file JSON) and a plan (a list
+    of action lines, or the text of a plan file)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
+
+    scene: dict[str, Any]
+    plan: list[str] | str
+    scenario: str | None = None
+    engine: str | None = None
+
+
+def _problem(status: int, message: str, kind: str = "BAD_INPUT") -> JSONResponse:
+    return JSONResponse({"status": kind, "error": message}, status_code=status)
+
+
+class Tutors:
+    """One warm tutor per (scenario, engine), each verifying one request at a time."""
+
+    def __init__(self, scenario: str, engine: str, kb: Path | None, timeout_s: float) -> None:
+        self.scenario, self.engine, self.kb, self.timeout_s = scenario, engine, kb, timeout_s
+        self._tutors: dict[tuple[str, str], tuple[LogicTutor, threading.Lock]] = {}
+        self._lock = threading.Lock()
+
+    def get(self, scenario: str | None, engine: str | None) -> tuple[LogicTutor, threading.Lock]:
+        key = (scenario or self.scenario, engine or self.engine)
+        with self._lock:
+            found = self._tutors.get(key)
+            if found is None:
+                tutor = LogicTutor(key[0], key[1], timeout_s=self.timeout_s, kb=self.kb)
+                found = self._tutors[key] = (tutor, threading.Lock())
+            return found
+
+
+def create_app(
+    *,
+    scenario: str = DEFAULT_SCENARIO,
+    engine: str = "fast",
+    kb: Path | None = None,
+    api_key: str | None = None,
+    timeout_s: float = 120.0,
+) -> FastAPI:
+    """The service; the default tutor loads here, so a bad option fails at start."""
+    tutors = Tutors(scenario, engine, kb, timeout_s)
+    default, _ = tutors.get(None, None)
+    app = FastAPI(
+        title="VIRF Logic Tutor",
+        summary="Verify robot task plans against an OWL 2 DL safety ontology.",
+        version="1",
+    )
+
+    @app.middleware("http")
+    async def guard(
+        request: Request, call_next: Callable[[Request], Awaitable[Response]]
+    ) -> Response:
+        if api_key is not None and request.url.path.startswith("/v1/"):
+            given = request.headers.get(API_KEY_HEADER) or request.headers.get(
+                "authorization", ""
+            ).removeprefix("Bearer ")
+            if not hmac.compare_digest(given.encode(), api_key.encode()):
+                return _problem(
+                    401, f"missing or wrong API key: send it in the {API_KEY_HEADER} header"
+                )
+        if request.method == "POST":
+            length = request.headers.get("content-length")
+            if length is None:
+                return _problem(411, "send the request with a Content-Length header")
+            if not length.isdigit() or int(length) > MAX_REQUEST_BYTES:
+                return _problem(413, f"request body larger than {MAX_REQUEST_BYTES // 2**20} MiB")
+        return await call_next(request)
+
+    @app.exception_handler(RequestValidationError)
+    async def bad_body(request: Request, exc: RequestValidationError) -> JSONResponse:
+        first = exc.errors()[0]
+        where = ".".join(str(p) for p in first["loc"] if p != "body") or "the request body"
+        if first["type"] == "json_invalid":
+            return _problem(400, "the request body is not valid JSON")
+        if first["type"] == "missing":
+            return _problem(400, f"the request body needs '{where}'")
+        if first["type"] == "extra_forbidden":
+            return _problem(400, f"unknown key '{where}'; expected scene, plan, scenario, engine")
+        return _problem(400, f"{where}: {first['msg']}")
+
+    @app.exception_handler(VirfError)
+    async def virf_error(request: Request, exc: VirfError) -> JSONResponse:
+        if isinstance(exc, EnvironmentProblem):
+            return _problem(503, str(exc), "ERROR")
+        return _problem(400, str(exc))
+
+    @app.exception_handler(Exception)
+    async def internal(request: Request, exc: Exception) -> JSONResponse:
+        return _problem(500, f"internal error: {type(exc).__name__}", "ERROR")
+
+    @app.post("/v1/verify")
+    def verify(body: VerifyRequest) -> Response:
+        """Verify a plan in a scene: the report ``virf verify --json`` prints."""
+        steps = parse_plan_text(body.plan) if isinstance(body.plan, str) else parse_plan(body.plan)
+        if not steps:
+            raise InputError("plan has no actions (only blank lines or comments)")
+        tutor, lock = tutors.get(body.scenario, body.engine)
+        scene = tutor.scene(body.scene)
+        with lock:
+            report = tutor.verifier.verify(scene, steps)
+        return Response(report.to_json() + "\n", media_type="application/json")
+
+    @app.get("/v1/rules")
+    def rules() -> list[dict[str, Any]]:
+        """The Unsafe State Concepts of the default scenario (``virf kb rules --json``)."""
+        uscs = sorted(default.tbox.vocabulary.uscs.values(), key=lambda u: (u.module, u.id))
+        return [asdict(u) for u in uscs]
+
+    @app.get("/v1/health")
+    def health() -> dict[str, Any]:
+        """Ready: the knowledge base is loaded (from its checked artifact, or compiled)."""
+        tbox = default.tbox
+        return {
+            "status": "ready",
+            "scenario": tbox.scenario,
+            "engine": default.engine.name,
+            "rules": len(tbox.vocabulary.uscs),
+            "knowledge": tbox.source,
+            "kb": str(kb) if kb is not None else None,
+        }
+
+    return app
+
+
+def app_from_environment() -> FastAPI:
+    """The app of one ``virf serve --workers N`` process, from the settings the
+    command left in the environment (uvicorn starts workers by import path)."""
+    import ast
+    import os
+
+    scenario, engine, kb, api_key = ast.literal_eval(os.environ["VIRF_SERVE_SETTINGS"])
+    return create_app(
+        scenario=scenario, engine=engine, kb=Path(kb) if kb else None, api_key=api_key
+    )

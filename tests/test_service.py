@@ -1,0 +1,121 @@
+"""The HTTP service: the same report as the CLI, byte for byte; one-line 4xx
+errors for what a client can fix; never SAFE when verification fails."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+from click.testing import Result
+from conftest import EXAMPLES_DIR
+from fastapi.testclient import TestClient
+
+from virf.service.app import MAX_REQUEST_BYTES, create_app
+
+WALK = EXAMPLES_DIR / "walkthrough"
+
+
+@pytest.fixture(scope="module")
+def client() -> TestClient:
+    return TestClient(create_app())
+
+
+def body(case: Path, **extra: object) -> dict[str, object]:
+    return {
+        "scene": json.loads((case / "scene.json").read_text()),
+        "plan": (case / "plan.txt").read_text(),
+        **extra,
+    }
+
+
+@pytest.mark.parametrize("case", ["walkthrough", "safe-fridge", "unknown-material-microwave"])
+def test_verify_answers_what_the_cli_prints(
+    client: TestClient, cli: Callable[..., Result], case: str
+) -> None:
+    folder = EXAMPLES_DIR / case
+    printed = cli("verify", folder / "scene.json", folder / "plan.txt", "--json").output
+    got = client.post("/v1/verify", json=body(folder))
+    assert got.status_code == 200
+    assert got.headers["content-type"] == "application/json"
+    assert got.text == printed
+    # A plan given as a list of lines is the same plan.
+    text = (folder / "plan.txt").read_text()
+    lines = json.loads(text) if text.lstrip().startswith("[") else text.splitlines()
+    again = client.post("/v1/verify", json={**body(folder), "plan": lines})
+    assert again.text == printed
+
+
+def test_the_walkthrough_is_unsafe_at_step_7(client: TestClient) -> None:
+    report = client.post("/v1/verify", json=body(WALK)).json()
+    assert (report["status"], report["dangerous_step"]) == ("UNSAFE", 7)
+
+
+@pytest.mark.parametrize(
+    ("request_body", "status", "message"),
+    [
+        ({"plan": "find Egg"}, 400, "the request body needs 'scene'"),
+        ({"scene": {}, "plan": "find Egg", "colour": 1}, 400, "unknown key 'colour'"),
+        ({"scene": {"instances": [], "assertions": []}, "plan": ""}, 400, "plan has no actions"),
+        (
+            {"scene": {"instances": [], "assertions": []}, "plan": "fly Egg"},
+            400,
+            "unknown action 'fly'",
+        ),
+        ({"scene": {"instances": 3}, "plan": "find Egg"}, 400, "instances"),
+        (
+            {"scene": {"instances": [], "assertions": []}, "plan": "find Egg", "engine": "magic"},
+            400,
+            "magic",
+        ),
+    ],
+)
+def test_bad_requests_are_one_line_4xx(
+    client: TestClient, request_body: dict[str, object], status: int, message: str
+) -> None:
+    got = client.post("/v1/verify", json=request_body)
+    assert got.status_code == status, got.text
+    error = got.json()
+    assert error["status"] == "BAD_INPUT" and message in error["error"]
+    assert "\n" not in error["error"]
+
+
+def test_limits(client: TestClient) -> None:
+    huge = client.post(
+        "/v1/verify",
+        content=b"{}",
+        headers={"content-type": "application/json", "content-length": str(MAX_REQUEST_BYTES + 1)},
+    )
+    assert huge.status_code == 413
+    broken = client.post(
+        "/v1/verify", content=b"{not json", headers={"content-type": "application/json"}
+    )
+    assert broken.status_code == 400 and "not valid JSON" in broken.json()["error"]
+
+
+def test_a_failed_verification_is_an_error_report_never_safe() -> None:
+    slow = TestClient(create_app(timeout_s=1e-9))
+    report = slow.post("/v1/verify", json=body(WALK)).json()
+    assert report["status"] == "ERROR" and "timed out" in report["reason"]
+
+
+def test_the_api_key_is_required_when_set() -> None:
+    keyed = TestClient(create_app(api_key="s3cret-key"))
+    assert keyed.get("/v1/health").status_code == 401
+    assert keyed.get("/v1/health", headers={"x-api-key": "wrong"}).status_code == 401
+    ok = keyed.get("/v1/health", headers={"authorization": "Bearer s3cret-key"})
+    assert ok.status_code == 200 and ok.json()["status"] == "ready"
+    assert keyed.get("/docs").status_code == 200  # the docs themselves are not secret
+
+
+def test_rules_and_health(client: TestClient, cli: Callable[..., Result]) -> None:
+    rules = client.get("/v1/rules").json()
+    assert rules == json.loads(cli("kb", "rules", "--json").output)
+    health = client.get("/v1/health").json()
+    assert health["status"] == "ready" and health["rules"] == len(rules)
+
+
+def test_serve_refuses_a_public_address_without_a_key(cli: Callable[..., Result]) -> None:
+    got = cli("serve", "--host", "0.0.0.0", env={"VIRF_API_KEY": None})
+    assert got.exit_code == 2 and "without an API key" in got.output
