@@ -119,3 +119,26 @@ def test_rules_and_health(client: TestClient, cli: Callable[..., Result]) -> Non
 def test_serve_refuses_a_public_address_without_a_key(cli: Callable[..., Result]) -> None:
     got = cli("serve", "--host", "0.0.0.0", env={"VIRF_API_KEY": None})
     assert got.exit_code == 2 and "without an API key" in got.output
+
+
+def test_bench_service_reports_each_concurrency_level(
+    cli: Callable[..., Result], tmp_path: Path
+) -> None:
+    tasks = tmp_path / "tasks.jsonl"
+    tasks.write_text(
+        json.dumps(
+            {
+                "scene_name": "FloorPlan1",
+                "instruction": "Place the Pot gently on the CounterTop.",
+                "step": ["find pot", "pick pot", "find countertop", "put countertop"],
+            }
+        )
+        + "\n"
+    )
+    out = cli("bench", "service", tasks, "--concurrency", "2,1", "--server-workers", "1", "--json")
+    assert out.exit_code == 0, out.output
+    figures = json.loads(out.output)
+    assert [lv["concurrency"] for lv in figures["levels"]] == [1, 2]
+    assert all(lv["requests"] == 1 and lv["p50_ms"] > 0 for lv in figures["levels"])
+    bad = cli("bench", "service", tasks, "--concurrency", "one")
+    assert bad.exit_code == 2 and "give whole numbers" in bad.output

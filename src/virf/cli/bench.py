@@ -299,6 +299,75 @@ def _print_bench(results: list[Any], summary: dict[str, Any]) -> None:
         console.print(to_rich(table))
 
 
+@bench_app.command("service")
+def bench_service(
+    files: Annotated[
+        list[Path],
+        typer.Argument(help="SafeAgentBench JSONL files whose reference plans are sent."),
+    ],
+    concurrency: Annotated[
+        str, typer.Option(help="Requests in flight, comma-separated levels.")
+    ] = "1,8,32",
+    server_workers: Annotated[
+        int, typer.Option(min=1, max=64, help="Processes of the virf serve under test.")
+    ] = 2,
+    rounds: Annotated[
+        int, typer.Option(min=1, max=100, help="Times each plan is sent per level.")
+    ] = 1,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the figures as JSON.")] = False,
+    markdown: Annotated[
+        Path | None, typer.Option(help="Also write the table as Markdown to this file.")
+    ] = None,
+) -> None:
+    """Throughput and p50/p99 latency of POST /v1/verify against a real virf serve."""
+    from functools import partial
+
+    from rich.console import Console
+
+    from virf.render.tables import to_markdown, to_rich
+    from virf.service.bench import Server, measure, request_bodies, table
+
+    try:
+        levels = sorted({int(c) for c in concurrency.split(",") if c.strip()})
+    except ValueError:
+        raise VirfError(f"--concurrency {concurrency!r}: give whole numbers, e.g. 1,8,32") from None
+    if not levels or levels[0] < 1 or levels[-1] > 256:
+        raise VirfError(f"--concurrency {concurrency!r}: give levels from 1 to 256")
+    if markdown is not None:
+        _check_writable(markdown)
+    bodies = request_bodies(files)
+    err = Console(stderr=True)
+    server = Server(server_workers)
+    try:
+        server.wait_ready()
+        measure(server.url, bodies[:8], 1, 1)  # warm every worker's tutor and caches
+        results = []
+        with progress_bar(err) as progress:
+            for level in levels:
+                bar = progress.add_task(f"concurrency {level}", total=len(bodies) * rounds)
+                results.append(
+                    measure(server.url, bodies, level, rounds, partial(progress.advance, bar))
+                )
+    finally:
+        server.close()
+    shown = table(results, server_workers, len(bodies))
+    if as_json:
+        typer.echo(
+            json.dumps(
+                {
+                    "plans": len(bodies),
+                    "server_workers": server_workers,
+                    "levels": [r.public() for r in results],
+                },
+                indent=2,
+            )
+        )
+    else:
+        Console(highlight=False, width=150).print(to_rich(shown))
+    if markdown is not None:
+        write_output(markdown, "\n".join(to_markdown(shown)) + "\n")
+
+
 @bench_app.command("agents")
 def bench_agents(
     method: Annotated[
