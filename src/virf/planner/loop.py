@@ -83,6 +83,21 @@ class Turn:
     data: Mapping[str, Any] | None = None
 
 
+class Transcript(list[Turn]):
+    """The dialogue as it grows: each turn is also handed to ``on_turn`` (a
+    service streams the run to its client as it happens)."""
+
+    def __init__(self, first: Turn, on_turn: Callable[[Turn], None] | None = None) -> None:
+        super().__init__()
+        self._on_turn = on_turn
+        self.append(first)
+
+    def append(self, turn: Turn) -> None:
+        super().append(turn)
+        if self._on_turn is not None:
+            self._on_turn(turn)
+
+
 @dataclass(frozen=True)
 class LoopResult:
     outcome: Outcome
@@ -127,6 +142,7 @@ def refine(
     feedback: Callable[[Report], str] = feedback_prompt,
     read: Callable[[str], ReadPlan] = read_plan,
     deadline: Deadline | None = None,
+    on_turn: Callable[[Turn], None] | None = None,
 ) -> LoopResult:
     """Run Algorithm 1 for one instruction in one scene.
 
@@ -134,7 +150,8 @@ def refine(
     (the paper's diagnostic template by default; VIRF-Reject's generic
     message for that ablation). ``prompt_suffix`` and ``read`` let a method
     ask for reasoning before the plan and read the plan after it.
-    ``deadline`` bounds the run: when it passes, the task is rejected."""
+    ``deadline`` bounds the run: when it passes, the task is rejected.
+    ``on_turn`` sees each turn of the transcript as it is added."""
     if max_iter < 1:
         raise ValueError("max_iter must be at least 1")
     data = dict(scene_data)
@@ -144,7 +161,7 @@ def refine(
         {"role": "system", "content": SYSTEM},
         {"role": "user", "content": prompt},
     ]
-    log: list[Turn] = [Turn(0, "user", "instruction", instruction)]
+    log: list[Turn] = Transcript(Turn(0, "user", "instruction", instruction), on_turn)
     plan: tuple[PlanStep, ...] | None = None  # the plan under verification
     reply = ""
     for i in range(max_iter):

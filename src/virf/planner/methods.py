@@ -35,7 +35,7 @@ from virf.errors import InputError, closest
 from virf.ontology.tbox import UnsafeStateConcept, Vocabulary
 from virf.planner.apprentices import Apprentice
 from virf.planner.deadline import Deadline
-from virf.planner.loop import SYSTEM, LoopResult, Outcome, Turn, Tutor, refine
+from virf.planner.loop import SYSTEM, LoopResult, Outcome, Transcript, Turn, Tutor, refine
 from virf.planner.prompting import (
     REFUSAL,
     ReadPlan,
@@ -125,6 +125,7 @@ def run_method(
     task_id: str = "task",
     critic: Apprentice | None = None,
     deadline: Deadline | None = None,
+    on_turn: Callable[[Turn], None] | None = None,
 ) -> LoopResult:
     """Plan with ``method``; ``tutor`` must already hold the method's knowledge.
 
@@ -150,13 +151,14 @@ def run_method(
             feedback=(lambda _r: generic) if method.feedback == "reject" else feedback_prompt,
             read=read,
             deadline=deadline,
+            on_turn=on_turn,
         )
     scene = build_scene(scene_data)
     messages = [
         {"role": "system", "content": SYSTEM},
         {"role": "user", "content": apprentice_prompt(instruction, scene, rules) + suffix},
     ]
-    log = [Turn(0, "user", "instruction", instruction)]
+    log: list[Turn] = Transcript(Turn(0, "user", "instruction", instruction), on_turn)
 
     def out_of_time(i: int) -> LoopResult | None:
         if deadline is None or not deadline.expired():
