@@ -4,6 +4,7 @@ errors for what a client can fix; never SAFE when verification fails."""
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -142,3 +143,104 @@ def test_bench_service_reports_each_concurrency_level(
     assert all(lv["requests"] == 1 and lv["p50_ms"] > 0 for lv in figures["levels"])
     bad = cli("bench", "service", tasks, "--concurrency", "one")
     assert bad.exit_code == 2 and "give whole numbers" in bad.output
+
+
+# ---------------------------------------------------------------------- runs
+def _events(text: str) -> list[tuple[str, object]]:
+    out = []
+    for block in text.strip().split("\n\n"):
+        lines = dict(line.split(": ", 1) for line in block.splitlines() if not line.startswith(":"))
+        if "event" in lines:
+            out.append((lines["event"], json.loads(lines["data"])))
+    return out
+
+
+def _wait(client: TestClient, run_id: str, state: str) -> dict[str, object]:
+    for _ in range(600):
+        got = client.get(f"/v1/runs/{run_id}").json()
+        if got["state"] == state:
+            return dict(got)
+        time.sleep(0.05)
+    raise AssertionError(f"run {run_id} is {got['state']}, not {state}: {got['error']}")
+
+
+def test_a_run_streams_its_dialogue(client: TestClient) -> None:
+    folder = EXAMPLES_DIR / "dialogue"
+    started = client.post(
+        "/v1/plan",
+        json={
+            "scene": json.loads((folder / "scene.json").read_text()),
+            "instruction": (folder / "instruction.txt").read_text(),
+            "planner": f"replay:{folder / 'replay.jsonl'}",
+            "task_id": "demo-fridge",
+        },
+    )
+    assert started.status_code == 202, started.text
+    run = started.json()
+    events = _events(client.get(run["events"]).text)
+    kinds = [(kind, data["kind"] if kind == "turn" else None) for kind, data in events]  # type: ignore[index]
+    assert kinds == [
+        ("turn", "instruction"),
+        ("turn", "proposal"),
+        ("turn", "report"),
+        ("turn", "proposal"),
+        ("turn", "report"),
+        ("result", None),
+    ]
+    result = events[-1][1]
+    assert result["outcome"] == "APPROVED" and result["iterations"] == 2  # type: ignore[index]
+    assert client.get(run["run"]).json()["state"] == "done"
+
+
+def test_a_run_waits_for_answers_and_goes_on(client: TestClient, tmp_path: Path) -> None:
+    folder = EXAMPLES_DIR / "unknown-material-microwave"
+    plan = json.loads((folder / "plan.txt").read_text())
+    replay = tmp_path / "replay.jsonl"
+    replay.write_text(json.dumps({"task_id": "q", "iteration": 0, "text": "\n".join(plan)}) + "\n")
+    run = client.post(
+        "/v1/plan",
+        json={
+            "scene": json.loads((folder / "scene.json").read_text()),
+            "instruction": "Heat the cup in the microwave.",
+            "planner": f"replay:{replay}",
+            "task_id": "q",
+        },
+    ).json()
+    waiting = _wait(client, run["id"], "waiting")
+    keys = [q["key"] for q in waiting["questions"]]  # type: ignore[attr-defined]
+    assert keys == [
+        "material:Bowl_1",
+        "fill:Bowl_1",
+        "contents:contains:Bowl_1",
+        "contents:contains:Microwave_1",
+    ]
+    wrong = client.post(run["answers"], json={"answers": {"material:Plate_1": "Glass"}})
+    assert wrong.status_code == 400 and "asked no question 'material:Plate_1'" in wrong.text
+    silly = client.post(run["answers"], json={"answers": {"material:Bowl_1": "Cheese"}})
+    assert silly.status_code == 400
+    answers = dict(zip(keys, ["Glass", "yes", "yes", "yes"], strict=True))
+    ok = client.post(run["answers"], json={"answers": answers})
+    assert ok.status_code == 200, ok.text
+    done = _wait(client, run["id"], "done")
+    assert done["result"]["outcome"] == "APPROVED", done  # type: ignore[index]
+    late = client.post(run["answers"], json={"answers": answers})
+    assert late.status_code == 400 and "not waiting for answers" in late.text
+
+
+def test_run_requests_are_checked(client: TestClient) -> None:
+    scene = json.loads((EXAMPLES_DIR / "dialogue" / "scene.json").read_text())
+    nobody = client.post("/v1/plan", json={"scene": scene, "instruction": "Go."})
+    assert nobody.status_code == 400 and "no planner" in nobody.json()["error"]
+    bad = client.post(
+        "/v1/plan", json={"scene": scene, "instruction": "Go.", "planner": "oracle:x"}
+    )
+    assert bad.status_code == 400 and "unknown planner" in bad.json()["error"]
+    assert client.get("/v1/runs/nope").status_code == 404
+    replay = EXAMPLES_DIR / "dialogue" / "replay.jsonl"
+    lost = client.post(
+        "/v1/plan",
+        json={"scene": scene, "instruction": "Go.", "planner": f"replay:{replay}", "task_id": "x"},
+    ).json()
+    failed = _wait(client, lost["id"], "failed")
+    assert "has no proposal for task x" in str(failed["error"])
+    assert _events(client.get(lost["events"]).text)[-1][0] == "error"

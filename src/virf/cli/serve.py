@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -22,6 +23,15 @@ def serve(
     scenario: ScenarioOpt = "kitchen",
     engine: EngineOpt = "fast",
     kb: KbOpt = None,
+    planner: Annotated[
+        str | None,
+        typer.Option(
+            help="Apprentice for POST /v1/plan runs that name none (openai:MODEL, replay:FILE)."
+        ),
+    ] = None,
+    run_log: Annotated[
+        Path | None, typer.Option(help="SQLite run log of the runs' model calls.")
+    ] = None,
     api_key: Annotated[
         str | None,
         typer.Option(
@@ -31,7 +41,7 @@ def serve(
         ),
     ] = None,
 ) -> None:
-    """Serve POST /v1/verify, GET /v1/rules and GET /v1/health (OpenAPI docs at /docs)."""
+    """Serve the tutor over HTTP: /v1/verify, /v1/plan runs, /v1/rules, /v1/health, the page at / (OpenAPI docs at /docs)."""
     import uvicorn
 
     if api_key is None and host not in LOCAL_HOSTS:
@@ -42,11 +52,26 @@ def serve(
     if api_key is None:
         typer.echo("no API key: listening on this machine only", err=True)
     # Each worker process builds its own app (and tutor) from these settings.
-    os.environ["VIRF_SERVE_SETTINGS"] = repr((scenario, engine, str(kb) if kb else None, api_key))
+    settings = (
+        scenario,
+        engine,
+        str(kb) if kb else None,
+        api_key,
+        planner,
+        str(run_log) if run_log else None,
+    )
+    os.environ["VIRF_SERVE_SETTINGS"] = repr(settings)
     if workers == 1:
         from virf.service.app import create_app
 
-        app = create_app(scenario=scenario, engine=engine, kb=kb, api_key=api_key)
+        app = create_app(
+            scenario=scenario,
+            engine=engine,
+            kb=kb,
+            api_key=api_key,
+            planner=planner,
+            run_log=run_log,
+        )
         uvicorn.run(app, host=host, port=port, log_level="warning")
     else:
         uvicorn.run(

@@ -25,12 +25,13 @@ from typing import Any, Final
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse, Response
+from fastapi.responses import JSONResponse, Response, StreamingResponse
 from pydantic import BaseModel, ConfigDict
 
 from virf.api import LogicTutor
 from virf.errors import EnvironmentProblem, InputError, VirfError
 from virf.ontology.tbox import DEFAULT_SCENARIO
+from virf.service.runs import AnswersRequest, PlanRequest, Runs
 from virf.world.plan import parse_plan, parse_plan_text
 
 # A scene of MAX_INSTANCES objects with their relations is far below this.
@@ -48,6 +49,10 @@ class VerifyRequest(BaseModel):
     plan: list[str] | str
     scenario: str | None = None
     engine: str | None = None
+
+
+class HttpNotFound(Exception):
+    """An id in the path names nothing: 404."""
 
 
 def _problem(status: int, message: str, kind: str = "BAD_INPUT") -> JSONResponse:
@@ -79,9 +84,15 @@ def create_app(
     kb: Path | None = None,
     api_key: str | None = None,
     timeout_s: float = 120.0,
+    planner: str | None = None,
+    run_log: Path | None = None,
+    answer_wait_s: float = 600.0,
 ) -> FastAPI:
-    """The service; the default tutor loads here, so a bad option fails at start."""
+    """The service; the default tutor loads here, so a bad option fails at start.
+    ``planner`` is the apprentice runs use unless a request names one;
+    ``run_log`` records their model calls."""
     tutors = Tutors(scenario, engine, kb, timeout_s)
+    runs = Runs(tutors, planner=planner, run_log=run_log, answer_wait_s=answer_wait_s)
     default, _ = tutors.get(None, None)
     app = FastAPI(
         title="VIRF Logic Tutor",
@@ -120,6 +131,10 @@ def create_app(
         if first["type"] == "extra_forbidden":
             return _problem(400, f"unknown key '{where}'; expected scene, plan, scenario, engine")
         return _problem(400, f"{where}: {first['msg']}")
+
+    @app.exception_handler(HttpNotFound)
+    async def not_found(request: Request, exc: HttpNotFound) -> JSONResponse:
+        return _problem(404, str(exc))
 
     @app.exception_handler(VirfError)
     async def virf_error(request: Request, exc: VirfError) -> JSONResponse:
@@ -162,6 +177,45 @@ def create_app(
             "kb": str(kb) if kb is not None else None,
         }
 
+    def known_run(run_id: str) -> Any:
+        try:
+            return runs.get(run_id)
+        except KeyError:
+            raise HttpNotFound(f"no run '{run_id[:40]}'") from None
+
+    @app.post("/v1/plan", status_code=202)
+    def plan(body: PlanRequest) -> dict[str, Any]:
+        """Start a tutor–apprentice run (as ``virf plan``); follow it with the run's URLs."""
+        run = runs.start(body)
+        return {
+            "id": run.id,
+            "state": run.state,
+            "run": f"/v1/runs/{run.id}",
+            "events": f"/v1/runs/{run.id}/events",
+            "answers": f"/v1/runs/{run.id}/answers",
+        }
+
+    @app.get("/v1/runs/{run_id}")
+    def run_state(run_id: str) -> dict[str, Any]:
+        """A run: its state (running, waiting for answers, done, failed), turns, questions, result."""
+        state: dict[str, Any] = known_run(run_id).public()
+        return state
+
+    @app.get("/v1/runs/{run_id}/events")
+    def run_events(run_id: str) -> StreamingResponse:
+        """The run as server-sent events: turn, questions, result or error."""
+        return StreamingResponse(runs.events(known_run(run_id)), media_type="text/event-stream")
+
+    @app.post("/v1/runs/{run_id}/answers")
+    def run_answers(run_id: str, body: AnswersRequest) -> dict[str, Any]:
+        """Answer the questions the run is waiting on; it goes on with them."""
+        run = known_run(run_id)
+        runs.answer(run, body.answers)
+        return {"id": run.id, "accepted": sorted(body.answers)}
+
+    from virf.service.pages import add_pages  # pages imports this module
+
+    add_pages(app, tutors)
     return app
 
 
@@ -171,7 +225,14 @@ def app_from_environment() -> FastAPI:
     import ast
     import os
 
-    scenario, engine, kb, api_key = ast.literal_eval(os.environ["VIRF_SERVE_SETTINGS"])
+    scenario, engine, kb, api_key, planner, run_log = ast.literal_eval(
+        os.environ["VIRF_SERVE_SETTINGS"]
+    )
     return create_app(
-        scenario=scenario, engine=engine, kb=Path(kb) if kb else None, api_key=api_key
+        scenario=scenario,
+        engine=engine,
+        kb=Path(kb) if kb else None,
+        api_key=api_key,
+        planner=planner,
+        run_log=Path(run_log) if run_log else None,
     )

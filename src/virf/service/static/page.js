@@ -1,0 +1,745 @@
+// The VIRF service page: verify a scene and plan, draw the state at the
+// dangerous step, answer open questions, browse the rules.  Plain DOM code,
+// no framework and no build step, so the page works offline from the wheel.
+"use strict";
+
+(() => {
+  const byId = (id) => document.querySelector(`[data-testid="${id}"]`);
+  const SVG = "http://www.w3.org/2000/svg";
+  const KEY_STORE = "virf-api-key";
+  // Phases whose finding is about the state before the step's action (the
+  // snapshot that carries the action about to happen), not the state after it.
+  const BEFORE_ACTION = new Set(["action", "precondition", "missing-object"]);
+  // Question kinds an answer turns into scene data (virf.planner.questions.SETTLEABLE).
+  const SETTLEABLE = new Set(["material", "fill", "contents", "confirm", "which", "where", "contradiction"]);
+
+  // What the current report was made from: drawing a state or answering a
+  // question must use these, not whatever the text boxes hold by now.
+  let current = null;
+  let rules = null;
+  let ruleShown = null;
+  // Responses that arrive after a newer request was sent are dropped.
+  let verifySeq = 0;
+  let stateSeq = 0;
+
+  // ------------------------------------------------------------ helpers
+  function el(tag, attrs, ...children) {
+    const node = document.createElement(tag);
+    for (const [name, value] of Object.entries(attrs || {})) {
+      if (value === null || value === undefined || value === false) continue;
+      if (name === "class") node.className = value;
+      else if (name === "text") node.textContent = value;
+      else node.setAttribute(name, value === true ? "" : String(value));
+    }
+    for (const child of children) {
+      if (child === null || child === undefined) continue;
+      node.append(child instanceof Node ? child : document.createTextNode(String(child)));
+    }
+    return node;
+  }
+
+  function svgEl(tag, attrs) {
+    const node = document.createElementNS(SVG, tag);
+    for (const [name, value] of Object.entries(attrs || {})) {
+      if (value === null || value === undefined) continue;
+      node.setAttribute(name, String(value));
+    }
+    return node;
+  }
+
+  function showError(message) {
+    byId("error-text").textContent = message;
+    byId("error-banner").hidden = false;
+  }
+
+  function clearError() {
+    byId("error-banner").hidden = true;
+    byId("error-text").textContent = "";
+  }
+
+  class ApiError extends Error {}
+
+  async function api(method, path, body) {
+    const headers = { Accept: "application/json" };
+    const key = byId("api-key").value.trim();
+    if (key) headers["X-API-Key"] = key;
+    if (body !== undefined) headers["Content-Type"] = "application/json";
+    let response;
+    try {
+      response = await fetch(path, {
+        method,
+        headers,
+        body: body === undefined ? undefined : JSON.stringify(body),
+      });
+    } catch (exc) {
+      throw new ApiError(`the server did not answer (${exc.message})`);
+    }
+    let data = null;
+    try {
+      data = await response.json();
+    } catch (exc) {
+      data = null;
+    }
+    if (!response.ok) {
+      const said = data && (data.error || (typeof data.detail === "string" ? data.detail : null));
+      throw new ApiError(said || `${response.status} ${response.statusText} from ${path}`);
+    }
+    return data;
+  }
+
+  const factText = (f) => `${f.subject} ${f.predicate} ${f.object}`;
+  const factKey = (f) => `${f.subject}\u0000${f.predicate}\u0000${f.object}`;
+  const stateOf = (v) => (BEFORE_ACTION.has(v.phase) ? Math.max(0, v.step - 1) : v.step);
+
+  function busy(on) {
+    byId("busy").hidden = !on;
+    byId("verify-button").disabled = on;
+  }
+
+  // ------------------------------------------------------------ tabs
+  function showTab(name) {
+    for (const tab of document.querySelectorAll(".tab")) {
+      tab.setAttribute("aria-selected", String(tab.dataset.tab === name));
+    }
+    for (const panel of document.querySelectorAll(".panel")) {
+      panel.hidden = panel.dataset.panel !== name;
+    }
+    if (name === "rules") loadRules();
+  }
+
+  // ------------------------------------------------------------ examples
+  async function loadExamples() {
+    const select = byId("example-select");
+    let examples = [];
+    try {
+      examples = await api("GET", "/v1/examples");
+    } catch (exc) {
+      showError(exc.message);
+      return;
+    }
+    select.replaceChildren();
+    if (!examples.length) {
+      select.append(el("option", { value: "", text: "(no bundled examples on this server)" }));
+      select.disabled = true;
+      return;
+    }
+    select.disabled = false;
+    select.append(el("option", { value: "", text: "(choose a bundled example)" }));
+    for (const ex of examples) {
+      select.append(el("option", { value: ex.name, title: ex.description, text: ex.name }));
+    }
+  }
+
+  async function pickExample() {
+    const name = byId("example-select").value;
+    byId("example-description").textContent = "";
+    if (!name) return;
+    clearError();
+    try {
+      const ex = await api("GET", `/v1/examples/${encodeURIComponent(name)}`);
+      byId("scene-input").value = JSON.stringify(ex.scene, null, 2);
+      byId("plan-input").value = ex.plan;
+      byId("example-description").textContent = ex.description;
+    } catch (exc) {
+      showError(exc.message);
+    }
+  }
+
+  async function readFileInto(input, target) {
+    const file = input.files && input.files[0];
+    if (!file) return;
+    try {
+      byId(target).value = await file.text();
+      byId("example-select").value = "";
+      byId("example-description").textContent = "";
+    } catch (exc) {
+      showError(`could not read ${file.name}: ${exc.message}`);
+    }
+  }
+
+  // ------------------------------------------------------------ verify
+  function readInputs() {
+    const sceneText = byId("scene-input").value;
+    const plan = byId("plan-input").value;
+    if (!sceneText.trim()) throw new ApiError("paste or upload a scene (JSON) first");
+    if (!plan.trim()) throw new ApiError("paste or upload a plan first");
+    let scene;
+    try {
+      scene = JSON.parse(sceneText);
+    } catch (exc) {
+      throw new ApiError(`the scene is not valid JSON: ${exc.message}`);
+    }
+    if (scene === null || typeof scene !== "object" || Array.isArray(scene)) {
+      throw new ApiError("the scene must be a JSON object with instances and assertions");
+    }
+    return { scene, plan };
+  }
+
+  async function verify(keepNotice) {
+    clearError();
+    if (!keepNotice) byId("answers-notice").hidden = true;
+    let input;
+    try {
+      input = readInputs();
+    } catch (exc) {
+      showError(exc.message);
+      return;
+    }
+    const seq = ++verifySeq;
+    busy(true);
+    try {
+      const report = await api("POST", "/v1/verify", input);
+      if (seq !== verifySeq) return;
+      current = { ...input, report };
+      renderReport(report);
+      await drawState(defaultState(report));
+    } catch (exc) {
+      if (seq === verifySeq) showError(exc.message);
+    } finally {
+      if (seq === verifySeq) busy(false);
+    }
+  }
+
+  // The state to draw first: the dangerous step's, else the plan's last.
+  function defaultState(report) {
+    const lead =
+      report.violations.find((v) => v.step === report.dangerous_step && v.definite) ||
+      report.violations.find((v) => v.step === report.dangerous_step) ||
+      report.violations[0];
+    if (lead) return stateOf(lead);
+    const simulated = report.trace.filter((t) => t.outcome !== "not-simulated").length;
+    return report.status === "SAFE" ? simulated : 0;
+  }
+
+  function renderReport(report) {
+    byId("result").hidden = false;
+    const verdict = byId("verdict");
+    verdict.textContent = report.status;
+    verdict.dataset.status = report.status;
+    byId("reason").textContent = report.reason;
+    renderTrace(report);
+    renderQuestions(report);
+    renderViolations(report);
+    const suggestion = report.suggestion || "";
+    byId("suggestion").textContent = suggestion;
+    byId("suggestion-box").hidden = !suggestion;
+  }
+
+  function renderTrace(report) {
+    const body = byId("trace").querySelector("tbody");
+    body.replaceChildren();
+    const rows = [
+      { step: 0, action: "(the scene before the plan)", outcome: "", findings: [], added: [], removed: [] },
+      ...report.trace,
+    ];
+    for (const t of rows) {
+      const dangerous = t.step === report.dangerous_step;
+      const changes = [...t.added.map((a) => `+ ${a}`), ...t.removed.map((r) => `− ${r}`)];
+      const row = el(
+        "tr",
+        {
+          "data-testid": "trace-step",
+          "data-step": t.step,
+          "data-outcome": t.outcome,
+          "data-dangerous": dangerous ? "true" : "false",
+          class: dangerous ? `dangerous ${report.status === "UNKNOWN" ? "unknown" : ""}` : "",
+          title: t.outcome === "not-simulated" ? "not simulated: no state to draw" : "draw this state",
+        },
+        el("td", { text: String(t.step) }),
+        el("td", { class: "mono", text: t.action }),
+        el("td", { class: `outcome-${t.outcome}` }, t.outcome, ...t.findings.map((f) => el("div", { class: "finding" }, ...camelBreaks(f)))),
+        el("td", { class: "changes", text: changes.join("\n") }),
+      );
+      row.style.whiteSpace = "pre-line";
+      if (t.outcome !== "not-simulated") {
+        row.addEventListener("click", () => drawState(stateForRow(report, t.step)));
+      }
+      body.append(row);
+    }
+  }
+
+  // A rule's CamelCase name with line-break chances between its words, so a
+  // narrow column wraps it between words rather than inside one.
+  function camelBreaks(name) {
+    const parts = name.split(/(?=[A-Z][a-z])/);
+    return parts.flatMap((p, i) => (i ? [document.createElement("wbr"), p] : [p]));
+  }
+
+  // A row's findings decide which snapshot shows them; otherwise the state after the step.
+  function stateForRow(report, step) {
+    const here = report.violations.find((v) => v.step === step);
+    return here ? stateOf(here) : step;
+  }
+
+  function factList(facts, testid) {
+    return el("ul", {}, ...facts.map((f) => el("li", { "data-testid": testid, class: "mono", text: factText(f) })));
+  }
+
+  function renderViolations(report) {
+    const box = byId("violations");
+    box.replaceChildren();
+    byId("no-violations").hidden = report.violations.length > 0;
+    report.violations.forEach((v, i) => {
+      const openRule = el("button", { type: "button", class: "linkish small", "data-testid": "open-rule", text: "rule ›" });
+      openRule.addEventListener("click", () => {
+        showTab("rules");
+        selectRuleWhenLoaded(v.id);
+      });
+      const card = el(
+        "div",
+        {
+          class: `violation ${v.definite ? "" : "possible"}`,
+          "data-testid": "violation",
+          "data-id": v.id,
+          "data-index": i,
+        },
+        el("h3", {}, el("span", { "data-testid": "violation-rule", text: v.id }), " ", openRule),
+        el(
+          "div",
+          { class: "meta" },
+          el("span", { class: "badge", "data-testid": "violation-category", text: v.category }),
+          el("span", { class: `badge ${v.danger_level}`, "data-testid": "violation-danger", text: `danger: ${v.danger_level}` }),
+          el("span", { class: "badge", text: `step ${v.step} · ${v.phase}` }),
+          el("span", { class: "badge", text: v.definite ? "definite" : "possible" }),
+        ),
+        el("div", { "data-testid": "violation-message", text: v.message }),
+      );
+      if (v.triggering_facts.length) {
+        card.append(el("div", { class: "label", text: "Triggering facts" }), factList(v.triggering_facts, "trigger-fact"));
+      }
+      if (v.assumed_facts.length) {
+        card.append(el("div", { class: "label", text: "Assumed facts (not known)" }), factList(v.assumed_facts, "assumed-fact"));
+      }
+      if (v.as_written.length) {
+        card.append(el("div", { class: "label", text: "As the scene wrote them" }), factList(v.as_written, "as-written-fact"));
+      }
+      if (v.background.length) {
+        card.append(
+          el("div", { class: "label", text: "Background knowledge" }),
+          el(
+            "ul",
+            {},
+            ...v.background.map((b) =>
+              el("li", { "data-testid": "background-axiom" }, el("span", { class: "mono", text: b.text }), el("span", { class: "src", text: ` (${b.id}; ${b.source})` })),
+            ),
+          ),
+        );
+      }
+      if (v.suggestion) {
+        card.append(el("div", { class: "label", text: "Suggestion" }), el("div", { "data-testid": "violation-suggestion", text: v.suggestion }));
+      }
+      card.append(el("div", { class: "src", text: `Source: ${v.source}` }));
+      card.addEventListener("click", (event) => {
+        if (event.target.closest("button")) return;
+        drawState(stateOf(v), i);
+      });
+      box.append(card);
+    });
+  }
+
+  // ------------------------------------------------------------ questions
+  function renderQuestions(report) {
+    const section = byId("questions");
+    const form = byId("questions-form");
+    form.replaceChildren();
+    section.hidden = report.questions.length === 0;
+    let answerable = 0;
+    for (const q of report.questions) {
+      const settleable = SETTLEABLE.has(q.kind);
+      const id = `q-${form.childElementCount}`;
+      const row = el(
+        "div",
+        { class: `question ${settleable ? "" : "readonly"}`, "data-testid": "question", "data-key": q.key, "data-kind": q.kind },
+        el("label", { class: "qtext", for: settleable ? id : null, text: q.text }),
+      );
+      if (settleable) {
+        answerable += 1;
+        let control;
+        if (q.options.length) {
+          control = el("select", { id, "data-testid": "answer", "data-key": q.key }, el("option", { value: "", text: "(leave open)" }));
+          q.options.forEach((o, i) => {
+            // A contradiction's options are facts; the server accepts their number.
+            const value = q.kind === "contradiction" ? String(i + 1) : o;
+            control.append(el("option", { value, text: o }));
+          });
+        } else {
+          control = el("input", { id, type: "text", "data-testid": "answer", "data-key": q.key, placeholder: "leave blank to keep it open" });
+        }
+        row.append(el("div", {}, control));
+      } else {
+        row.append(el("div", { class: "muted small", text: "No scene datum settles this one: the plan itself must change." }));
+      }
+      form.append(row);
+    }
+    if (answerable) {
+      form.append(el("button", { type: "submit", class: "primary", "data-testid": "answer-button", text: "Answer and verify again" }));
+    }
+  }
+
+  async function submitAnswers(event) {
+    event.preventDefault();
+    clearError();
+    if (!current) return;
+    const answers = {};
+    for (const control of byId("questions-form").querySelectorAll("[data-testid=answer]")) {
+      const value = control.value.trim();
+      if (value) answers[control.dataset.key] = value;
+    }
+    if (!Object.keys(answers).length) {
+      showError("answer at least one question (the others may stay open)");
+      return;
+    }
+    busy(true);
+    try {
+      const update = await api("POST", "/v1/apply-answers", { scene: current.scene, plan: current.plan, answers });
+      byId("scene-input").value = JSON.stringify(update.scene, null, 2);
+      byId("plan-input").value = current.plan;
+      const notice = byId("answers-notice");
+      const settled = update.applied.length ? update.applied.join(", ") : "nothing";
+      const open = update.unsettled.length ? ` Not settled by these answers: ${update.unsettled.join(", ")}.` : "";
+      notice.textContent = `Your answers settled ${settled}; the scene above now says so.${open}`;
+      notice.hidden = false;
+    } catch (exc) {
+      showError(exc.message);
+      busy(false);
+      return;
+    }
+    busy(false);
+    await verify(true);
+  }
+
+  // ------------------------------------------------------------ scene graph
+  // Draws state ``index``, highlighting the facts of its violations, or of
+  // violation number ``only`` alone.
+  async function drawState(index, only) {
+    if (!current) return;
+    const seq = ++stateSeq;
+    const { scene, plan, report } = current;
+    try {
+      const snap = await api("POST", "/v1/state", { scene, plan, step: index });
+      if (seq !== stateSeq || current.report !== report) return;
+      const chosen = only === undefined ? null : report.violations[only];
+      const highlights = chosen ? [chosen] : report.violations.filter((v) => stateOf(v) === index);
+      renderGraph(snap, highlights);
+      for (const card of byId("violations").querySelectorAll("[data-testid=violation]")) {
+        card.classList.toggle("selected", chosen !== null && Number(card.dataset.index) === only);
+      }
+      for (const row of byId("trace").querySelectorAll("tbody tr")) {
+        row.classList.toggle("shown", Number(row.dataset.step) === stateRowOf(report, index));
+      }
+    } catch (exc) {
+      if (seq === stateSeq) showError(exc.message);
+    }
+  }
+
+  // The trace row a drawn state belongs to (a before-action snapshot belongs to its action).
+  function stateRowOf(report, index) {
+    const v = report.violations.find((x) => stateOf(x) === index && BEFORE_ACTION.has(x.phase));
+    return v ? v.step : index;
+  }
+
+  function renderGraph(snap, violations) {
+    const wanted = new Map();
+    for (const v of violations) for (const f of v.triggering_facts) wanted.set(factKey(f), f);
+    const found = new Set();
+
+    // Objects are boxes: every subject of a fact. A relation between two
+    // of them is an arrow; anything else (types, states, materials, data
+    // values, closed lists) is a line inside its subject's box.
+    const nodes = new Map();
+    for (const f of snap.facts) {
+      if (!nodes.has(f.subject)) nodes.set(f.subject, { name: f.subject, types: [], attrs: [], hl: false });
+    }
+    const edges = [];
+    for (const f of snap.facts) {
+      const node = nodes.get(f.subject);
+      const key = factKey(f);
+      const hl = wanted.has(key);
+      if (hl) found.add(key);
+      const assumed = f.provenance === "assumed";
+      if (f.predicate === "rdf:type") {
+        node.types.push({ text: `is a ${f.object}`, hl, assumed, fact: f });
+      } else if (f.kind === "object" && nodes.has(f.object) && f.object !== f.subject) {
+        edges.push({ from: f.subject, to: f.object, label: f.predicate, hl, assumed, fact: f });
+        if (hl) nodes.get(f.object).hl = true;
+      } else {
+        node.attrs.push({ text: `${f.predicate} ${f.object}`, hl, assumed, fact: f });
+      }
+      if (hl) node.hl = true;
+    }
+    for (const v of violations) if (nodes.has(v.subject)) nodes.get(v.subject).hl = true;
+
+    const ordered = orderNodes(nodes, edges);
+    const CH = 7.3; // px per character of the 12px monospace font
+    const LINE = 15;
+    for (const n of ordered) {
+      const lines = [n.name, ...n.types.map((t) => t.text), ...n.attrs.map((a) => a.text)];
+      n.w = Math.ceil(Math.max(...lines.map((l) => l.length)) * CH + 16);
+      n.h = lines.length * LINE + 10;
+    }
+    const maxW = Math.max(120, ...ordered.map((n) => n.w));
+    const maxH = Math.max(40, ...ordered.map((n) => n.h));
+    // An ellipse wide enough that neighbouring boxes do not overlap.
+    const count = ordered.length;
+    const rx = count > 1 ? (maxW * count) / 4.5 + 60 : 0;
+    const ry = count > 1 ? (maxH * count) / 4.5 + 40 : 0;
+    ordered.forEach((n, i) => {
+      const angle = -Math.PI / 2 + (2 * Math.PI * i) / Math.max(1, count);
+      n.x = rx * Math.cos(angle);
+      n.y = ry * Math.sin(angle);
+    });
+    const pad = 24;
+    const minX = Math.min(...ordered.map((n) => n.x - n.w / 2)) - pad;
+    const maxX = Math.max(...ordered.map((n) => n.x + n.w / 2)) + pad;
+    const minY = Math.min(...ordered.map((n) => n.y - n.h / 2)) - pad;
+    const maxY = Math.max(...ordered.map((n) => n.y + n.h / 2)) + pad;
+    const width = Math.max(200, maxX - minX);
+    const height = Math.max(120, maxY - minY);
+
+    const svg = svgEl("svg", {
+      viewBox: `${minX} ${minY} ${width} ${height}`,
+      width: Math.round(width),
+      height: Math.round(height),
+      role: "img",
+      "aria-label": `Scene graph of state ${snap.step}`,
+      "data-testid": "graph-svg",
+    });
+    const defs = svgEl("defs");
+    for (const [id, colour] of [["arrow", "#8a96a3"], ["arrow-hl", "#d6336c"], ["arrow-assumed", "#9a6200"]]) {
+      const marker = svgEl("marker", { id, viewBox: "0 0 10 10", refX: 10, refY: 5, markerWidth: 7, markerHeight: 7, orient: "auto-start-reverse" });
+      marker.append(svgEl("path", { d: "M0,0 L10,5 L0,10 z", fill: colour }));
+      defs.append(marker);
+    }
+    svg.append(defs);
+
+    const byName = new Map(ordered.map((n) => [n.name, n]));
+    const pairCount = new Map();
+    const labels = [];
+    for (const e of edges) {
+      const a = byName.get(e.from);
+      const b = byName.get(e.to);
+      const start = border(a, b.x - a.x, b.y - a.y);
+      const end = border(b, a.x - b.x, a.y - b.y);
+      const pair = [e.from, e.to].sort().join("\u0000");
+      const nth = pairCount.get(pair) || 0;
+      pairCount.set(pair, nth + 1);
+      const g = svgEl("g", {
+        class: `edge ${e.hl ? "hl" : ""} ${e.assumed ? "assumed" : ""}`,
+        "data-testid": "graph-edge",
+        "data-fact": factText(e.fact),
+        "data-highlighted": e.hl ? "true" : "false",
+      });
+      const marker = e.hl ? "arrow-hl" : e.assumed ? "arrow-assumed" : "arrow";
+      g.append(svgEl("line", { x1: start.x, y1: start.y, x2: end.x, y2: end.y, "marker-end": `url(#${marker})` }));
+      const title = svgEl("title");
+      title.textContent = `${factText(e.fact)} (${e.fact.provenance})`;
+      g.append(title);
+      svg.append(g);
+      // Labels of several relations between one pair are stacked, not overprinted.
+      const label = svgEl("text", {
+        x: (start.x + end.x) / 2,
+        y: (start.y + end.y) / 2 - 4 + nth * 13,
+        "text-anchor": "middle",
+        class: `edge-label ${e.hl ? "hl" : ""}`,
+      });
+      label.textContent = e.label;
+      labels.push(label);
+    }
+
+    for (const n of ordered) {
+      const g = svgEl("g", {
+        class: `node ${n.hl ? "hl" : ""}`,
+        "data-testid": "graph-node",
+        "data-name": n.name,
+        "data-highlighted": n.hl ? "true" : "false",
+        transform: `translate(${n.x - n.w / 2},${n.y - n.h / 2})`,
+      });
+      g.append(svgEl("rect", { width: n.w, height: n.h, rx: 5 }));
+      const lines = [
+        { text: n.name, cls: "name" },
+        ...n.types.map((t) => ({ ...t, cls: "type" })),
+        ...n.attrs.map((a) => ({ ...a, cls: "attr" })),
+      ];
+      lines.forEach((line, i) => {
+        const classes = [line.cls, line.assumed ? "assumed" : "", line.hl ? "hl" : ""].join(" ").trim();
+        const t = svgEl("text", { x: 8, y: 18 + i * LINE, class: classes, "data-highlighted": line.hl ? "true" : "false" });
+        t.textContent = line.text;
+        if (line.fact) {
+          const title = svgEl("title");
+          title.textContent = `${factText(line.fact)} (${line.fact.provenance})`;
+          t.append(title);
+        }
+        g.append(t);
+      });
+      svg.append(g);
+    }
+    // Relation names go last so no box hides one.
+    const labelLayer = svgEl("g", { class: "labels" });
+    labelLayer.append(...labels);
+    svg.append(labelLayer);
+
+    byId("graph").replaceChildren(svg);
+    const action = snap.action ? ` · next action: ${snap.action}` : "";
+    const which = snap.step === 0 ? "the scene before the plan" : `after step ${snap.step}`;
+    const lit = violations.length ? ` · highlighted: the facts of ${violations.map((v) => v.id).join(", ")}` : "";
+    byId("graph-caption").textContent = `State ${snap.step} (${which})${action} · ${ordered.length} objects, ${snap.facts.length} facts${lit}`;
+    byId("graph-caption").dataset.step = String(snap.step);
+
+    const missing = [...wanted.entries()].filter(([k]) => !found.has(k)).map(([, f]) => factText(f));
+    const box = byId("graph-missing");
+    box.hidden = missing.length === 0;
+    box.textContent = missing.length ? `Triggering facts not among this state's assertions: ${missing.join("; ")}` : "";
+  }
+
+  // Connected objects sit next to each other on the ellipse: breadth-first
+  // from the best-connected object, ties broken by name, so the drawing is
+  // the same every time.
+  function orderNodes(nodes, edges) {
+    const adjacent = new Map([...nodes.keys()].map((n) => [n, new Set()]));
+    for (const e of edges) {
+      adjacent.get(e.from).add(e.to);
+      adjacent.get(e.to).add(e.from);
+    }
+    const names = [...nodes.keys()].sort();
+    const byDegree = [...names].sort((a, b) => adjacent.get(b).size - adjacent.get(a).size || (a < b ? -1 : 1));
+    const seen = new Set();
+    const out = [];
+    for (const start of byDegree) {
+      if (seen.has(start)) continue;
+      const queue = [start];
+      seen.add(start);
+      while (queue.length) {
+        const name = queue.shift();
+        out.push(nodes.get(name));
+        for (const next of [...adjacent.get(name)].sort()) {
+          if (!seen.has(next)) {
+            seen.add(next);
+            queue.push(next);
+          }
+        }
+      }
+    }
+    return out;
+  }
+
+  // Where the ray from a box's centre in direction (dx, dy) leaves the box.
+  function border(n, dx, dy) {
+    const hw = n.w / 2 + 2;
+    const hh = n.h / 2 + 2;
+    const t = Math.min(dx ? hw / Math.abs(dx) : Infinity, dy ? hh / Math.abs(dy) : Infinity);
+    return { x: n.x + dx * (Number.isFinite(t) ? t : 0), y: n.y + dy * (Number.isFinite(t) ? t : 0) };
+  }
+
+  // ------------------------------------------------------------ rules
+  const RULE_FIELDS = [
+    ["definition", "Definition"],
+    ["category", "Category"],
+    ["danger_level", "Danger level"],
+    ["kind", "Kind"],
+    ["check_at", "Checked"],
+    ["description", "Description"],
+    ["safety_warning", "Safety warning"],
+    ["trigger_reason", "Triggered when"],
+    ["suggestion", "Suggestion"],
+    ["source", "Sources"],
+    ["question", "Question asked"],
+    ["generalizes", "Generalises"],
+    ["module", "Module"],
+  ];
+  let pendingRule = null;
+
+  async function loadRules() {
+    if (rules !== null) return;
+    rules = [];
+    try {
+      rules = await api("GET", "/v1/rules");
+    } catch (exc) {
+      rules = null;
+      showError(exc.message);
+      return;
+    }
+    filterRules();
+    if (pendingRule) selectRule(pendingRule);
+    else if (rules.length) selectRule(rules[0].id);
+  }
+
+  function selectRuleWhenLoaded(id) {
+    pendingRule = id;
+    if (rules && rules.length) selectRule(id);
+  }
+
+  function filterRules() {
+    const words = byId("rule-search").value.toLowerCase().split(/\s+/).filter(Boolean);
+    const list = byId("rule-list");
+    list.replaceChildren();
+    const shown = (rules || []).filter((r) => {
+      const hay = RULE_FIELDS.map(([k]) => r[k]).concat([r.id, r.name]).join("\n").toLowerCase();
+      return words.every((w) => hay.includes(w));
+    });
+    for (const r of shown) {
+      const item = el(
+        "button",
+        { type: "button", class: "rule-item", "data-testid": "rule-item", "data-id": r.id, "aria-current": String(r.id === ruleShown) },
+        el("span", { class: "rid" }, ...camelBreaks(r.id)),
+        el("span", { class: "rmeta", text: `${r.category} · ${r.danger_level} · ${r.kind}` }),
+      );
+      item.addEventListener("click", () => selectRule(r.id));
+      list.append(el("li", {}, item));
+    }
+    byId("rule-count").textContent = `${shown.length} of ${(rules || []).length} rules`;
+  }
+
+  function selectRule(id) {
+    const rule = (rules || []).find((r) => r.id === id);
+    if (!rule) return;
+    pendingRule = null;
+    ruleShown = id;
+    for (const item of byId("rule-list").querySelectorAll(".rule-item")) {
+      item.setAttribute("aria-current", String(item.dataset.id === id));
+    }
+    const dl = el("dl");
+    for (const [key, label] of RULE_FIELDS) {
+      if (!rule[key]) continue;
+      dl.append(el("dt", { text: label }), el("dd", { "data-testid": `rule-${key.replace("_", "-")}`, class: key === "definition" ? "mono" : "", text: rule[key] }));
+    }
+    byId("rule-detail").replaceChildren(el("h2", { "data-testid": "rule-name", text: rule.id }), dl);
+  }
+
+  // ------------------------------------------------------------ start
+  async function health() {
+    try {
+      const h = await api("GET", "/v1/health");
+      byId("health").textContent = `${h.status} · scenario ${h.scenario} · ${h.engine} engine · ${h.rules} rules`;
+    } catch (exc) {
+      byId("health").textContent = "";
+      showError(exc.message);
+    }
+  }
+
+  async function start() {
+    const key = byId("api-key");
+    key.value = sessionStorage.getItem(KEY_STORE) || "";
+    key.addEventListener("change", async () => {
+      sessionStorage.setItem(KEY_STORE, key.value.trim());
+      clearError();
+      rules = null;
+      await Promise.all([health(), loadExamples()]);
+      if (!byId("panel-rules").hidden) loadRules();
+    });
+    for (const tab of document.querySelectorAll(".tab")) {
+      tab.addEventListener("click", () => showTab(tab.dataset.tab));
+    }
+    byId("error-close").addEventListener("click", clearError);
+    byId("example-select").addEventListener("change", pickExample);
+    byId("scene-file").addEventListener("change", (e) => readFileInto(e.target, "scene-input"));
+    byId("plan-file").addEventListener("change", (e) => readFileInto(e.target, "plan-input"));
+    byId("verify-button").addEventListener("click", () => verify(false));
+    byId("questions-form").addEventListener("submit", submitAnswers);
+    byId("rule-search").addEventListener("input", filterRules);
+    await Promise.all([health(), loadExamples()]);
+    if (location.hash === "#rules") showTab("rules");
+    document.body.dataset.ready = "true";
+  }
+
+  start();
+})();

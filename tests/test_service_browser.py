@@ -1,0 +1,311 @@
+"""The service's page in a real headless Chromium (Debian's, driven by
+Playwright), against a real uvicorn server on the loopback interface:
+verify the walkthrough and see step 7 and its facts highlighted, answer an
+UNKNOWN's questions and see the verdict change, browse and search the rules,
+and see API errors in the banner."""
+
+from __future__ import annotations
+
+import importlib.util
+import re
+import socket
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import pytest
+
+from virf.service.app import create_app
+
+if TYPE_CHECKING:
+    from fastapi import FastAPI
+    from playwright.sync_api import Browser, Page
+
+CHROMIUM = Path("/usr/bin/chromium")
+SHOTS = Path("/tmp/virf-service-screens")
+
+pytestmark = [
+    pytest.mark.skipif(
+        not CHROMIUM.is_file(),
+        reason="Chromium is not installed at /usr/bin/chromium (apt-get install chromium)",
+    ),
+    pytest.mark.skipif(
+        importlib.util.find_spec("playwright") is None,
+        reason="Playwright for Python is not installed (pip install playwright)",
+    ),
+]
+
+# Generous: a slow machine under load, not a latency requirement.
+STEP_MS = 30_000
+HIGHLIGHT = "rgb(214, 51, 108)"
+
+
+@contextmanager
+def serving(app: FastAPI) -> Iterator[str]:
+    """``app`` on a free loopback port, served by uvicorn in a thread; yields its address."""
+    import uvicorn
+
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    sock.bind(("127.0.0.1", 0))
+    host, port = sock.getsockname()
+    server = uvicorn.Server(uvicorn.Config(app, log_level="warning", lifespan="off"))
+    thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
+    thread.start()
+    try:
+        for _ in range(500):
+            if server.started or not thread.is_alive():
+                break
+            threading.Event().wait(0.01)
+        assert server.started, "the service did not start"
+        yield f"http://{host}:{port}/"
+    finally:
+        server.should_exit = True
+        thread.join(timeout=10)
+        sock.close()
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Browser]:
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as pw:
+        chromium = pw.chromium.launch(
+            executable_path=str(CHROMIUM),
+            args=[
+                "--headless=new",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--disable-background-networking",
+                "--disable-component-update",
+                "--disable-sync",
+                "--no-first-run",
+            ],
+        )
+        try:
+            yield chromium
+        finally:
+            chromium.close()
+
+
+@pytest.fixture(scope="module")
+def url() -> Iterator[str]:
+    with serving(create_app()) as address:
+        yield address
+
+
+@contextmanager
+def page_at(browser: Browser, url: str) -> Iterator[Page]:
+    context = browser.new_context(viewport={"width": 1400, "height": 1000})
+    page = context.new_page()
+    page.set_default_timeout(STEP_MS)
+    # A script error in the page fails the test, not only a missing element.
+    errors: list[str] = []
+    page.on("pageerror", lambda exc: errors.append(str(exc)))
+    # Nothing may come from outside the service.
+    foreign: list[str] = []
+    page.on("request", lambda r: None if r.url.startswith(url) else foreign.append(r.url))
+    try:
+        page.goto(url)
+        page.wait_for_selector("body[data-ready=true]")
+        yield page
+        assert not errors, f"script errors on the page: {errors}"
+        assert not foreign, f"requests outside the service: {foreign}"
+    finally:
+        context.close()
+
+
+def shot(page: Page, name: str) -> Path:
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    path = SHOTS / f"{name}.png"
+    page.screenshot(path=str(path), full_page=True)
+    return path
+
+
+def load_example(page: Page, name: str) -> None:
+    from playwright.sync_api import expect
+
+    page.get_by_test_id("example-select").select_option(name)
+    expect(page.get_by_test_id("plan-input")).not_to_have_value("")
+    page.get_by_test_id("verify-button").click()
+
+
+def test_the_walkthrough_is_unsafe_at_step_7_with_its_facts_drawn(
+    browser: Browser, url: str
+) -> None:
+    from playwright.sync_api import expect
+
+    with page_at(browser, url) as page:
+        expect(page.get_by_test_id("health")).to_contain_text("ready")
+        load_example(page, "walkthrough")
+        expect(page.get_by_test_id("scene-input")).to_have_value(re.compile("TestMicrowave_Action"))
+        verdict = page.get_by_test_id("verdict")
+        expect(verdict).to_have_text("UNSAFE")
+        expect(verdict).to_have_css("color", "rgb(179, 38, 30)")
+        expect(page.get_by_test_id("reason")).to_contain_text("step 7")
+
+        # Step 7, and only step 7, is highlighted in the trace.
+        rows = page.get_by_test_id("trace-step")
+        expect(rows).to_have_count(8)  # the scene before the plan, and seven actions
+        dangerous = page.locator("[data-testid=trace-step][data-dangerous=true]")
+        expect(dangerous).to_have_count(1)
+        expect(dangerous).to_have_attribute("data-step", "7")
+        expect(dangerous).to_contain_text("turn_on(TestMicrowave_Action)")
+        expect(dangerous).to_have_css("background-color", "rgb(253, 236, 234)")
+        expect(page.locator("[data-testid=trace-step][data-step='3']")).to_have_css(
+            "background-color", "rgba(0, 0, 0, 0)"
+        )
+
+        # The violation: its rule, category, danger level, facts, background, suggestion.
+        usage = page.locator("[data-testid=violation][data-id=UnsafeMicrowaveUsage]")
+        expect(usage.get_by_test_id("violation-category")).to_have_text("Fire Hazard")
+        expect(usage.get_by_test_id("violation-danger")).to_have_text("danger: high")
+        expect(usage.get_by_test_id("trigger-fact")).to_have_count(4)
+        expect(usage.get_by_test_id("trigger-fact").first).to_have_text(
+            "TestMicrowave_Action contains TestPot_Action"
+        )
+        expect(usage.get_by_test_id("background-axiom")).to_contain_text(
+            "Pot SubClassOf hasMaterial value Metal"
+        )
+        expect(page.get_by_test_id("suggestion")).to_contain_text("microwave-safe")
+
+        # The graph of state 7: the triggering relation and objects stand out.
+        expect(page.get_by_test_id("graph-caption")).to_have_attribute("data-step", "7")
+        edge = page.locator(
+            "[data-testid=graph-edge][data-fact='TestMicrowave_Action contains TestPot_Action']"
+        )
+        expect(edge).to_have_attribute("data-highlighted", "true")
+        expect(edge.locator("line")).to_have_css("stroke", HIGHLIGHT)
+        micro = page.locator("[data-testid=graph-node][data-name=TestMicrowave_Action]")
+        expect(micro).to_have_attribute("data-highlighted", "true")
+        expect(micro.locator("text.hl", has_text="hasState OnState")).to_have_count(1)
+        expect(
+            page.locator("[data-testid=graph-node][data-name=TestKnife_Action]")
+        ).to_have_attribute("data-highlighted", "false")
+        # By default every finding of step 7 is lit, the possible one's open-world facts too ...
+        pot_closed = page.locator(
+            "[data-testid=graph-node][data-name=TestPot_Action] text", has_text="contains only {}"
+        )
+        expect(pot_closed).to_have_attribute("data-highlighted", "true")
+        shot(page, "walkthrough-unsafe")
+        # ... a click on one violation lights its facts alone.
+        usage.get_by_test_id("violation-message").click()
+        expect(usage).to_have_class(re.compile("selected"))
+        expect(pot_closed).to_have_attribute("data-highlighted", "false")
+        expect(edge).to_have_attribute("data-highlighted", "true")
+        expect(page.get_by_test_id("graph-caption")).to_contain_text(
+            "highlighted: the facts of UnsafeMicrowaveUsage"
+        )
+
+        # Another step's state: drawn, nothing highlighted; step 7 again brings it back.
+        page.locator("[data-testid=trace-step][data-step='2']").click()
+        expect(page.get_by_test_id("graph-caption")).to_have_attribute("data-step", "2")
+        expect(page.locator("[data-testid=graph-edge][data-highlighted=true]")).to_have_count(0)
+        expect(page.locator("[data-testid=graph-node][data-name=Robot_1]")).to_be_visible()
+        dangerous.click()
+        expect(page.get_by_test_id("graph-caption")).to_have_attribute("data-step", "7")
+        expect(edge).to_have_attribute("data-highlighted", "true")
+
+        # The violation's rule opens in the rules tab.
+        usage.get_by_test_id("open-rule").click()
+        expect(page.get_by_test_id("panel-rules")).to_be_visible()
+        expect(page.get_by_test_id("rule-name")).to_have_text("UnsafeMicrowaveUsage")
+
+
+def test_answering_an_unknowns_questions_changes_the_verdict(browser: Browser, url: str) -> None:
+    from playwright.sync_api import expect
+
+    with page_at(browser, url) as page:
+        load_example(page, "unknown-material-microwave")
+        expect(page.get_by_test_id("verdict")).to_have_text("UNKNOWN")
+        expect(page.get_by_test_id("verdict")).to_have_attribute("data-status", "UNKNOWN")
+        expect(page.get_by_test_id("question")).to_have_count(4)
+        material = page.locator("[data-testid=answer][data-key='material:Bowl_1']")
+        expect(material.locator("option", has_text="Glass")).to_have_count(1)
+        # The possible findings' facts are drawn at step 7, the assumed fill state in amber.
+        bowl = page.locator("[data-testid=graph-node][data-name=Bowl_1]")
+        expect(bowl).to_have_attribute("data-highlighted", "true")
+        shot(page, "unknown-questions")
+
+        material.select_option("Glass")
+        page.locator("[data-testid=answer][data-key='fill:Bowl_1']").select_option("yes")
+        page.get_by_test_id("answer-button").click()
+        expect(page.get_by_test_id("verdict")).to_have_text("SAFE")
+        expect(page.get_by_test_id("verdict")).to_have_css("color", "rgb(30, 123, 52)")
+        notice = page.get_by_test_id("answers-notice")
+        expect(notice).to_contain_text("settled material:Bowl_1, fill:Bowl_1")
+        expect(page.get_by_test_id("scene-input")).to_have_value(re.compile('"object": "Glass"'))
+        expect(page.get_by_test_id("questions")).to_be_hidden()
+        expect(page.get_by_test_id("no-violations")).to_be_visible()
+        expect(page.locator("[data-testid=trace-step][data-dangerous=true]")).to_have_count(0)
+        shot(page, "unknown-answered-safe")
+
+
+def test_errors_reach_the_banner(browser: Browser, url: str) -> None:
+    from playwright.sync_api import expect
+
+    with page_at(browser, url) as page:
+        load_example(page, "walkthrough")
+        expect(page.get_by_test_id("verdict")).to_have_text("UNSAFE")
+        page.get_by_test_id("plan-input").fill("find Pot\nfly Pot\n")
+        page.get_by_test_id("verify-button").click()
+        banner = page.get_by_test_id("error-banner")
+        expect(banner).to_be_visible()
+        expect(page.get_by_test_id("error-text")).to_contain_text("unknown action 'fly'")
+        page.get_by_test_id("scene-input").fill("{not json")
+        page.get_by_test_id("verify-button").click()
+        expect(page.get_by_test_id("error-text")).to_contain_text("the scene is not valid JSON")
+        page.get_by_test_id("error-close").click()
+        expect(banner).to_be_hidden()
+
+        # An answer the server refuses: its one line, verbatim.
+        load_example(page, "unknown-material-microwave")
+        expect(page.get_by_test_id("verdict")).to_have_text("UNKNOWN")
+        page.get_by_test_id("answer-button").click()
+        expect(page.get_by_test_id("error-text")).to_have_text(
+            "answer at least one question (the others may stay open)"
+        )
+
+
+def test_rules_are_browsed_and_searched(browser: Browser, url: str) -> None:
+    from playwright.sync_api import expect
+
+    with page_at(browser, url) as page:
+        page.get_by_test_id("tab-rules").click()
+        items = page.get_by_test_id("rule-item")
+        expect(items.first).to_be_visible()
+        total = items.count()
+        assert total > 40
+        expect(page.get_by_test_id("rule-count")).to_have_text(f"{total} of {total} rules")
+
+        page.get_by_test_id("rule-search").fill("microwave metal")
+        expect(
+            page.locator("[data-testid=rule-item][data-id=UnsafeMicrowaveUsage]")
+        ).to_be_visible()
+        assert 0 < items.count() < total
+        page.locator("[data-testid=rule-item][data-id=UnsafeMicrowaveUsage]").click()
+        expect(page.get_by_test_id("rule-name")).to_have_text("UnsafeMicrowaveUsage")
+        expect(page.get_by_test_id("rule-definition")).to_contain_text("Microwave")
+        expect(page.get_by_test_id("rule-category")).to_have_text("Fire Hazard")
+        expect(page.get_by_test_id("rule-source")).to_contain_text("USDA")
+        shot(page, "rules-search")
+
+        page.get_by_test_id("rule-search").fill("no rule says this zzz")
+        expect(items).to_have_count(0)
+        expect(page.get_by_test_id("rule-count")).to_have_text(f"0 of {total} rules")
+
+
+def test_a_keyed_service_asks_for_its_key(browser: Browser) -> None:
+    from playwright.sync_api import expect
+
+    with serving(create_app(api_key="s3cret-key")) as keyed, page_at(browser, keyed) as page:
+        expect(page.get_by_test_id("error-text")).to_contain_text("missing or wrong API key")
+        key = page.get_by_test_id("api-key")
+        key.fill("s3cret-key")
+        key.dispatch_event("change")
+        expect(page.get_by_test_id("health")).to_contain_text("ready")
+        expect(page.get_by_test_id("error-banner")).to_be_hidden()
+        load_example(page, "walkthrough")
+        expect(page.get_by_test_id("verdict")).to_have_text("UNSAFE")
