@@ -7,108 +7,49 @@ the rule listed by ``virf kb rules --kb DIR``."""
 
 from __future__ import annotations
 
-import importlib.util
-import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import pytest
+from browser_support import chromium, needs_browser
+from browser_support import page_at as browser_page
+from browser_support import serving as serve_app
+from browser_support import shot as save_shot
 
-from virf.authoring.review import ReviewWorkspace, bind, create_app, url_of
+from virf.authoring.review import ReviewWorkspace, create_app
 
 if TYPE_CHECKING:
     from playwright.sync_api import Browser, Page
 
-CHROMIUM = Path("/usr/bin/chromium")
+pytestmark = needs_browser
 SHOTS = Path("/tmp/virf-review-screens")
 
-pytestmark = [
-    pytest.mark.skipif(
-        not CHROMIUM.is_file(),
-        reason="Chromium is not installed at /usr/bin/chromium (apt-get install chromium)",
-    ),
-    pytest.mark.skipif(
-        importlib.util.find_spec("playwright") is None,
-        reason="Playwright for Python is not installed (pip install playwright)",
-    ),
-]
-
-# Seconds the page may take for one step; a check against the real workspace
-# starts Java, the first one in a process takes the longest.
 STEP_MS = 60_000
 
 
 @contextmanager
 def serving(workspace: ReviewWorkspace, reviewer: str) -> Iterator[str]:
     """The review server on a free loopback port, in a thread; yields its address."""
-    import uvicorn
-
-    sock = bind("127.0.0.1", 0)
-    url = url_of(sock)
-    config = uvicorn.Config(create_app(workspace, reviewer), log_level="warning", lifespan="off")
-    server = uvicorn.Server(config)
-    thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
-    thread.start()
-    try:
-        for _ in range(500):
-            if server.started or not thread.is_alive():
-                break
-            threading.Event().wait(0.01)
-        assert server.started, "the review server did not start"
+    with serve_app(create_app(workspace, reviewer)) as url:
         yield url
-    finally:
-        server.should_exit = True
-        thread.join(timeout=10)
-        sock.close()
 
 
 @pytest.fixture(scope="module")
 def browser() -> Iterator[Browser]:
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as pw:
-        chromium = pw.chromium.launch(
-            executable_path=str(CHROMIUM),
-            args=[
-                "--headless=new",
-                "--no-sandbox",
-                "--disable-gpu",
-                "--disable-background-networking",
-                "--disable-component-update",
-                "--disable-sync",
-                "--no-first-run",
-            ],
-        )
-        try:
-            yield chromium
-        finally:
-            chromium.close()
+    with chromium() as launched:
+        yield launched
 
 
 @contextmanager
 def page_at(browser: Browser, url: str) -> Iterator[Page]:
-    context = browser.new_context(viewport={"width": 1280, "height": 900})
-    page = context.new_page()
-    page.set_default_timeout(STEP_MS)
-    # A script error in the page fails the test, not only a missing element.
-    errors: list[str] = []
-    page.on("pageerror", lambda exc: errors.append(str(exc)))
-    try:
-        page.goto(url)
-        page.wait_for_selector("body[data-ready=true]")
+    with browser_page(browser, url, timeout_ms=STEP_MS) as page:
         yield page
-        assert not errors, f"script errors on the page: {errors}"
-    finally:
-        context.close()
 
 
 def shot(page: Page, name: str) -> Path:
-    SHOTS.mkdir(parents=True, exist_ok=True)
-    path = SHOTS / f"{name}.png"
-    page.screenshot(path=str(path), full_page=True)
-    return path
+    return save_shot(page, SHOTS, name)
 
 
 def test_the_page_over_a_stand_in_workspace(browser: Browser) -> None:

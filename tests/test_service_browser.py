@@ -6,88 +6,34 @@ and see API errors in the banner."""
 
 from __future__ import annotations
 
-import importlib.util
 import re
-import socket
-import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import pytest
+from browser_support import chromium, needs_browser, serving
+from browser_support import page_at as browser_page
+from browser_support import shot as save_shot
 
 from virf.service.app import create_app
 
 if TYPE_CHECKING:
-    from fastapi import FastAPI
     from playwright.sync_api import Browser, Page
 
-CHROMIUM = Path("/usr/bin/chromium")
+pytestmark = needs_browser
 SHOTS = Path("/tmp/virf-service-screens")
-
-pytestmark = [
-    pytest.mark.skipif(
-        not CHROMIUM.is_file(),
-        reason="Chromium is not installed at /usr/bin/chromium (apt-get install chromium)",
-    ),
-    pytest.mark.skipif(
-        importlib.util.find_spec("playwright") is None,
-        reason="Playwright for Python is not installed (pip install playwright)",
-    ),
-]
 
 # Generous: a slow machine under load, not a latency requirement.
 STEP_MS = 30_000
 HIGHLIGHT = "rgb(214, 51, 108)"
 
 
-@contextmanager
-def serving(app: FastAPI) -> Iterator[str]:
-    """``app`` on a free loopback port, served by uvicorn in a thread; yields its address."""
-    import uvicorn
-
-    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    sock.bind(("127.0.0.1", 0))
-    host, port = sock.getsockname()
-    server = uvicorn.Server(uvicorn.Config(app, log_level="warning", lifespan="off"))
-    thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
-    thread.start()
-    try:
-        for _ in range(500):
-            if server.started or not thread.is_alive():
-                break
-            threading.Event().wait(0.01)
-        assert server.started, "the service did not start"
-        yield f"http://{host}:{port}/"
-    finally:
-        server.should_exit = True
-        thread.join(timeout=10)
-        sock.close()
-
-
 @pytest.fixture(scope="module")
 def browser() -> Iterator[Browser]:
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as pw:
-        chromium = pw.chromium.launch(
-            executable_path=str(CHROMIUM),
-            args=[
-                "--headless=new",
-                "--no-sandbox",
-                "--disable-gpu",
-                "--disable-background-networking",
-                "--disable-component-update",
-                "--disable-sync",
-                "--no-first-run",
-            ],
-        )
-        try:
-            yield chromium
-        finally:
-            chromium.close()
+    with chromium() as launched:
+        yield launched
 
 
 @pytest.fixture(scope="module")
@@ -98,30 +44,12 @@ def url() -> Iterator[str]:
 
 @contextmanager
 def page_at(browser: Browser, url: str) -> Iterator[Page]:
-    context = browser.new_context(viewport={"width": 1400, "height": 1000})
-    page = context.new_page()
-    page.set_default_timeout(STEP_MS)
-    # A script error in the page fails the test, not only a missing element.
-    errors: list[str] = []
-    page.on("pageerror", lambda exc: errors.append(str(exc)))
-    # Nothing may come from outside the service.
-    foreign: list[str] = []
-    page.on("request", lambda r: None if r.url.startswith(url) else foreign.append(r.url))
-    try:
-        page.goto(url)
-        page.wait_for_selector("body[data-ready=true]")
+    with browser_page(browser, url, timeout_ms=STEP_MS, width=1400, height=1000) as page:
         yield page
-        assert not errors, f"script errors on the page: {errors}"
-        assert not foreign, f"requests outside the service: {foreign}"
-    finally:
-        context.close()
 
 
 def shot(page: Page, name: str) -> Path:
-    SHOTS.mkdir(parents=True, exist_ok=True)
-    path = SHOTS / f"{name}.png"
-    page.screenshot(path=str(path), full_page=True)
-    return path
+    return save_shot(page, SHOTS, name)
 
 
 def load_example(page: Page, name: str) -> None:
