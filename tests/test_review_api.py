@@ -301,9 +301,10 @@ def test_the_page_and_its_assets_are_served_locally(client: TestClient) -> None:
     assert page.headers["content-type"].startswith("text/html")
     assert "default-src 'self'" in page.headers["content-security-policy"]
     assert 'id="queue"' in page.text
-    for asset in ("/static/review.js", "/static/review.css"):
-        assert asset in page.text
-        assert client.get(asset).status_code == 200
+    # Relative, so the page works at / (virf kb review) and at /review/ (virf serve).
+    for asset in ("static/review.js", "static/review.css"):
+        assert f'"{asset}"' in page.text
+        assert client.get(f"/{asset}").status_code == 200
 
 
 def test_the_page_loads_nothing_from_the_internet() -> None:

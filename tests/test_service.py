@@ -244,3 +244,20 @@ def test_run_requests_are_checked(client: TestClient) -> None:
     failed = _wait(client, lost["id"], "failed")
     assert "has no proposal for task x" in str(failed["error"])
     assert _events(client.get(lost["events"]).text)[-1][0] == "error"
+
+
+def test_the_review_page_is_a_section_of_the_service(tmp_path: Path) -> None:
+    from virf.authoring.workspace import Workspace
+
+    ws = Workspace.init(tmp_path / "kb", starter=False)
+    ws.close()
+    app = create_app(workspace=tmp_path / "kb", reviewer="ana", api_key="k3y-for-tests")
+    local = TestClient(app, base_url="http://127.0.0.1")
+    key = {"x-api-key": "k3y-for-tests"}
+    assert local.get("/v1/health", headers=key).json()["review"] == "/review/"
+    page = local.get("/review/")
+    assert page.status_code == 200 and 'src="static/review.js"' in page.text
+    assert local.get("/review/static/review.js").status_code == 200
+    assert local.get("/review/api/candidates").status_code == 401  # the service's key guards it
+    assert local.get("/review/api/candidates", headers=key).json() == []
+    assert local.get("/review", follow_redirects=False).headers["location"] == "/review/"

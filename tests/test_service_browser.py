@@ -237,3 +237,24 @@ def test_a_keyed_service_asks_for_its_key(browser: Browser) -> None:
         expect(page.get_by_test_id("error-banner")).to_be_hidden()
         load_example(page, "walkthrough")
         expect(page.get_by_test_id("verdict")).to_have_text("UNSAFE")
+
+
+def test_the_review_page_is_reached_from_the_service_page(browser: Browser, tmp_path: Path) -> None:
+    from playwright.sync_api import expect
+
+    from virf.authoring.workspace import Workspace
+
+    Workspace.init(tmp_path / "kb", starter=False).close()
+    with (
+        serving(create_app(workspace=tmp_path / "kb", reviewer="ana")) as address,
+        page_at(browser, address) as page,
+    ):
+        link = page.get_by_test_id("review-link")
+        expect(link).to_be_visible()
+        link.click()
+        page.wait_for_selector("body[data-ready=true]")
+        expect(page.get_by_role("heading", name="VIRF knowledge review")).to_be_visible()
+        expect(
+            page.get_by_text("No rule has been accepted yet.")
+        ).to_be_visible()  # its API answered
+        assert page.url == f"{address}review/"

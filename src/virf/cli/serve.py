@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from virf.cli.app import EngineOpt, KbOpt, ScenarioOpt
+from virf.cli.app import EngineOpt, KbOpt, ScenarioOpt, default_reviewer
 from virf.errors import InputError
 
 LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
@@ -31,6 +31,17 @@ def serve(
     ] = None,
     run_log: Annotated[
         Path | None, typer.Option(help="SQLite run log of the runs' model calls.")
+    ] = None,
+    workspace: Annotated[
+        Path | None,
+        typer.Option(
+            "--workspace",
+            "-w",
+            help="A knowledge workspace whose review page becomes the /review/ section.",
+        ),
+    ] = None,
+    reviewer: Annotated[
+        str | None, typer.Option(help="Name recorded with review decisions (default: login name).")
     ] = None,
     api_key: Annotated[
         str | None,
@@ -59,6 +70,8 @@ def serve(
         api_key,
         planner,
         str(run_log) if run_log else None,
+        str(workspace) if workspace else None,
+        reviewer or default_reviewer(),
     )
     os.environ["VIRF_SERVE_SETTINGS"] = repr(settings)
     if workers == 1:
@@ -71,6 +84,8 @@ def serve(
             api_key=api_key,
             planner=planner,
             run_log=run_log,
+            workspace=workspace,
+            reviewer=reviewer or default_reviewer(),
         )
         uvicorn.run(app, host=host, port=port, log_level="warning")
     else:

@@ -25,7 +25,7 @@ from typing import Any, Final
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse, Response, StreamingResponse
+from fastapi.responses import JSONResponse, RedirectResponse, Response, StreamingResponse
 from pydantic import BaseModel, ConfigDict
 
 from virf.api import LogicTutor
@@ -87,10 +87,14 @@ def create_app(
     planner: str | None = None,
     run_log: Path | None = None,
     answer_wait_s: float = 600.0,
+    workspace: Path | None = None,
+    reviewer: str = "reviewer",
 ) -> FastAPI:
     """The service; the default tutor loads here, so a bad option fails at start.
     ``planner`` is the apprentice runs use unless a request names one;
-    ``run_log`` records their model calls."""
+    ``run_log`` records their model calls.  With a knowledge ``workspace``,
+    its review page is a section of the app at ``/review/`` (decisions
+    recorded as ``reviewer``'s)."""
     tutors = Tutors(scenario, engine, kb, timeout_s)
     runs = Runs(tutors, planner=planner, run_log=run_log, answer_wait_s=answer_wait_s)
     default, _ = tutors.get(None, None)
@@ -104,7 +108,8 @@ def create_app(
     async def guard(
         request: Request, call_next: Callable[[Request], Awaitable[Response]]
     ) -> Response:
-        if api_key is not None and request.url.path.startswith("/v1/"):
+        guarded = request.url.path.startswith(("/v1/", "/review/api/"))
+        if api_key is not None and guarded:
             given = request.headers.get(API_KEY_HEADER) or request.headers.get(
                 "authorization", ""
             ).removeprefix("Bearer ")
@@ -175,6 +180,7 @@ def create_app(
             "rules": len(tbox.vocabulary.uscs),
             "knowledge": tbox.source,
             "kb": str(kb) if kb is not None else None,
+            "review": "/review/" if workspace is not None else None,
         }
 
     def known_run(run_id: str) -> Any:
@@ -213,6 +219,17 @@ def create_app(
         runs.answer(run, body.answers)
         return {"id": run.id, "accepted": sorted(body.answers)}
 
+    if workspace is not None:
+        from virf.authoring.review import create_app as review_app
+        from virf.authoring.workspace import Workspace
+
+        # The review page's own guards stay: it answers on this machine only.
+        app.mount("/review", review_app(Workspace.open(workspace), reviewer))
+
+        @app.get("/review", include_in_schema=False)
+        def review_root() -> RedirectResponse:
+            return RedirectResponse("/review/")
+
     from virf.service.pages import add_pages  # pages imports this module
 
     add_pages(app, tutors)
@@ -225,7 +242,7 @@ def app_from_environment() -> FastAPI:
     import ast
     import os
 
-    scenario, engine, kb, api_key, planner, run_log = ast.literal_eval(
+    scenario, engine, kb, api_key, planner, run_log, workspace, reviewer = ast.literal_eval(
         os.environ["VIRF_SERVE_SETTINGS"]
     )
     return create_app(
@@ -235,4 +252,6 @@ def app_from_environment() -> FastAPI:
         api_key=api_key,
         planner=planner,
         run_log=Path(run_log) if run_log else None,
+        workspace=Path(workspace) if workspace else None,
+        reviewer=reviewer,
     )

@@ -26,6 +26,10 @@
 
   async function api(method, path, body) {
     const init = { method, headers: { Accept: "application/json" } };
+    // Mounted in `virf serve` (at /review/), the service's API key, if one
+    // was entered on its page, goes along; relative paths keep both mounts working.
+    const key = sessionStorage.getItem("virf-api-key");
+    if (key) init.headers["X-API-Key"] = key;
     if (body !== undefined) {
       init.headers["Content-Type"] = "application/json";
       init.body = JSON.stringify(body);
@@ -107,7 +111,7 @@
 
   async function loadQueue() {
     const status = state.filter === "pending" ? "pending" : "all";
-    const items = await api("GET", `/api/candidates?status=${status}`);
+    const items = await api("GET", `api/candidates?status=${status}`);
     // Pending first (the work left), then by id.
     const rank = { pending: 0, accepted: 1, rejected: 2 };
     items.sort((a, b) => (rank[a.status] - rank[b.status]) || (a.id - b.id));
@@ -161,7 +165,7 @@
   async function select(id) {
     clearError();
     try {
-      const view = await api("GET", `/api/candidates/${id}`);
+      const view = await api("GET", `api/candidates/${id}`);
       state.selected = id;
       state.view = view;
       state.checks = new Map();
@@ -409,7 +413,7 @@
     $("check-state").textContent = "checking…";
     $("check-btn").disabled = true;
     try {
-      const report = await api("POST", `/api/candidates/${id}/check`, { axiom: text });
+      const report = await api("POST", `api/candidates/${id}/check`, { axiom: text });
       if (!state.view || state.view.summary.id !== id) return;
       state.checks.set(text, report);
       if (seq === state.checkSeq) {
@@ -480,7 +484,7 @@
     $("preview").replaceChildren(el("p", { class: "muted", text: "computing the effect… (seconds)" }));
     try {
       const body = { axiom: text === draftAxiom() ? null : text };
-      const preview = await api("POST", `/api/candidates/${id}/preview`, body);
+      const preview = await api("POST", `api/candidates/${id}/preview`, body);
       if (seq === state.previewSeq && state.view && state.view.summary.id === id) renderPreview(preview);
     } catch (err) {
       if (seq === state.previewSeq) {
@@ -525,7 +529,7 @@
     }
     for (const b of ["accept-btn", "accept-edited-btn", "reject-btn"]) $(b).disabled = true;
     try {
-      const result = await api("POST", `/api/candidates/${id}/decision`, body);
+      const result = await api("POST", `api/candidates/${id}/decision`, body);
       clearError();
       notify(`Candidate #${id} ${result.decision === "accept" ? "accepted" : "rejected"}.`);
       await Promise.all([loadQueue(), loadRules()]);
@@ -545,7 +549,7 @@
   // -- accepted rules -------------------------------------------------------
 
   async function loadRules() {
-    const rules = await api("GET", "/api/rules");
+    const rules = await api("GET", "api/rules");
     const tbody = $("rules").querySelector("tbody");
     tbody.replaceChildren();
     for (const r of rules) {

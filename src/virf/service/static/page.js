@@ -710,6 +710,8 @@
     try {
       const h = await api("GET", "/v1/health");
       byId("health").textContent = `${h.status} · scenario ${h.scenario} · ${h.engine} engine · ${h.rules} rules`;
+      // The knowledge-acquisition review page, when the service has a workspace.
+      byId("review-link").hidden = !h.review;
     } catch (exc) {
       byId("health").textContent = "";
       showError(exc.message);
