@@ -6,6 +6,7 @@ and see API errors in the banner."""
 
 from __future__ import annotations
 
+import json
 import re
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -16,6 +17,7 @@ import pytest
 from browser_support import chromium, needs_browser, serving
 from browser_support import page_at as browser_page
 from browser_support import shot as save_shot
+from conftest import EXAMPLES_DIR
 
 from virf.service.app import create_app
 
@@ -258,3 +260,116 @@ def test_the_review_page_is_reached_from_the_service_page(browser: Browser, tmp_
             page.get_by_text("No rule has been accepted yet.")
         ).to_be_visible()  # its API answered
         assert page.url == f"{address}review/"
+
+
+# ---------------------------------------------------------------------- plan runs
+def start_run(page: Page, scene: Path, instruction: str, planner: str, task_id: str) -> None:
+    page.get_by_test_id("tab-plan").click()
+    page.get_by_test_id("plan-instruction").fill(instruction)
+    page.get_by_test_id("plan-scene-file").set_input_files(str(scene))
+    page.get_by_test_id("plan-planner").fill(planner)
+    page.get_by_test_id("plan-task-id").fill(task_id)
+    page.get_by_test_id("plan-start").click()
+
+
+def test_a_plan_run_streams_its_dialogue_to_approval(browser: Browser, url: str) -> None:
+    from playwright.sync_api import expect
+
+    folder = EXAMPLES_DIR / "dialogue"
+    with page_at(browser, url) as page:
+        page.get_by_test_id("tab-plan").click()
+        expect(page.get_by_test_id("plan-task-id")).to_have_value("task")
+        # This server has no default planner: the one-line 400 reaches the banner.
+        page.get_by_test_id("plan-instruction").fill("Go.")
+        page.get_by_test_id("plan-scene-file").set_input_files(str(folder / "scene.json"))
+        expect(page.get_by_test_id("plan-scene")).to_have_value(re.compile("Fridge_1"))
+        page.get_by_test_id("plan-start").click()
+        expect(page.get_by_test_id("error-text")).to_contain_text("no planner")
+        expect(page.get_by_test_id("plan-run")).to_be_hidden()
+
+        start_run(
+            page,
+            folder / "scene.json",
+            (folder / "instruction.txt").read_text(),
+            f"replay:{folder / 'replay.jsonl'}",
+            "demo-fridge",
+        )
+        expect(page.get_by_test_id("error-banner")).to_be_hidden()
+        outcome = page.get_by_test_id("plan-outcome")
+        expect(outcome).to_have_text("APPROVED")
+        expect(outcome).to_have_css("color", "rgb(30, 123, 52)")
+        expect(page.get_by_test_id("plan-state")).to_have_text("done")
+        expect(page.get_by_test_id("plan-reason")).to_contain_text("2 iterations")
+
+        turns = page.get_by_test_id("turn")
+        kinds = [
+            (t.get_attribute("data-speaker"), t.get_attribute("data-kind")) for t in turns.all()
+        ]
+        assert kinds == [
+            ("user", "instruction"),
+            ("apprentice", "proposal"),
+            ("tutor", "report"),
+            ("apprentice", "proposal"),
+            ("tutor", "report"),
+        ]
+        first, second = page.get_by_test_id("iteration").all()
+        expect(first.get_by_role("heading")).to_have_text("Iteration 1")
+        expect(first.get_by_test_id("turn-status")).to_have_text("UNSAFE")
+        expect(first.get_by_test_id("turn-status")).to_have_css("color", "rgb(179, 38, 30)")
+        expect(first.get_by_test_id("turn-suggestion")).to_have_text(
+            "Suggestion: Close the fridge before the plan ends."
+        )
+        expect(first.locator("[data-kind=report] [data-testid=turn-text]")).to_contain_text(
+            "the refrigerator door is open"
+        )
+        # A proposal is the plan the tutor read, one action a line, not the model's prose.
+        proposal = first.locator("[data-kind=proposal] pre")
+        expect(proposal).to_have_text(
+            "find Apple_1\npick Apple_1\nfind Fridge_1\nopen Fridge_1\nput Fridge_1"
+        )
+        expect(second.get_by_test_id("turn-status")).to_have_text("SAFE")
+        final = page.get_by_test_id("plan-final")
+        expect(final).to_have_text(re.compile(r"put Fridge_1\nclose Fridge_1$"))
+        expect(page.get_by_test_id("plan-questions")).to_be_hidden()
+        shot(page, "plan-dialogue")
+
+
+def test_a_plan_run_asks_and_goes_on_with_the_answers(
+    browser: Browser, url: str, tmp_path: Path
+) -> None:
+    from playwright.sync_api import expect
+
+    folder = EXAMPLES_DIR / "unknown-material-microwave"
+    plan = json.loads((folder / "plan.txt").read_text())
+    replay = tmp_path / "replay.jsonl"
+    replay.write_text(json.dumps({"task_id": "q", "iteration": 0, "text": "\n".join(plan)}) + "\n")
+    with page_at(browser, url) as page:
+        start_run(page, folder / "scene.json", "Heat the bowl.", f"replay:{replay}", "q")
+        expect(page.get_by_test_id("plan-state")).to_have_text("waiting")
+        questions = page.get_by_test_id("plan-question")
+        expect(questions).to_have_count(4)
+        expect(page.get_by_test_id("turn-status")).to_have_text("UNKNOWN")
+        material = page.locator("[data-testid=plan-answer][data-key='material:Bowl_1']")
+        expect(material.locator("option", has_text="Glass")).to_have_count(1)
+        shot(page, "plan-waiting")
+
+        # An answer the server refuses (a form older than the ontology): its line, verbatim.
+        material.evaluate("s => s.append(new Option('Cheese', 'Cheese'))")
+        material.select_option("Cheese")
+        page.get_by_test_id("plan-answer-button").click()
+        expect(page.get_by_test_id("error-text")).to_contain_text("unknown material 'Cheese'")
+        expect(page.get_by_test_id("plan-questions")).to_be_visible()
+
+        material.select_option("Glass")
+        for key in ("fill:Bowl_1", "contents:contains:Bowl_1", "contents:contains:Microwave_1"):
+            page.locator(f"[data-testid=plan-answer][data-key='{key}']").select_option("yes")
+        page.get_by_test_id("plan-answer-button").click()
+        expect(page.get_by_test_id("plan-outcome")).to_have_text("APPROVED")
+        expect(page.get_by_test_id("error-banner")).to_be_hidden()
+        expect(page.get_by_test_id("plan-questions")).to_be_hidden()
+        answers = page.locator("[data-testid=turn][data-kind=answers]")
+        expect(answers).to_contain_text("material:Bowl_1 = Glass")
+        statuses = page.get_by_test_id("turn-status")
+        expect(statuses).to_have_text(["UNKNOWN", "SAFE"])
+        expect(page.get_by_test_id("plan-final")).to_have_text("\n".join(plan))
+        shot(page, "plan-answered")

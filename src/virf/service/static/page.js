@@ -1,5 +1,6 @@
 // The VIRF service page: verify a scene and plan, draw the state at the
-// dangerous step, answer open questions, browse the rules.  Plain DOM code,
+// dangerous step, answer open questions, browse the rules, follow a
+// tutor–apprentice planning run.  Plain DOM code,
 // no framework and no build step, so the page works offline from the wheel.
 "use strict";
 
@@ -705,6 +706,335 @@
     byId("rule-detail").replaceChildren(el("h2", { "data-testid": "rule-name", text: rule.id }), dl);
   }
 
+  // ------------------------------------------------------------ plan runs
+  // A tutor–apprentice run (POST /v1/plan) followed through its event
+  // stream.  fetch() rather than EventSource: EventSource cannot send the
+  // X-API-Key header a keyed service needs.
+  const OUTCOME_STATUS = { APPROVED: "SAFE", APPROVED_UNVERIFIED: "UNKNOWN", TASK_REJECTED: "UNSAFE" };
+  let planRun = null; // { id, answers, abort }
+  let planSeq = 0;
+
+  function keyHeaders(extra) {
+    const headers = { ...extra };
+    const key = byId("api-key").value.trim();
+    if (key) headers["X-API-Key"] = key;
+    return headers;
+  }
+
+  function planState(state) {
+    const badge = byId("plan-state");
+    badge.hidden = !state;
+    badge.textContent = state || "";
+    badge.dataset.state = state || "";
+    // Only while the run is being created: a new run may replace a running one
+    // (that one fails closed on its own if nobody answers it).
+    byId("plan-start").disabled = state === "starting";
+  }
+
+  function readPlanInputs() {
+    const instruction = byId("plan-instruction").value.trim();
+    const sceneText = byId("plan-scene").value;
+    if (!instruction) throw new ApiError("write the instruction for the robot first");
+    if (!sceneText.trim()) throw new ApiError("paste or upload a scene (JSON) for the run first");
+    let scene;
+    try {
+      scene = JSON.parse(sceneText);
+    } catch (exc) {
+      throw new ApiError(`the run's scene is not valid JSON: ${exc.message}`);
+    }
+    if (scene === null || typeof scene !== "object" || Array.isArray(scene)) {
+      throw new ApiError("the run's scene must be a JSON object with instances and assertions");
+    }
+    const body = { scene, instruction };
+    const planner = byId("plan-planner").value.trim();
+    if (planner) body.planner = planner;
+    body.task_id = byId("plan-task-id").value.trim() || "task";
+    const maxIter = byId("plan-max-iter").value.trim();
+    if (maxIter) {
+      const n = Number(maxIter);
+      if (!Number.isInteger(n) || n < 1 || n > 20) throw new ApiError("max iterations must be a whole number from 1 to 20");
+      body.max_iter = n;
+    }
+    return body;
+  }
+
+  function resetPlanView() {
+    byId("plan-run").hidden = false;
+    byId("dialogue").replaceChildren();
+    byId("plan-outcome-box").hidden = true;
+    byId("plan-final-box").hidden = true;
+    byId("plan-questions").hidden = true;
+    byId("plan-questions-form").replaceChildren();
+    byId("plan-run-id").textContent = "";
+  }
+
+  async function startPlan() {
+    clearError();
+    let body;
+    try {
+      body = readPlanInputs();
+    } catch (exc) {
+      showError(exc.message);
+      return;
+    }
+    if (planRun) planRun.abort.abort();
+    planRun = null;
+    const seq = ++planSeq;
+    resetPlanView();
+    planState("starting");
+    let started;
+    try {
+      started = await api("POST", "/v1/plan", body);
+    } catch (exc) {
+      if (seq !== planSeq) return;
+      planState("");
+      byId("plan-run").hidden = true;
+      showError(exc.message);
+      return;
+    }
+    if (seq !== planSeq) return;
+    planRun = { id: started.id, run: started.run, answers: started.answers, abort: new AbortController() };
+    byId("plan-run-id").textContent = `run ${started.id}`;
+    planState(started.state);
+    await followPlan(seq, planRun, started.events);
+  }
+
+  async function followPlan(seq, run, eventsUrl) {
+    let finished = false;
+    try {
+      const response = await fetch(eventsUrl, {
+        headers: keyHeaders({ Accept: "text/event-stream" }),
+        signal: run.abort.signal,
+      });
+      if (!response.ok) {
+        let said = null;
+        try {
+          said = (await response.json()).error;
+        } catch (exc) {
+          said = null;
+        }
+        throw new ApiError(said || `${response.status} ${response.statusText} from ${eventsUrl}`);
+      }
+      const reader = response.body.pipeThrough(new TextDecoderStream()).getReader();
+      let buffer = "";
+      for (;;) {
+        const { value, done } = await reader.read();
+        if (done) break;
+        // The SSE format allows \r\n and \r line ends; one form is easier to split.
+        buffer += value.replace(/\r\n?/g, "\n");
+        let cut;
+        while ((cut = buffer.indexOf("\n\n")) >= 0) {
+          const block = buffer.slice(0, cut);
+          buffer = buffer.slice(cut + 2);
+          const message = parseEvent(block);
+          if (message === null || seq !== planSeq) continue;
+          finished = onPlanEvent(message.event, message.data) || finished;
+        }
+      }
+    } catch (exc) {
+      if (exc.name === "AbortError" || seq !== planSeq) return;
+      showError(exc instanceof ApiError ? exc.message : `the run's event stream broke off (${exc.message})`);
+    }
+    if (seq !== planSeq || finished) return;
+    // The stream ended early (a proxy, a restart): the run's own state says where it is.
+    try {
+      const state = await api("GET", run.run);
+      if (seq !== planSeq) return;
+      if (state.result) onPlanEvent("result", state.result);
+      else if (state.error) onPlanEvent("error", { error: state.error });
+      else {
+        planState(state.state);
+        showError(`the run's event stream ended while the run was ${state.state}; reload its state with ${run.run}`);
+      }
+    } catch (exc) {
+      if (seq === planSeq) showError(exc.message);
+    }
+  }
+
+  // One server-sent event: its `event:` name and its `data:` lines joined;
+  // comment lines (": keep-alive") are not events.
+  function parseEvent(block) {
+    let event = "message";
+    const data = [];
+    for (const line of block.split("\n")) {
+      if (!line || line.startsWith(":")) continue;
+      const colon = line.indexOf(":");
+      const field = colon < 0 ? line : line.slice(0, colon);
+      let value = colon < 0 ? "" : line.slice(colon + 1);
+      if (value.startsWith(" ")) value = value.slice(1);
+      if (field === "event") event = value;
+      else if (field === "data") data.push(value);
+    }
+    if (!data.length) return null;
+    try {
+      return { event, data: JSON.parse(data.join("\n")) };
+    } catch (exc) {
+      showError(`the run sent an event that is not JSON (${event})`);
+      return null;
+    }
+  }
+
+  // Returns whether the run is over.
+  function onPlanEvent(event, data) {
+    if (event === "turn") {
+      addTurn(data);
+      if (planRun && byId("plan-state").dataset.state !== "running") planState("running");
+      byId("plan-questions").hidden = true;
+    } else if (event === "questions") {
+      planState("waiting");
+      renderPlanQuestions(data);
+    } else if (event === "result") {
+      byId("plan-questions").hidden = true;
+      planState("done");
+      renderOutcome(data);
+      return true;
+    } else if (event === "error") {
+      byId("plan-questions").hidden = true;
+      planState("failed");
+      showError(`the run failed: ${data.error}`);
+      return true;
+    }
+    return false;
+  }
+
+  const SPEAKERS = { user: "You", apprentice: "Apprentice", tutor: "Tutor" };
+
+  function addTurn(turn) {
+    const box = byId("dialogue");
+    let group = box.querySelector(`[data-testid=iteration][data-iteration="${turn.iteration}"]`);
+    if (!group) {
+      group = el(
+        "section",
+        { class: "iteration", "data-testid": "iteration", "data-iteration": turn.iteration },
+        el("h3", { text: `Iteration ${turn.iteration + 1}` }),
+      );
+      box.append(group);
+    }
+    const head = el(
+      "div",
+      { class: "turn-head" },
+      el("span", { class: "speaker", "data-testid": "turn-speaker", text: SPEAKERS[turn.speaker] || turn.speaker }),
+      el("span", { class: "badge", "data-testid": "turn-kind", text: turn.kind }),
+    );
+    if (turn.status) {
+      head.append(el("span", { class: "verdict small-verdict", "data-testid": "turn-status", "data-status": turn.status, text: turn.status }));
+    }
+    const body =
+      turn.kind === "proposal" || turn.kind === "answers"
+        ? el("pre", { class: "plan-text", "data-testid": "turn-text", text: turn.kind === "answers" ? answersText(turn.text) : turn.text })
+        : el("div", { class: "turn-text", "data-testid": "turn-text", text: turn.text });
+    const extra = [];
+    if (turn.kind === "report" && turn.data && turn.data.suggestion) {
+      extra.push(el("div", { class: "small turn-note", "data-testid": "turn-suggestion", text: `Suggestion: ${turn.data.suggestion}` }));
+    }
+    group.append(
+      el(
+        "article",
+        {
+          class: `turn ${turn.speaker}`,
+          "data-testid": "turn",
+          "data-speaker": turn.speaker,
+          "data-kind": turn.kind,
+          "data-status": turn.status || "",
+        },
+        head,
+        body,
+        ...extra,
+      ),
+    );
+    body.scrollIntoView({ block: "nearest" });
+  }
+
+  // The answers turn carries the answers as JSON; a person reads one a line.
+  function answersText(text) {
+    try {
+      const given = JSON.parse(text);
+      if (given && typeof given === "object" && !Array.isArray(given)) {
+        const lines = Object.entries(given).map(([key, value]) => `${key} = ${value}`);
+        return lines.length ? lines.join("\n") : "(no answers: every question stays open)";
+      }
+    } catch (exc) {
+      // Not JSON: shown as it came.
+    }
+    return text;
+  }
+
+  function renderPlanQuestions(questions) {
+    const section = byId("plan-questions");
+    const form = byId("plan-questions-form");
+    form.replaceChildren();
+    questions.forEach((q, n) => {
+      const id = `pq-${n}`;
+      let control;
+      if (q.options.length) {
+        control = el("select", { id, "data-testid": "plan-answer", "data-key": q.key }, el("option", { value: "", text: "(leave open)" }));
+        q.options.forEach((o, i) => {
+          // A contradiction's options are facts; the server accepts their number.
+          const value = q.kind === "contradiction" ? String(i + 1) : o;
+          control.append(el("option", { value, text: o }));
+        });
+      } else {
+        control = el("input", { id, type: "text", "data-testid": "plan-answer", "data-key": q.key, placeholder: "leave blank to keep it open" });
+      }
+      form.append(
+        el(
+          "div",
+          { class: "question", "data-testid": "plan-question", "data-key": q.key, "data-kind": q.kind },
+          el("label", { class: "qtext", for: id, text: q.text }),
+          el("div", {}, control),
+        ),
+      );
+    });
+    form.append(el("button", { type: "submit", class: "primary", "data-testid": "plan-answer-button", text: "Send answers" }));
+    section.hidden = false;
+  }
+
+  async function submitPlanAnswers(event) {
+    event.preventDefault();
+    clearError();
+    if (!planRun) return;
+    const answers = {};
+    for (const control of byId("plan-questions-form").querySelectorAll("[data-testid=plan-answer]")) {
+      const value = control.value.trim();
+      if (value) answers[control.dataset.key] = value;
+    }
+    const button = byId("plan-answer-button");
+    button.disabled = true;
+    const run = planRun;
+    try {
+      // No answers at all is a valid reply: every question stays open.
+      await api("POST", run.answers, { answers });
+      if (run === planRun) byId("plan-questions").hidden = true;
+    } catch (exc) {
+      showError(exc.message);
+    } finally {
+      button.disabled = false;
+    }
+  }
+
+  function renderOutcome(result) {
+    const outcome = byId("plan-outcome");
+    outcome.textContent = result.outcome;
+    outcome.dataset.status = OUTCOME_STATUS[result.outcome] || "ERROR";
+    outcome.dataset.outcome = result.outcome;
+    const rounds = result.iterations === 1 ? "1 iteration" : `${result.iterations} iterations`;
+    byId("plan-reason").textContent = `${result.reason} · ${rounds}`;
+    byId("plan-outcome-box").hidden = false;
+    const plan = result.plan || [];
+    byId("plan-final").textContent = plan.length ? plan.join("\n") : "(no plan)";
+    byId("plan-final-box").hidden = false;
+  }
+
+  async function readPlanScene(input) {
+    const file = input.files && input.files[0];
+    if (!file) return;
+    try {
+      byId("plan-scene").value = await file.text();
+    } catch (exc) {
+      showError(`could not read ${file.name}: ${exc.message}`);
+    }
+  }
+
   // ------------------------------------------------------------ start
   async function health() {
     try {
@@ -738,8 +1068,15 @@
     byId("verify-button").addEventListener("click", () => verify(false));
     byId("questions-form").addEventListener("submit", submitAnswers);
     byId("rule-search").addEventListener("input", filterRules);
+    byId("plan-start").addEventListener("click", startPlan);
+    byId("plan-questions-form").addEventListener("submit", submitPlanAnswers);
+    byId("plan-scene-file").addEventListener("change", (e) => readPlanScene(e.target));
+    byId("plan-scene-from-verify").addEventListener("click", () => {
+      byId("plan-scene").value = byId("scene-input").value;
+    });
     await Promise.all([health(), loadExamples()]);
     if (location.hash === "#rules") showTab("rules");
+    if (location.hash === "#plan") showTab("plan");
     document.body.dataset.ready = "true";
   }
 
