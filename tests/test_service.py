@@ -236,6 +236,10 @@ def test_run_requests_are_checked(client: TestClient) -> None:
     )
     assert bad.status_code == 400 and "unknown planner" in bad.json()["error"]
     assert client.get("/v1/runs/nope").status_code == 404
+    extra = client.post("/v1/plan", json={"scene": scene, "instruction": "Go.", "model": "x"})
+    assert extra.json()["error"] == (
+        "unknown key 'model'; expected scene, instruction, planner, method, max_iter, task_id"
+    )
     replay = EXAMPLES_DIR / "dialogue" / "replay.jsonl"
     lost = client.post(
         "/v1/plan",

@@ -55,6 +55,17 @@ class HttpNotFound(Exception):
     """An id in the path names nothing: 404."""
 
 
+def _keys_of(request: Request) -> str:
+    """The keys the body of this request's endpoint takes."""
+    path = request.url.path
+    model: type[BaseModel] = VerifyRequest
+    if path == "/v1/plan":
+        model = PlanRequest
+    elif path.startswith("/v1/runs/"):
+        model = AnswersRequest
+    return ", ".join(model.model_fields)
+
+
 def _problem(status: int, message: str, kind: str = "BAD_INPUT") -> JSONResponse:
     return JSONResponse({"status": kind, "error": message}, status_code=status)
 
@@ -134,7 +145,7 @@ def create_app(
         if first["type"] == "missing":
             return _problem(400, f"the request body needs '{where}'")
         if first["type"] == "extra_forbidden":
-            return _problem(400, f"unknown key '{where}'; expected scene, plan, scenario, engine")
+            return _problem(400, f"unknown key '{where}'; expected {_keys_of(request)}")
         return _problem(400, f"{where}: {first['msg']}")
 
     @app.exception_handler(HttpNotFound)
