@@ -30,13 +30,13 @@ ROOT = Path(__file__).resolve().parent.parent
 def test_export_tbox_is_one_rdfxml_ontology_with_every_logical_axiom(
     tutor: LogicTutor, tmp_path: Path
 ) -> None:
+    path = tmp_path / "tbox.owl"
+    written = export_tbox(tutor.tbox, path)  # starts the JVM the imports below need
     from java.io import File
     from java.util import HashSet
     from org.semanticweb.owlapi.apibinding import OWLManager
     from org.semanticweb.owlapi.formats import RDFXMLDocumentFormat
 
-    path = tmp_path / "tbox.owl"
-    written = export_tbox(tutor.tbox, path)
     expected = HashSet()
     for ax in tutor.tbox.owl.logical_axioms():
         expected.add(ax.getAxiomWithoutAnnotations())
