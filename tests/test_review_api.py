@@ -84,6 +84,9 @@ class FakeWorkspace:
         self.calls.append(("candidates", status))
         return [self._summary(c) for c in self.items.values() if status in (None, c.status)]
 
+    def summary(self, cid: int) -> CandidateSummary:
+        return self._summary(self._get(cid))
+
     def candidate(self, cid: int) -> CandidateView:
         c = self._get(cid)
         return CandidateView(

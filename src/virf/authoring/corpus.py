@@ -40,7 +40,7 @@ import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
 import numpy.typing as npt
@@ -326,12 +326,7 @@ class Corpus:
                     os.fchmod(fh.fileno(), _FILE_MODE)
                     fh.write(raw)
         except OSError as exc:
-            for staged_file, _, _ in staged:
-                with contextlib.suppress(OSError):
-                    staged_file.unlink()
-            raise InputError(
-                f"cannot write to the corpus {shown(self.folder)}: {exc.strerror}"
-            ) from None
+            self._unstage(staged, exc)
         try:
             for staged_file, target, old in staged:
                 os.replace(staged_file, target)
@@ -340,17 +335,21 @@ class Corpus:
         except OSError as exc:
             # Renames within one folder fail only when the disk or its
             # permissions change under us; what was renamed stays.
-            for staged_file, _, _ in staged:
-                with contextlib.suppress(OSError):
-                    staged_file.unlink()
-            raise InputError(
-                f"cannot write to the corpus {shown(self.folder)}: {exc.strerror}"
-            ) from None
+            self._unstage(staged, exc)
         finally:
             self._documents = None
             self._index = None
 
     # -- the index --------------------------------------------------------
+
+    def _unstage(self, staged: Sequence[tuple[Path, Path, str | None]], exc: OSError) -> NoReturn:
+        """Remove the staged copies that are still there, and say why the add failed."""
+        for staged_file, _, _ in staged:
+            with contextlib.suppress(OSError):
+                staged_file.unlink()
+        raise InputError(
+            f"cannot write to the corpus {shown(self.folder)}: {exc.strerror}"
+        ) from None
 
     def build(self, progress: Progress | None = None) -> None:
         """Make sure the retrieval index is current, embedding what changed.

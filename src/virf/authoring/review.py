@@ -57,6 +57,8 @@ class ReviewWorkspace(Protocol):
 
     def candidates(self, status: Status | None = None) -> list[CandidateSummary]: ...
 
+    def summary(self, cid: int) -> CandidateSummary: ...
+
     def candidate(self, cid: int) -> CandidateView: ...
 
     def opened(self, cid: int, reviewer: str) -> None: ...
@@ -225,7 +227,7 @@ def create_app(
     def known(cid: int) -> CandidateSummary:
         """The candidate's queue entry; 404 with the workspace's own words if there is none."""
         try:
-            return ws.candidate(cid).summary
+            return ws.summary(cid)
         except InputError as exc:
             raise HttpProblem(404, str(exc)) from None
 

@@ -84,6 +84,11 @@ MIGRATIONS: Final[tuple[Migration, ...]] = (
 )
 
 
+def status_of(decision: str | None) -> str:
+    """A candidate's status from its decision (None: not decided yet)."""
+    return {"accept": "accepted", "reject": "rejected"}.get(decision or "", "pending")
+
+
 @dataclass(frozen=True)
 class CandidateRow:
     id: int
@@ -298,10 +303,7 @@ class Store:
                 "SELECT c.id, d.decision FROM candidates c "
                 "LEFT JOIN decisions d ON d.candidate_id = c.id ORDER BY c.id"
             ).fetchall()
-        return {
-            cid: {"accept": "accepted", "reject": "rejected"}.get(dec, "pending")
-            for cid, dec in rows
-        }
+        return {cid: status_of(dec) for cid, dec in rows}
 
     # ------------------------------------------------------------ events
     def add_event(

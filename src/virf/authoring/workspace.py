@@ -37,11 +37,11 @@ from virf.authoring.models import (
     Status,
 )
 from virf.authoring.normalize import DEFAULT_THRESHOLD, VocabularyIndex, normalise
-from virf.authoring.store import DecisionRow, Store
+from virf.authoring.store import CandidateRow, DecisionRow, Store, status_of
 from virf.errors import InputError, clip, read_json_file
 from virf.files import write_atomically
 from virf.migrations import now
-from virf.ontology.tbox import TBox, load_tbox, ontology_dir, scenario_names
+from virf.ontology.tbox import TBox, Vocabulary, load_tbox, ontology_dir, scenario_names
 from virf.ontology.workspace import FORMAT, LAYERS, MARKER, KbLayout, open_layout
 
 if TYPE_CHECKING:
@@ -306,15 +306,12 @@ class Workspace:
         return ids
 
     # ------------------------------------------------------------------ checks
-    def _vocabulary_index(self) -> VocabularyIndex:
+    def _vocabulary_index(self, vocab: Vocabulary) -> VocabularyIndex:
         from virf.authoring.embed import default_embedder
 
         with self._lock:
-            tbox = self.tbox()
-            if self._index is None or self._index.vocab is not tbox.vocabulary:
-                self._index = VocabularyIndex(
-                    tbox.vocabulary, default_embedder().encode, self.cache_dir
-                )
+            if self._index is None or self._index.vocab is not vocab:
+                self._index = VocabularyIndex(vocab, default_embedder().encode, self.cache_dir)
             return self._index
 
     def evidence(self, ids: Sequence[str]) -> tuple[Evidence, ...]:
@@ -372,7 +369,7 @@ class Workspace:
             normalised = normalise(
                 axiom,
                 vocab,
-                self._vocabulary_index(),
+                self._vocabulary_index(vocab),
                 declared_parents=parsed_draft.parents(),
                 threshold=self.threshold,
                 own_name=name,
@@ -392,6 +389,7 @@ class Workspace:
         items.extend(self._annotation_items(rule, vocab.uscs.values()))
         items.extend(self._evidence_items(parsed_draft, evidence_ids))
         block = self._block(
+            vocab,
             cid,
             rule,
             normalised.axiom,
@@ -536,6 +534,7 @@ class Workspace:
 
     def _block(
         self,
+        vocab: Vocabulary,
         cid: int,
         rule: dict[str, Any],
         axiom: str,
@@ -552,7 +551,6 @@ class Workspace:
         # parser does not look into already-loaded imports when it parses a
         # document from a string, and the declarations cost nothing.
         new = {c for c, _ in new_classes}
-        vocab = self.tbox().vocabulary
         for term, role in sorted(manchester.names(axiom).items()):
             if term in new:
                 continue
@@ -761,14 +759,13 @@ class Workspace:
         for cid, st in statuses.items():
             if status is not None and st != status:
                 continue
-            out.append(self._summary(cid, st))
+            out.append(self._summary(self.store.candidate(cid), st, self.store.latest_check(cid)))
         return out
 
-    def _summary(self, cid: int, status: str) -> CandidateSummary:
-        row = self.store.candidate(cid)
-        latest = self.store.latest_check(cid)
+    @staticmethod
+    def _summary(row: CandidateRow, status: str, latest: dict[str, Any] | None) -> CandidateSummary:
         return CandidateSummary(
-            id=cid,
+            id=row.id,
             name=row.name,
             category=str(row.rule["category"]),
             drafter=row.drafter,
@@ -778,14 +775,24 @@ class Workspace:
             passed=None if latest is None else bool(latest["passed"]),
         )
 
+    def summary(self, cid: int) -> CandidateSummary:
+        """The candidate's queue entry (InputError for an unknown id)."""
+        row = self.store.candidate(cid)  # first: it refuses an id no candidate can have
+        decision = self.store.decision(cid)
+        return self._summary(
+            row,
+            status_of(decision.decision if decision else None),
+            self.store.latest_check(cid),
+        )
+
     def candidate(self, cid: int) -> CandidateView:
         row = self.store.candidate(cid)
-        status = self.store.statuses()[cid]
         check = self.store.latest_check(cid)
         preview = self.store.latest_preview(cid)
         decision = self.store.decision(cid)
+        status = status_of(decision.decision if decision else None)
         return CandidateView(
-            summary=self._summary(cid, status),
+            summary=self._summary(row, status, check),
             rule=RuleDraft(**row.rule),
             evidence=self.evidence(row.evidence),
             retrieved=row.retrieved,

@@ -32,7 +32,8 @@ from virf.api import LogicTutor
 from virf.errors import EnvironmentProblem, InputError, VirfError
 from virf.ontology.tbox import DEFAULT_SCENARIO
 from virf.service.runs import AnswersRequest, PlanRequest, Runs
-from virf.world.plan import parse_plan, parse_plan_text
+from virf.world.plan import PlanStep, parse_plan, parse_plan_text
+from virf.world.scene import Scene
 
 # A scene of MAX_INSTANCES objects with their relations is far below this.
 MAX_REQUEST_BYTES: Final = 8 * 1024 * 1024
@@ -77,6 +78,21 @@ class Tutors:
         self.scenario, self.engine, self.kb, self.timeout_s = scenario, engine, kb, timeout_s
         self._tutors: dict[tuple[str, str], tuple[LogicTutor, threading.Lock]] = {}
         self._lock = threading.Lock()
+
+    def prepare(
+        self,
+        scene: dict[str, Any],
+        plan: list[str] | str,
+        scenario: str | None,
+        engine: str | None,
+    ) -> tuple[LogicTutor, threading.Lock, Scene, tuple[PlanStep, ...]]:
+        """A request's tutor, scene and plan, read as ``virf verify`` reads them
+        (a plan is a list of lines or a plan file's text)."""
+        steps = parse_plan_text(plan) if isinstance(plan, str) else parse_plan(plan)
+        if not steps:
+            raise InputError("plan has no actions (only blank lines or comments)")
+        tutor, lock = self.get(scenario, engine)
+        return tutor, lock, tutor.scene(scene), tuple(steps)
 
     def get(self, scenario: str | None, engine: str | None) -> tuple[LogicTutor, threading.Lock]:
         key = (scenario or self.scenario, engine or self.engine)
@@ -165,11 +181,9 @@ def create_app(
     @app.post("/v1/verify")
     def verify(body: VerifyRequest) -> Response:
         """Verify a plan in a scene: the report ``virf verify --json`` prints."""
-        steps = parse_plan_text(body.plan) if isinstance(body.plan, str) else parse_plan(body.plan)
-        if not steps:
-            raise InputError("plan has no actions (only blank lines or comments)")
-        tutor, lock = tutors.get(body.scenario, body.engine)
-        scene = tutor.scene(body.scene)
+        tutor, lock, scene, steps = tutors.prepare(
+            body.scene, body.plan, body.scenario, body.engine
+        )
         with lock:
             report = tutor.verifier.verify(scene, steps)
         return Response(report.to_json() + "\n", media_type="application/json")

@@ -38,7 +38,6 @@ import virf
 from virf.errors import InputError, clip, closest
 from virf.planner.questions import apply_answers
 from virf.service.app import Tutors
-from virf.world.plan import PlanStep, parse_plan, parse_plan_text
 
 STATIC_DIR: Final = Path(__file__).resolve().parent / "static"
 
@@ -89,14 +88,6 @@ class AnswersRequest(_Body):
     answers: dict[str, str]
     scenario: str | None = None
     engine: str | None = None
-
-
-def _steps(plan: list[str] | str) -> tuple[PlanStep, ...]:
-    """The plan as ``/v1/verify`` reads it (a list of lines or a plan file's text)."""
-    steps = parse_plan_text(plan) if isinstance(plan, str) else parse_plan(plan)
-    if not steps:
-        raise InputError("plan has no actions (only blank lines or comments)")
-    return tuple(steps)
 
 
 def _example_names(folder: Path | None) -> list[str]:
@@ -160,9 +151,9 @@ def add_pages(app: FastAPI, tutors: Tutors, *, examples: Path | None = None) -> 
     @app.post("/v1/state")
     def state(body: StateRequest) -> dict[str, Any]:
         """The facts of the simulated state ``step`` (0: the scene before the plan)."""
-        steps = _steps(body.plan)
-        tutor, lock = tutors.get(body.scenario, body.engine)
-        scene = tutor.scene(body.scene)
+        tutor, lock, scene, steps = tutors.prepare(
+            body.scene, body.plan, body.scenario, body.engine
+        )
         with lock:
             snapshots = tutor.verifier.snapshots(scene, steps)
         last = len(snapshots) - 1
@@ -193,9 +184,9 @@ def add_pages(app: FastAPI, tutors: Tutors, *, examples: Path | None = None) -> 
     @app.post("/v1/apply-answers")
     def answers(body: AnswersRequest) -> dict[str, Any]:
         """The scene with answers to the report's questions applied, as ``virf plan`` does."""
-        steps = _steps(body.plan)
-        tutor, lock = tutors.get(body.scenario, body.engine)
-        scene = tutor.scene(body.scene)
+        tutor, lock, scene, steps = tutors.prepare(
+            body.scene, body.plan, body.scenario, body.engine
+        )
         with lock:
             report = tutor.verifier.verify(scene, steps)
         keys = [q.key for q in report.questions]
