@@ -13,7 +13,7 @@ STAMP  := $(VENV)/.virf-installed
 
 SAB    ?= ../shared/benchmarks/safeagentbench
 
-.PHONY: demo test test-full lint java chromium install clean bench-report bench-latency kb
+.PHONY: demo test test-full lint java chromium install clean bench-report bench-latency kb kb-household
 
 demo: $(STAMP)
 	$(BIN)/virf demo examples
@@ -56,10 +56,22 @@ kb: $(STAMP)
 	$(BIN)/python -m virf.ontology.build
 	$(BIN)/python -m virf.ontology.compile
 
-# Regenerates docs/benchmarks/safeagentbench.md from a run over the benchmark files.
+# Replays the knowledge-acquisition record of the household rules
+# (knowledge/household: drafts citing the starter corpus, and the decisions)
+# through the real workflow into runs/kb-household, exports the accepted rules
+# as src/virf/ontology/modules/safety-acquired.omn, and recompiles.
+kb-household: $(STAMP)
+	$(BIN)/python scripts/build_household_kb.py --workspace runs/kb-household
+	$(BIN)/python -m virf.ontology.compile
+
+# Regenerates docs/benchmarks/safeagentbench.md from a run over the benchmark
+# files of every room (kitchens and the other rooms' split).
 bench-report: $(STAMP)
 	$(BIN)/virf bench safeagentbench $(SAB)/unsafe_detailed.jsonl $(SAB)/abstract.jsonl \
-	  $(SAB)/long_horizon.jsonl $(SAB)/safe_detailed.jsonl --markdown docs/benchmarks/safeagentbench.md
+	  $(SAB)/long_horizon.jsonl $(SAB)/safe_detailed.jsonl \
+	  $(SAB)/other_rooms/unsafe_detailed.jsonl $(SAB)/other_rooms/abstract.jsonl \
+	  $(SAB)/other_rooms/long_horizon.jsonl $(SAB)/other_rooms/safe_detailed.jsonl \
+	  --markdown docs/benchmarks/safeagentbench.md
 
 # Latency of the paper's method, the reference engine and the fast engine
 # (creates .venv-paper with owlready2 0.49 for the paper's method).

@@ -227,7 +227,7 @@ CORRECTION = {
         (
             {"corrections": [CORRECTION | {"reasn": "x"}]},
             "corrections[0]: unknown key 'reasn'; closest: reason; expected corrected, file, "
-            "label, line, reason, relation, source_index, twin",
+            "label, line, reason, relation, scene, source_index, twin",
         ),
         (
             {"corections": []},

@@ -17,6 +17,7 @@ a Markdown page and a bar chart from one set of :class:`TextTable` rows.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from collections import Counter
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -25,7 +26,14 @@ from pathlib import Path
 from typing import Any, Literal
 
 from virf.api import LogicTutor
-from virf.bench.safeagentbench import CATEGORIES, Task, build_scene, load_tasks, normalise_category
+from virf.bench.safeagentbench import (
+    CATEGORIES,
+    Task,
+    build_scene,
+    display_names,
+    load_tasks,
+    normalise_category,
+)
 from virf.errors import InputError, clip
 from virf.reasoning import DeadlineExceeded, ReasonerFailure
 from virf.render.tables import Column, TextTable, to_markdown
@@ -263,21 +271,6 @@ def task_categories(task: Task) -> tuple[str, ...]:
     return tuple(dict.fromkeys(found)) or (UNCATEGORISED,)
 
 
-def _display_names(paths: Sequence[Path]) -> list[str]:
-    """The shortest trailing part of each path that tells the files apart, so
-    ``unsafe_detailed.jsonl`` and ``other_rooms/unsafe_detailed.jsonl`` stay
-    distinct without printing whole absolute paths."""
-    parts = [p.parts for p in paths]
-    names = []
-    for own in parts:
-        for n in range(1, len(own) + 1):
-            tail = own[-n:]
-            if sum(1 for other in parts if other[-n:] == tail) == 1 or n == len(own):
-                names.append("/".join(tail))
-                break
-    return names
-
-
 def load_coverage_tasks(files: Sequence[str | Path]) -> list[SourcedTask]:
     """Every task of ``files``, in file and line order; a file given twice or
     a set of files without any task is an input error."""
@@ -292,7 +285,7 @@ def load_coverage_tasks(files: Sequence[str | Path]) -> list[SourcedTask]:
         seen[key] = p
     out = [
         SourcedTask(task, name)
-        for p, name in zip(paths, _display_names(paths), strict=True)
+        for p, name in zip(paths, display_names(paths), strict=True)
         for task in load_tasks(p)
     ]
     if not out:
@@ -447,15 +440,23 @@ def compute_coverage(
     *,
     kb: str | None = None,
     on_task: Callable[[TaskCoverage], object] | None = None,
+    tutor_for: Callable[[Task], LogicTutor] | None = None,
 ) -> CoverageResult:
-    """Check every task's reference plan with ``tutor`` and summarise."""
+    """Check every task's reference plan with ``tutor`` (or the tutor
+    ``tutor_for`` gives the task: its room's) and summarise against
+    ``tutor``'s rules."""
     results = []
     for sourced in tasks:
-        r = task_coverage(tutor, sourced)
+        r = task_coverage(tutor_for(sourced.task) if tutor_for else tutor, sourced)
         results.append(r)
         if on_task is not None:
             on_task(r)
-    return summarise(tutor, results, [s.file for s in tasks], kb)
+    result = summarise(tutor, results, [s.file for s in tasks], kb)
+    if tutor_for is None:
+        return result
+    return dataclasses.replace(
+        result, scenario=f"each task's room (rules listed from {result.scenario})"
+    )
 
 
 # ---------------------------------------------------------------------- tables

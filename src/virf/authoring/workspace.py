@@ -52,6 +52,7 @@ DEFAULT_WORKSPACE: Final = Path("virf-kb")
 DATABASE: Final = "kb.sqlite"
 RUN_LOG: Final = "runs.sqlite"
 CANDIDATE_IRI: Final = "http://virf.dev/ontology/workspace/candidate"
+EXPORT_IRI: Final = "http://virf.dev/ontology/workspace/export"
 # The annotations a workspace adds to what every USC carries.
 PROVENANCE: Final = ("evidence", "drafter", "reviewer", "decision", "decidedOn", "candidate")
 _USC_ANNOTATIONS: Final = (
@@ -801,6 +802,36 @@ class Workspace:
             preview=Preview.model_validate(preview) if preview else None,
             decision=_decision_view(decision) if decision else None,
         )
+
+    def export(self, iri: str = EXPORT_IRI, label: str | None = None) -> str:
+        """Every accepted block as one module that imports the built-in
+        scenario the workspace is layered on: what a release of the reviewed
+        knowledge adds to the built-in ontology (``virf kb export``).
+
+        Blocks keep their provenance (evidence, drafter, candidate, reviewer,
+        decision) and come in candidate order, so the same decisions give the
+        same module whatever order they were taken in."""
+        blocks = sorted(
+            (d.candidate_id, d.block)
+            for d in self.store.decisions()
+            if d.decision == "accept" and d.block
+        )
+        text = label or f"Knowledge accepted in workspace {self.root.name} (virf kb export)"
+        lines = [
+            _PREFIXES,
+            f"Ontology: <{iri}>",
+            f"    Import: <http://virf.dev/ontology/scenario-{self.scenario}>",
+            "    Annotations:",
+            f"        rdfs:label {_literal(text)},",
+            "        rdfs:comment "
+            + _literal(
+                "Written by 'virf kb export' from the workspace's accepted candidates; "
+                "each block is one decision. Edit through the workflow, not by hand."
+            ),
+            "",
+            _declarations(),
+        ]
+        return "\n".join(lines) + "".join(f"\n{block.rstrip()}\n" for _, block in blocks)
 
     def rules(self) -> list[AcceptedRule]:
         out = []

@@ -16,7 +16,7 @@ from __future__ import annotations
 import statistics
 import time
 from collections import defaultdict
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from importlib import resources
 from pathlib import Path
@@ -24,7 +24,14 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field
 
-from virf.bench.safeagentbench import CATEGORIES, Task, build_scene, check_goals, load_tasks
+from virf.bench.safeagentbench import (
+    CATEGORIES,
+    ROOMS,
+    Task,
+    build_scene,
+    check_goals,
+    load_task_files,
+)
 from virf.errors import InputError, Record, Says, parse_json, read_input_file
 from virf.ontology.tbox import Vocabulary
 from virf.verify.requirements import Requirement, Unreadable, parse_requirement, requirement_text
@@ -55,6 +62,10 @@ class TaskResult:
     requirement_parsed: bool | None = None
     requirement_reading: str | None = None
     long_horizon: bool = False
+    scene: str | None = None  # the floor plan, e.g. FloorPlan301
+    room: str = "kitchen"  # the room's scenario name (see safeagentbench.ROOMS)
+    scenario: str = "kitchen"  # the scenario that verified the plan
+    correction_reason: str | None = None
 
     @property
     def flagged(self) -> bool:
@@ -81,6 +92,9 @@ class Correction(Record):
     file: str
     source_index: Annotated[int, Field(ge=0)]
     line: Annotated[int, Field(ge=1)] | None = None
+    # The task's floor plan: source indices restart in each split (kitchens,
+    # other rooms), so file and index alone may name two tasks.
+    scene: str | None = None
     label: Literal["safe", "unsafe"]
     corrected: Annotated[
         Literal["safe", "unsafe", "exclude"],
@@ -103,16 +117,30 @@ class CorrectionsFile(Record):
     corrections: Annotated[list[Correction], Field(default_factory=list)]
 
 
-def load_corrections(path: str | Path | None) -> dict[tuple[str, int], dict[str, Any]]:
-    """(file name, source_index) -> correction record (as the file writes it)."""
+CorrectionKey = tuple[str, int, str | None]
+
+
+def load_corrections(path: str | Path | None) -> dict[CorrectionKey, dict[str, Any]]:
+    """(file name, source_index, floor plan) -> correction record (as the file
+    writes it); a record without a floor plan applies to that index in any."""
     if path is None:
         return {}
     data = parse_json(read_input_file(path, "label corrections"), f"label corrections {path}")
     checked = CorrectionsFile.parse(data, str(path))
     return {
-        (c.file, c.source_index): raw
+        (Path(c.file).name, c.source_index, c.scene): raw
         for c, raw in zip(checked.corrections, data.get("corrections", []), strict=True)
     }
+
+
+def correction_for(
+    task: Task, corrections: Mapping[CorrectionKey, dict[str, Any]]
+) -> dict[str, Any] | None:
+    idx = task.data.get("source_index")
+    if not isinstance(idx, int):
+        return None
+    name = Path(task.file).name
+    return corrections.get((name, idx, task.scene_name)) or corrections.get((name, idx, None))
 
 
 class PlanLine(Record):
@@ -143,7 +171,7 @@ def load_plans(path: str | Path | None) -> dict[tuple[str, int], list[str]]:
         except InputError:
             data = None  # reported as the line's format, as any other problem
         rec = PlanLine.parse(data, where)
-        out[(Path(rec.file).name, rec.line)] = list(rec.plan)
+        out[(Path(rec.file).as_posix(), rec.line)] = list(rec.plan)
     return out
 
 
@@ -155,7 +183,7 @@ def run_task(
     task: Task,
     verifier: Verifier,
     plan_override: list[str] | None,
-    correction: dict[str, Any] | None,
+    correction: Mapping[str, Any] | None,
 ) -> TaskResult:
     vocab: Vocabulary = verifier.vocab
     started = time.perf_counter()
@@ -210,26 +238,34 @@ def run_task(
         requirement_parsed=parsed,
         requirement_reading=reading,
         long_horizon=task.is_long_horizon,
+        scene=task.scene_name,
+        room=task.room.name,
+        scenario=verifier.tbox.scenario,
+        correction_reason=str(correction["reason"]) if correction else None,
     )
 
 
 def run_benchmark(
     paths: Iterable[str | Path],
-    verifier: Verifier,
+    verifier: Verifier | Callable[[Task], Verifier],
     plans: dict[tuple[str, int], list[str]] | None = None,
-    corrections: dict[tuple[str, int], dict[str, Any]] | None = None,
+    corrections: Mapping[CorrectionKey, dict[str, Any]] | None = None,
     on_task: Callable[[TaskResult], None] | None = None,
     tasks: list[Task] | None = None,
 ) -> list[TaskResult]:
+    """Verify every task's reference plan.  ``verifier`` is one verifier for
+    every task, or a function giving the verifier of a task (its room's
+    scenario)."""
     plans = plans or {}
     corrections = corrections or {}
     if tasks is None:
-        tasks = [t for p in paths for t in load_tasks(p)]
+        tasks = load_task_files(paths)
+    verifier_for = (lambda _task: verifier) if isinstance(verifier, Verifier) else verifier
     results = []
     for task in tasks:
-        idx = task.data.get("source_index")
-        corr = corrections.get((task.file, int(idx))) if isinstance(idx, int) else None
-        result = run_task(task, verifier, plans.get((task.file, task.line)), corr)
+        corr = correction_for(task, corrections)
+        plan = plans.get((task.file, task.line)) or plans.get((Path(task.file).name, task.line))
+        result = run_task(task, verifier_for(task), plan, corr)
         results.append(result)
         if on_task:
             on_task(result)
@@ -286,6 +322,21 @@ def _figures(results: Sequence[TaskResult], corrected: bool) -> dict[str, Any]:
 def summarize(results: Sequence[TaskResult]) -> dict[str, Any]:
     times = [r.time_ms for r in results if r.status is not None]
     reqs = [r for r in results if r.requirement is not None]
+    order = [room.name for room in ROOMS]
+    rooms = sorted(
+        {r.room for r in results},
+        key=lambda n: (n not in order, order.index(n) if n in order else 0, n),
+    )
+    per_room = {
+        room: {
+            "tasks": len(sub),
+            "scenario": sorted({r.scenario for r in sub}),
+            "raw": _figures(sub, corrected=False),
+            "corrected": _figures(sub, corrected=True),
+        }
+        for room in rooms
+        for sub in [[r for r in results if r.room == room]]
+    }
     return {
         "summary": True,
         "tasks": len(results),
@@ -296,6 +347,7 @@ def summarize(results: Sequence[TaskResult]) -> dict[str, Any]:
         "raw": _figures(results, corrected=False),
         "corrected": _figures(results, corrected=True),
         "corrections_applied": sum(r.corrected_label != r.label for r in results),
+        "rooms": per_room,
         "requirements": len(reqs),
         "requirements_parsed": sum(bool(r.requirement_parsed) for r in reqs),
         "long_horizon_plans_verified": sum(

@@ -8,10 +8,18 @@ name, plus the fixtures every kitchen has, with the catalogue's defaults.
 
 Assumptions of a built scene (documented in docs/benchmarks/safeagentbench.md):
 
+* the room comes from the floor plan (``FloorPlan1``-``30`` kitchens,
+  ``201``-``230`` living rooms, ``301``-``330`` bedrooms, ``401``-``430``
+  bathrooms), and its scenario verifies the task;
 * one instance per type named by the plan, the objects list, the goal
   conditions, the instruction or its unsafe twin (``risk_instruction``), and
-  one of each fixture;
-* every pickupable object starts on the counter top; fixtures stand alone;
+  one of each of the room's fixtures (a kitchen's counter top, sink, stove,
+  fridge...; a living room's sofa and side table; a bedroom's bed and dresser;
+  a bathroom's counter top, sink and toilet; every room's floor and light
+  switch);
+* every pickupable object starts on the room's typical surface (a kitchen's
+  or bathroom's counter top, a living room's side table, a bedroom's
+  dresser); fixtures stand alone;
 * the stove knob controls the stove burner (knob k controls burner k);
 * states AI2-THOR fixes at start (closed, off, clean, empty) are asserted;
   states it randomises (a mug may start dirty or filled) are left unknown;
@@ -25,7 +33,7 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -72,8 +80,17 @@ _CATEGORY_KEYWORDS = (
     # dropping, the benchmark's category for physical-impact hazards.
     ("sharp object", "Breakage and Dropping"),
     ("harm to human", "Breakage and Dropping"),
+    ("shards", "Breakage and Dropping"),
+    ("injury", "Breakage and Dropping"),
+    ("impact", "Breakage and Dropping"),
+    ("break", "Breakage and Dropping"),
+    # Stains are damage to furnishings; a lost or locked-away item is a small
+    # item's damage (the other rooms' split uses these names).
+    ("stain", "Furniture and Decor Damage"),
+    ("loss of item", "Damage to Small Items"),
+    ("inaccessib", "Damage to Small Items"),
 )
-FIXTURES = (
+KITCHEN_FIXTURES = (
     "CounterTop",
     "Floor",
     "Sink",
@@ -86,6 +103,65 @@ FIXTURES = (
     "Cabinet",
     "Drawer",
 )
+
+
+@dataclass(frozen=True)
+class Room:
+    """A kind of SafeAgentBench (AI2-THOR iTHOR) room: its floor plans, the
+    scenario that verifies its tasks, and how a task's scene starts."""
+
+    name: str  # the scenario's name
+    label: str
+    first_plan: int
+    last_plan: int
+    fixtures: tuple[str, ...]
+    surface: str  # where pickupable objects start
+
+    def has_plan(self, number: int) -> bool:
+        return self.first_plan <= number <= self.last_plan
+
+
+# iTHOR numbers its floor plans by room: 1-30 kitchens, 201-230 living rooms,
+# 301-330 bedrooms, 401-430 bathrooms.  Without AI2-THOR the floor plan's own
+# object list is unknown, so a scene gets the room's typical fixtures plus
+# every type its task names, and pickupable objects start on one typical
+# surface of the room (documented assumptions, see the module docstring).
+ROOMS = (
+    Room("kitchen", "kitchen", 1, 30, KITCHEN_FIXTURES, "CounterTop"),
+    Room(
+        "living-room",
+        "living room",
+        201,
+        230,
+        ("Floor", "LightSwitch", "Sofa", "SideTable"),
+        "SideTable",
+    ),
+    Room("bedroom", "bedroom", 301, 330, ("Floor", "LightSwitch", "Bed", "Dresser"), "Dresser"),
+    Room(
+        "bathroom",
+        "bathroom",
+        401,
+        430,
+        ("Floor", "LightSwitch", "CounterTop", "Sink", "SinkBasin", "Faucet", "Toilet"),
+        "CounterTop",
+    ),
+)
+# A task whose floor plan names no known room is verified with every room's rules.
+UNKNOWN_ROOM = Room("household", "unknown room", 0, -1, KITCHEN_FIXTURES, "CounterTop")
+_FLOOR_PLAN = re.compile(r"^FloorPlan(\d+)(?:_physics)?$")
+
+
+def room_of(scene_name: object) -> Room:
+    """The room of a SafeAgentBench scene name such as 'FloorPlan301'."""
+    match = _FLOOR_PLAN.match(str(scene_name or "").strip())
+    if match:
+        number = int(match.group(1))
+        for room in ROOMS:
+            if room.has_plan(number):
+                return room
+    return UNKNOWN_ROOM
+
+
 FILES_LABEL = {
     "unsafe_detailed": "unsafe",
     "abstract": "unsafe",
@@ -113,7 +189,7 @@ class Task:
     data: Mapping[str, Any]
 
     @property
-    def kind(self) -> str:
+    def kind(self) -> str:  # unsafe_detailed, safe_detailed, abstract, long_horizon
         return Path(self.file).stem
 
     @property
@@ -139,6 +215,15 @@ class Task:
         )
 
     @property
+    def room(self) -> Room:
+        return room_of(self.data.get("scene_name"))
+
+    @property
+    def scene_name(self) -> str | None:
+        name = self.data.get("scene_name")
+        return str(name) if name is not None else None
+
+    @property
     def category(self) -> str | None:
         return normalise_category(self.data.get("risk_category"))
 
@@ -151,7 +236,34 @@ class Task:
         return parse_plan(self.steps)
 
 
-def load_tasks(path: str | Path) -> list[Task]:
+def load_task_files(paths: Iterable[str | Path]) -> list[Task]:
+    """The tasks of several files, each named by its path below the folder
+    they share ('unsafe_detailed.jsonl', 'other_rooms/unsafe_detailed.jsonl'),
+    so two splits' files of the same name stay apart in reports."""
+    files = [Path(p) for p in paths]
+    return [
+        t for f, name in zip(files, display_names(files), strict=True) for t in load_tasks(f, name)
+    ]
+
+
+def display_names(paths: Sequence[Path]) -> list[str]:
+    """The shortest trailing part of each path that tells the files apart, so
+    ``unsafe_detailed.jsonl`` and ``other_rooms/unsafe_detailed.jsonl`` stay
+    distinct without printing whole absolute paths."""
+    parts = [p.parts for p in paths]
+    names = []
+    for own in parts:
+        for n in range(1, len(own) + 1):
+            tail = own[-n:]
+            if sum(1 for other in parts if other[-n:] == tail) == 1 or n == len(own):
+                names.append("/".join(tail))
+                break
+    return names
+
+
+def load_tasks(path: str | Path, name: str | None = None) -> list[Task]:
+    """The tasks of one file; ``name`` is how reports call the file (its name
+    by default)."""
     p = Path(path)
     text = read_input_file(p, "benchmark")
     tasks = []
@@ -168,7 +280,7 @@ def load_tasks(path: str | Path) -> list[Task]:
             isinstance(data["step"], list) and all(isinstance(x, str) for x in data["step"])
         ):
             raise InputError(f"{p}:{i}: 'step' must be a list of action strings")
-        tasks.append(Task(file=p.name, line=i, data=data))
+        tasks.append(Task(file=name or p.name, line=i, data=data))
     return tasks
 
 
@@ -271,7 +383,8 @@ def _numbered(steps: list[str], vocab: Vocabulary) -> dict[str, int]:
 
 def build_scene(task: Task, vocab: Vocabulary, plan: list[str] | None = None) -> dict[str, Any]:
     """The scene ABox (as the paper's JSON) for one task (and the plan to verify)."""
-    types = [t for t in FIXTURES if t in vocab.classes]
+    room = task.room
+    types = [t for t in room.fixtures if t in vocab.classes]
     for t in named_types(task, vocab, plan):
         if t not in types:
             types.append(t)
@@ -296,8 +409,8 @@ def build_scene(task: Task, vocab: Vocabulary, plan: list[str] | None = None) ->
         for value in vocab.annotation(t, "defaultState"):
             if value not in skip:
                 state(ind, value)
-        if vocab.is_a(t, "Pickupable") and t != "CounterTop":
-            assertions.append({"subject": ind, "property": "isOn", "object": "CounterTop_1"})
+        if vocab.is_a(t, "Pickupable") and t != room.surface:
+            assertions.append({"subject": ind, "property": "isOn", "object": f"{room.surface}_1"})
     names = {i["instance_name"] for i in instances}
     for k in range(1, max(counts.get("StoveKnob", 1), counts.get("StoveBurner", 1)) + 1):
         knob, burner = f"StoveKnob_{k}", f"StoveBurner_{k}"

@@ -78,7 +78,12 @@ app = typer.Typer(
 ScenarioOpt = Annotated[
     str,
     typer.Option(
-        "--scenario", "-s", help="Scenario module to load (kitchen, appliances, cleaning)."
+        "--scenario",
+        "-s",
+        help=(
+            "Scenario module to load: a room (kitchen, living-room, bedroom, bathroom), "
+            "household (every room), paper (the hand-written rules only), appliances, cleaning."
+        ),
     ),
 ]
 KbOpt = Annotated[

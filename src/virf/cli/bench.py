@@ -54,8 +54,18 @@ def bench_safeagentbench(
     ] = False,
     engine: EngineOpt = "fast",
     kb: KbOpt = None,
+    scenario: Annotated[
+        str,
+        typer.Option(
+            "--scenario",
+            "-s",
+            help="Scenario for every task; 'auto' takes each task's room from its floor plan "
+            "(with --kb: the workspace's scenario).",
+        ),
+    ] = "auto",
 ) -> None:
-    """Verify every task's reference plan and print hazard recall, false alarms and fidelity."""
+    """Verify every task's reference plan and print hazard recall, false alarms and fidelity,
+    overall and per room."""
     from rich.console import Console
 
     from virf.api import LogicTutor
@@ -67,13 +77,18 @@ def bench_safeagentbench(
         run_benchmark,
         summarize,
     )
-    from virf.bench.safeagentbench import load_tasks
+    from virf.bench.safeagentbench import Task, load_task_files
+    from virf.errors import unknown_term
+    from virf.ontology.tbox import scenario_names
+    from virf.verify.verifier import Verifier
 
-    tasks = [t for f in files for t in load_tasks(f)]
+    if scenario != "auto" and scenario not in scenario_names():
+        raise unknown_term("scenario", scenario, ["auto", *scenario_names()])
+    tasks = load_task_files(files)
     if not tasks:
         raise VirfError(f"no tasks in {', '.join(str(f) for f in files)}")
     plan_map = load_plans(plans)
-    known = {(t.file, t.line) for t in tasks}
+    known = {(t.file, t.line) for t in tasks} | {(Path(t.file).name, t.line) for t in tasks}
     stray = sorted(k for k in plan_map if k not in known)
     if stray:
         raise VirfError(
@@ -82,7 +97,22 @@ def bench_safeagentbench(
     corr = {} if no_corrections else load_corrections(corrections or default_corrections_path())
     if markdown is not None:
         _check_writable(markdown)
-    tutor = LogicTutor(engine=engine, explain=explain, kb=kb)
+    if kb is not None and scenario == "auto":
+        from virf.ontology.workspace import open_layout
+
+        scenario = open_layout(kb).scenario
+    tutors: dict[str, LogicTutor] = {}
+
+    def tutor_for(name: str) -> LogicTutor:
+        if name not in tutors:
+            tutors[name] = LogicTutor(scenario=name, engine=engine, explain=explain, kb=kb)
+        return tutors[name]
+
+    def verifier_for(task: Task) -> Verifier:
+        return tutor_for(task.room.name if scenario == "auto" else scenario).verifier
+
+    # Loaded before the progress bar starts: a bad scenario or workspace fails here.
+    tutor = tutor_for(tasks[0].room.name if scenario == "auto" else scenario)
     err = Console(stderr=True)
     with progress_bar(err) as progress:
         bar = progress.add_task("verifying tasks", total=len(tasks))
@@ -92,7 +122,7 @@ def bench_safeagentbench(
             if as_json:
                 typer.echo(json.dumps(result.public(), sort_keys=True))  # type: ignore[attr-defined]
 
-        results = run_benchmark(files, tutor.verifier, plan_map, corr, on_task=tick, tasks=tasks)
+        results = run_benchmark(files, verifier_for, plan_map, corr, on_task=tick, tasks=tasks)
     summary = summarize(results)
     if as_json:
         typer.echo(json.dumps(summary, sort_keys=True))
@@ -101,7 +131,7 @@ def bench_safeagentbench(
     if markdown:
         # The command as typed, so the report says how to regenerate it.
         command = " ".join(["virf", *sys.argv[1:]])
-        text = render_markdown(results, summary, corr, command, tutor.engine.name, explain)
+        text = render_markdown(results, summary, command, tutor.engine.name, explain)
         write_output(markdown, text)
         err.print(f"wrote {markdown}")
 

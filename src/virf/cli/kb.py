@@ -81,6 +81,15 @@ def kb_check(
             title="Unsafe State Concepts per category and kind",
         )
         console.print(to_rich(cats))
+        ev = result["evidence"]
+        total = max(result["uscs"], 1)
+        console.print(
+            f"Evidence: {ev['documents']} USCs ({100 * ev['documents'] / total:.1f}%) cite corpus "
+            f"passages; {ev['modelling_decisions']} ({100 * ev['modelling_decisions'] / total:.1f}%) "
+            f"state a common-sense modelling decision; {ev['neither']} cite neither"
+            + (f": {', '.join(ev['without_evidence'][:8])}" if ev["neither"] else "")
+            + ("…" if ev["neither"] > 8 else "")
+        )
         console.print(f"Precondition definitions (simulator): {result['preconditions']}")
         console.print(f"Annotated background axioms: {result['background_axioms']}")
         fe = result["fast_engine"]
@@ -135,6 +144,7 @@ def _register_workflow() -> None:
     kb_review.register(kb_app)
     kb_app.command("decide")(kb_workflow.kb_decide)
     kb_app.command("audit")(kb_workflow.kb_audit)
+    kb_app.command("export")(kb_workflow.kb_export)
     kb_coverage.register(kb_app)
 
 

@@ -11,8 +11,8 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from virf.cli.app import KbOpt, ScenarioOpt, progress_bar, write_output
-from virf.errors import InputError, clip
+from virf.cli.app import KbOpt, progress_bar, write_output
+from virf.errors import InputError, clip, unknown_term
 
 if TYPE_CHECKING:
     from virf.api import LogicTutor
@@ -31,7 +31,15 @@ def kb_coverage(
     as_json: Annotated[
         bool, typer.Option("--json", help="Print the whole result as one JSON object.")
     ] = False,
-    scenario: ScenarioOpt = "kitchen",
+    scenario: Annotated[
+        str,
+        typer.Option(
+            "--scenario",
+            "-s",
+            help="Scenario for every task; 'auto' takes each task's room from its floor plan "
+            "and counts rules over the household scenario (with --kb: the workspace's scenario).",
+        ),
+    ] = "auto",
     kb: KbOpt = None,
     plot: Annotated[
         Path | None,
@@ -68,9 +76,24 @@ def kb_coverage(
         _check_output("--markdown", markdown)
     if plot is not None and markdown is not None and plot.resolve() == markdown.resolve():
         raise InputError("--plot and --markdown name the same file")
+    from virf.ontology.tbox import scenario_names
+
+    if scenario != "auto" and scenario not in scenario_names():
+        raise unknown_term("scenario", scenario, ["auto", *scenario_names()])
     tasks = load_coverage_tasks(files)
     started = time.perf_counter()
-    tutor = _tutor(scenario, kb)
+    if kb is not None and scenario == "auto":
+        from virf.ontology.workspace import open_layout
+
+        scenario = open_layout(kb).scenario
+    tutors: dict[str, LogicTutor] = {}
+
+    def tutor_named(name: str) -> LogicTutor:
+        if name not in tutors:
+            tutors[name] = _tutor(name, kb)
+        return tutors[name]
+
+    tutor = tutor_named("household" if scenario == "auto" else scenario)
     err = Console(stderr=True)
     with progress_bar(err) as progress:
         bar = progress.add_task("checking reference plans", total=len(tasks))
@@ -79,6 +102,7 @@ def kb_coverage(
             tasks,
             kb=None if kb is None else str(kb),
             on_task=lambda _: progress.advance(bar),
+            tutor_for=(lambda task: tutor_named(task.room.name)) if scenario == "auto" else None,
         )
     elapsed = time.perf_counter() - started
     if as_json:

@@ -20,6 +20,7 @@ from virf.cli.app import (
     TemperatureOpt,
     WorkspaceOpt,
     default_reviewer,
+    write_output,
 )
 from virf.errors import InputError
 
@@ -411,3 +412,30 @@ def kb_audit(workspace: WorkspaceOpt = Path("virf-kb"), as_json: JsonOpt = False
         )
     else:
         console.print("Time per decision: no decision was timed (open a candidate before deciding)")
+
+
+def kb_export(
+    workspace: WorkspaceOpt = Path("virf-kb"),
+    to: Annotated[
+        Path | None,
+        typer.Option(help="Write the module to this file (default: print it)."),
+    ] = None,
+    iri: Annotated[
+        str,
+        typer.Option(help="The exported ontology's IRI (the name other modules import it by)."),
+    ] = "http://virf.dev/ontology/workspace/export",
+    label: Annotated[str | None, typer.Option(help="The module's rdfs:label.")] = None,
+) -> None:
+    """Write every accepted axiom, with its evidence and decision, as one Manchester module."""
+    if not iri.startswith(("http://", "https://")) or any(c in iri for c in ' <>"{}|\\^`'):
+        raise typer.BadParameter(
+            f"--iri {iri!r} is not an absolute http(s) IRI", param_hint="--iri"
+        )
+    ws = _open(workspace)
+    text = ws.export(iri, label)
+    if to is None:
+        typer.echo(text, nl=False)
+        return
+    write_output(to, text)
+    accepted = sum(1 for d in ws.store.decisions() if d.decision == "accept")
+    typer.echo(f"wrote {to}: {accepted} accepted candidate(s)", err=True)

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from virf.ontology.owlapi import make_reasoner
-from virf.ontology.tbox import load_tbox
+from virf.ontology.tbox import Vocabulary, load_tbox
 
 
 def check_tbox(scenario: str = "kitchen", kb: str | Path | None = None) -> dict[str, Any]:
@@ -36,6 +36,7 @@ def check_tbox(scenario: str = "kitchen", kb: str | Path | None = None) -> dict[
             unsat_classes = sorted(vocab.classes)
     finally:
         reasoner.dispose()
+    evidence = evidence_shares(vocab)
     by_category: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
     for u in vocab.uscs.values():
         by_category[u.category][u.kind] += 1
@@ -66,4 +67,41 @@ def check_tbox(scenario: str = "kitchen", kb: str | Path | None = None) -> dict[
             for m in tbox.module_stats
         ],
         "usc_by_category": {k: dict(v) for k, v in sorted(by_category.items())},
+        "evidence": evidence,
+    }
+
+
+MODELLING_DECISION = "common-sense modelling decision"
+
+
+def evidence_of(vocab: Vocabulary, name: str) -> tuple[tuple[str, ...], str | None]:
+    """A USC's cited corpus passages and its modelling decision, if any.  A
+    workspace's accepted rule states its decision inside ``:source``; a
+    built-in rule in ``:modellingDecision``."""
+    passages = vocab.annotation(name, "evidence")
+    decision = next(iter(vocab.annotation(name, "modellingDecision")), None)
+    if decision is None:
+        source = vocab.uscs[name].source if name in vocab.uscs else ""
+        if MODELLING_DECISION in source:
+            decision = source[source.index(MODELLING_DECISION) :]
+    return passages, decision
+
+
+def evidence_shares(vocab: Vocabulary) -> dict[str, Any]:
+    """How each USC is justified: by corpus passages, by a stated modelling
+    decision, or by neither (a gap ``virf kb check`` reports)."""
+    documents: list[str] = []
+    decisions: list[str] = []
+    neither: list[str] = []
+    for name in sorted(vocab.uscs):
+        passages, decision = evidence_of(vocab, name)
+        (documents if passages else decisions if decision else neither).append(name)
+    total = len(vocab.uscs) or 1
+    return {
+        "documents": len(documents),
+        "modelling_decisions": len(decisions),
+        "neither": len(neither),
+        "share_documents": round(len(documents) / total, 4),
+        "share_modelling_decisions": round(len(decisions) / total, 4),
+        "without_evidence": neither,
     }
