@@ -67,6 +67,24 @@ def test_safeagentbench_plans_identical(tutor: LogicTutor, reference_tutor: Logi
     assert not different, different
 
 
+@pytest.mark.parametrize("room", ["living-room", "bedroom", "bathroom"])
+def test_other_rooms_plans_identical(room: str) -> None:
+    """Every room's plans, verified with the room's scenario, by both engines."""
+    if not (SAB / "other_rooms").is_dir():
+        pytest.skip(f"the other rooms' dev split is not at {SAB / 'other_rooms'}")
+    fast, ref = LogicTutor(room), LogicTutor(room, engine="reference")
+    cases = dev_cases([SAB / "other_rooms" / f for f in SAB_FILES], fast.tbox, room=room)
+    assert cases
+    cases = cases if FULL else sample(cases, 4)
+    different = [
+        c.name
+        for c in cases
+        if comparable(fast.verifier.verify(c.scene, c.plan, c.requirements))
+        != comparable(ref.verifier.verify(c.scene, c.plan, c.requirements))
+    ]
+    assert not different, different
+
+
 def test_the_fast_engine_answered_without_falling_back(tutor: LogicTutor) -> None:
     """The dev plans are inside the fragment: the fast engine itself answered."""
     cases = _dev_cases(tutor)[:6]

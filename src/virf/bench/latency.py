@@ -124,13 +124,14 @@ class Case:
     requirements: tuple[Requirement | Unreadable, ...] = ()
 
 
-def dev_cases(files: Sequence[str | Path], tbox: TBox) -> list[Case]:
-    """Every task in ``files`` that ships a reference plan."""
+def dev_cases(files: Sequence[str | Path], tbox: TBox, room: str | None = None) -> list[Case]:
+    """Every task in ``files`` that ships a reference plan (only those of
+    ``room``, a room's scenario name, when given)."""
     vocab = tbox.vocabulary
     out = []
     for f in files:
         for task in load_tasks(f):
-            if not task.steps:
+            if not task.steps or (room is not None and task.room.name != room):
                 continue
             try:
                 plan = parse_plan(task.steps)
@@ -139,7 +140,8 @@ def dev_cases(files: Sequence[str | Path], tbox: TBox) -> list[Case]:
             scene = build_scene(task_scene(task, vocab), vocab)
             text = requirement_text(task.instruction)
             reqs = (parse_requirement(text, vocab),) if text else ()
-            out.append(Case(f"{Path(task.file).name}:{task.line}", scene, plan, reqs))
+            where = "" if task.room.name == "kitchen" else f"{task.room.name}/"
+            out.append(Case(f"{where}{Path(task.file).name}:{task.line}", scene, plan, reqs))
     return out
 
 
