@@ -359,6 +359,8 @@ def _task_lines(rows: Sequence[TaskResult]) -> list[str]:
             if r.correction_reason
             else ""
         )
+        if r.note:
+            note += f" **Why**: {r.note}"
         what = r.violated_concept or "no rule fired"
         lines.append(
             f"- `{r.file}:{r.line}` ({ROOM_LABELS.get(r.room, r.room)}, "

@@ -13,6 +13,7 @@ documented label corrections applied).
 
 from __future__ import annotations
 
+import dataclasses
 import statistics
 import time
 from collections import defaultdict
@@ -66,6 +67,7 @@ class TaskResult:
     room: str = "kitchen"  # the room's scenario name (see safeagentbench.ROOMS)
     scenario: str = "kitchen"  # the scenario that verified the plan
     correction_reason: str | None = None
+    note: str | None = None  # why the verdict differs from the label (bundled notes)
 
     @property
     def flagged(self) -> bool:
@@ -109,12 +111,27 @@ class Correction(Record):
     twin: str | None = None
 
 
+class Note(Record):
+    """Why the tutor misses a task or raises a false alarm, when the label
+    stands: a reader of the report learns the cause, not only the verdict."""
+
+    when_unknown_key = "{where}: unknown key '{key}'{closest}; expected {expected}"
+    located_as = "{what}: {path}"
+
+    file: str
+    source_index: Annotated[int, Field(ge=0)]
+    line: Annotated[int, Field(ge=1)] | None = None
+    scene: str | None = None
+    reason: Annotated[str, Field(min_length=1)]
+
+
 class CorrectionsFile(Record):
     when_not_object = "{where} must be a JSON object with a 'corrections' list"
     when_unknown_key = "{where}: unknown key '{key}'{closest}; expected {expected}"
 
     description: str = ""
     corrections: Annotated[list[Correction], Field(default_factory=list)]
+    notes: Annotated[list[Note], Field(default_factory=list)]
 
 
 CorrectionKey = tuple[str, int, str | None]
@@ -133,9 +150,17 @@ def load_corrections(path: str | Path | None) -> dict[CorrectionKey, dict[str, A
     }
 
 
-def correction_for(
-    task: Task, corrections: Mapping[CorrectionKey, dict[str, Any]]
-) -> dict[str, Any] | None:
+def load_notes(path: str | Path | None) -> dict[CorrectionKey, str]:
+    """(file name, source_index, floor plan) -> why the verdict differs from
+    the label (the file's ``notes`` list)."""
+    if path is None:
+        return {}
+    data = parse_json(read_input_file(path, "label corrections"), f"label corrections {path}")
+    checked = CorrectionsFile.parse(data, str(path))
+    return {(Path(n.file).name, n.source_index, n.scene): n.reason for n in checked.notes}
+
+
+def correction_for(task: Task, corrections: Mapping[CorrectionKey, Any]) -> Any:
     idx = task.data.get("source_index")
     if not isinstance(idx, int):
         return None
@@ -252,6 +277,7 @@ def run_benchmark(
     corrections: Mapping[CorrectionKey, dict[str, Any]] | None = None,
     on_task: Callable[[TaskResult], None] | None = None,
     tasks: list[Task] | None = None,
+    notes: Mapping[CorrectionKey, str] | None = None,
 ) -> list[TaskResult]:
     """Verify every task's reference plan.  ``verifier`` is one verifier for
     every task, or a function giving the verifier of a task (its room's
@@ -266,6 +292,9 @@ def run_benchmark(
         corr = correction_for(task, corrections)
         plan = plans.get((task.file, task.line)) or plans.get((Path(task.file).name, task.line))
         result = run_task(task, verifier_for(task), plan, corr)
+        note = correction_for(task, notes or {})
+        if note is not None:
+            result = dataclasses.replace(result, note=str(note))
         results.append(result)
         if on_task:
             on_task(result)

@@ -41,7 +41,10 @@ def bench_safeagentbench(
         typer.Option(help="JSONL of plans for tasks that ship none: {file, line, plan: [...]}."),
     ] = None,
     corrections: Annotated[
-        Path | None, typer.Option(help="Label-corrections JSON (default: the bundled file).")
+        Path | None,
+        typer.Option(
+            help="Label corrections and per-task notes, JSON (default: the bundled file)."
+        ),
     ] = None,
     no_corrections: Annotated[
         bool, typer.Option("--no-corrections", help="Report raw labels only.")
@@ -73,6 +76,7 @@ def bench_safeagentbench(
     from virf.bench.runner import (
         default_corrections_path,
         load_corrections,
+        load_notes,
         load_plans,
         run_benchmark,
         summarize,
@@ -95,6 +99,7 @@ def bench_safeagentbench(
             f"--plans names a task that is not among the files: {stray[0][0]} line {stray[0][1]}"
         )
     corr = {} if no_corrections else load_corrections(corrections or default_corrections_path())
+    notes = load_notes(corrections or default_corrections_path())
     if markdown is not None:
         _check_writable(markdown)
     if kb is not None and scenario == "auto":
@@ -122,7 +127,9 @@ def bench_safeagentbench(
             if as_json:
                 typer.echo(json.dumps(result.public(), sort_keys=True))  # type: ignore[attr-defined]
 
-        results = run_benchmark(files, verifier_for, plan_map, corr, on_task=tick, tasks=tasks)
+        results = run_benchmark(
+            files, verifier_for, plan_map, corr, on_task=tick, tasks=tasks, notes=notes
+        )
     summary = summarize(results)
     if as_json:
         typer.echo(json.dumps(summary, sort_keys=True))
