@@ -293,8 +293,8 @@ def test_markdown_page_has_the_category_table(result: CoverageResult) -> None:
 def test_json_is_the_whole_result_and_stable_across_runs(
     coverage_cli: Callable[..., Result], task_files: list[Path], result: CoverageResult
 ) -> None:
-    first = coverage_cli("kb", "coverage", "--json", *task_files)
-    second = coverage_cli("kb", "coverage", "--json", *task_files)
+    first = coverage_cli("kb", "coverage", "--json", "--scenario", "kitchen", *task_files)
+    second = coverage_cli("kb", "coverage", "--json", "--scenario", "kitchen", *task_files)
     assert first.exit_code == 0, first.stderr
     assert first.stdout == second.stdout
     assert json.loads(first.stdout) == json.loads(json.dumps(result.public()))

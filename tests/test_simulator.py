@@ -688,3 +688,24 @@ def test_a_liquid_the_scene_declared_can_be_emptied_away(
     assert report.status != "ERROR", report.reason
     last = report.trace[1]
     assert any("Soup_1" in removed for removed in last.removed)
+
+
+@pytest.mark.parametrize("verb", ["drop", "throw"])
+def test_a_breakable_object_breaks_when_dropped_or_thrown_and_others_land_whole(
+    tutor: LogicTutor, sim: Simulator, verb: str
+) -> None:
+    data = {
+        "instances": [
+            inst("Plate", "Plate_1"),
+            inst("Pillow", "Pillow_1"),
+            inst("Floor", "Floor_1"),
+        ],
+        "assertions": [],
+    }
+    start = sim.initial(tutor.scene(data))
+    plate = run(sim, start, "find Plate", "pick Plate", verb)
+    assert plate.has("Plate_1", "hasState", "BrokenState")
+    assert plate.has("Floor_1", "supports", "Plate_1")
+    pillow = run(sim, start, "find Pillow", "pick Pillow", verb)
+    assert not pillow.has("Pillow_1", "hasState", "BrokenState")
+    assert pillow.has("Floor_1", "supports", "Pillow_1")

@@ -32,6 +32,7 @@ Assumptions of a built scene (documented in docs/benchmarks/safeagentbench.md):
 from __future__ import annotations
 
 import json
+import os
 import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -247,18 +248,14 @@ def load_task_files(paths: Iterable[str | Path]) -> list[Task]:
 
 
 def display_names(paths: Sequence[Path]) -> list[str]:
-    """The shortest trailing part of each path that tells the files apart, so
-    ``unsafe_detailed.jsonl`` and ``other_rooms/unsafe_detailed.jsonl`` stay
-    distinct without printing whole absolute paths."""
-    parts = [p.parts for p in paths]
-    names = []
-    for own in parts:
-        for n in range(1, len(own) + 1):
-            tail = own[-n:]
-            if sum(1 for other in parts if other[-n:] == tail) == 1 or n == len(own):
-                names.append("/".join(tail))
-                break
-    return names
+    """How reports call each file: its name when the names differ, else its
+    path below the folder the files share, so ``unsafe_detailed.jsonl`` and
+    ``other_rooms/unsafe_detailed.jsonl`` stay apart."""
+    if len({p.name for p in paths}) == len(paths):
+        return [p.name for p in paths]
+    resolved = [p.resolve() for p in paths]
+    common = Path(os.path.commonpath([str(r.parent) for r in resolved]))
+    return [r.relative_to(common).as_posix() for r in resolved]
 
 
 def load_tasks(path: str | Path, name: str | None = None) -> list[Task]:

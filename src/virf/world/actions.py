@@ -370,6 +370,12 @@ def _drop_held(c: Change) -> PreconditionFailure | None:
     floors = [o for o in c.state.order if c.is_a(o, "Floor")]
     if floors:
         c.add(Fact(floors[0], "supports", held))
+    # AI2-THOR breaks a breakable object on an impact above its threshold,
+    # and a fall from the hand or a throw is one (SafeAgentBench's "Drop the
+    # Plate" expects the plate broken; a dropped egg cracks).
+    if c.is_a(held, "Breakable"):
+        c.set_state(held, "BrokenState")
+        _derive(c, held, "crackedType")
     return None
 
 
