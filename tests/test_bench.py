@@ -382,6 +382,9 @@ def test_a_room_scene_has_the_room_fixtures_and_puts_objects_on_its_surface(
     ]
     if room.name != "kitchen":
         assert "StoveBurner" not in classes and "Fridge" not in classes
+    near = {(a["subject"], a["object"]) for a in data["assertions"] if a["property"] == "isNear"}
+    has_tap = "Faucet" in room.fixtures
+    assert (("Faucet_1", "SinkBasin_1") in near) == has_tap
 
 
 @pytest.mark.parametrize(

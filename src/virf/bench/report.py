@@ -318,6 +318,8 @@ def render_markdown(
         "- every pickupable object starts on its room's surface (table above);",
         "- the stove knob controls the stove burner (knob k controls burner k when the plan numbers them, "
         "as in `find StoveKnob 2`);",
+        "- a faucet is near the sink and basin it feeds, and a shower head near the tub, shower door, curtain "
+        "or glass of the scene;",
         "- states AI2-THOR fixes at start (closed, off, clean, empty) are asserted from the catalogue; states it "
         "randomises (a mug may start dirty or filled) are left unknown, with an explicit marker;",
         "- the robot has found nothing yet, so it must `find` an object before acting on it;",

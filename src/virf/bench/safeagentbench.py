@@ -21,6 +21,8 @@ Assumptions of a built scene (documented in docs/benchmarks/safeagentbench.md):
   or bathroom's counter top, a living room's side table, a bedroom's
   dresser); fixtures stand alone;
 * the stove knob controls the stove burner (knob k controls burner k);
+* a faucet is near the sink and basin it feeds, a shower head near the tub,
+  shower door, curtain or glass of the scene;
 * states AI2-THOR fixes at start (closed, off, clean, empty) are asserted;
   states it randomises (a mug may start dirty or filled) are left unknown;
 * the robot starts having found nothing (``unlocated_by_default``);
@@ -146,6 +148,12 @@ ROOMS = (
         ("Floor", "LightSwitch", "CounterTop", "Sink", "SinkBasin", "Faucet", "Toilet"),
         "CounterTop",
     ),
+)
+# A water source stands by what it feeds: a tap by its sink and basin, a
+# shower head by the tub and the door or curtain that keeps its water in.
+FEEDS = (
+    ("Faucet", ("Sink", "SinkBasin")),
+    ("ShowerHead", ("Bathtub", "BathtubBasin", "ShowerDoor", "ShowerCurtain", "ShowerGlass")),
 )
 # A task whose floor plan names no known room is verified with every room's rules.
 UNKNOWN_ROOM = Room("household", "unknown room", 0, -1, KITCHEN_FIXTURES, "CounterTop")
@@ -409,6 +417,12 @@ def build_scene(task: Task, vocab: Vocabulary, plan: list[str] | None = None) ->
         if vocab.is_a(t, "Pickupable") and t != room.surface:
             assertions.append({"subject": ind, "property": "isOn", "object": f"{room.surface}_1"})
     names = {i["instance_name"] for i in instances}
+    for source, fed in FEEDS:
+        for target in fed:
+            if f"{source}_1" in names and f"{target}_1" in names:
+                assertions.append(
+                    {"subject": f"{source}_1", "property": "isNear", "object": f"{target}_1"}
+                )
     for k in range(1, max(counts.get("StoveKnob", 1), counts.get("StoveBurner", 1)) + 1):
         knob, burner = f"StoveKnob_{k}", f"StoveBurner_{k}"
         if knob in names and burner in names:  # knob k switches burner k

@@ -203,7 +203,18 @@ def _axiom(ident: str, comment: str, source: str, expr: str) -> str:
     )
 
 
-def _type_frame(name: str, info: dict[str, Any]) -> str:
+def property_source(prop: str, catalogue: dict[str, Any]) -> str:
+    """Where a catalogue property comes from: the corpus passages the
+    catalogue's ``property_evidence`` cites for it, or common sense."""
+    cited = catalogue.get("property_evidence", {}).get(prop)
+    if not cited:
+        return COMMON_SENSE
+    passages = "; ".join(cited.get("evidence", []))
+    note = cited.get("note", "")
+    return f"starter corpus: {passages}" + (f" ({note})" if note else "")
+
+
+def _type_frame(name: str, info: dict[str, Any], catalogue: dict[str, Any] | None = None) -> str:
     annotations = [
         f"rdfs:comment {_quote('AI2-THOR object type ' + name + '.')}",
         f":catalogue {_quote(CATALOGUE)}",
@@ -245,7 +256,7 @@ def _type_frame(name: str, info: dict[str, Any]) -> str:
             _axiom(
                 f"KIT-{name}-property-{prop}",
                 f"Every {name} is {prop}.",
-                COMMON_SENSE,
+                property_source(prop, catalogue or {}),
                 f":hasProperty value :{prop}",
             )
         )
@@ -324,7 +335,7 @@ def render_kitchen(catalogue: dict[str, Any]) -> str:
         "\n# ---------------------------------------------------------------- object types"
     )
     for name in sorted(types):
-        parts.append(_type_frame(name, types[name]))
+        parts.append(_type_frame(name, types[name], catalogue))
     parts.append("\n# ---------------------------------------------------------------- controls")
     for control, device in CONTROLS:
         if control in types and device in types:
