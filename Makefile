@@ -24,8 +24,10 @@ demo: $(STAMP)
 	  --tasks examples/agents/tasks.jsonl --out runs/agents-demo
 	# Knowledge acquisition offline: a recorded LLM draft from the starter corpus,
 	# checked, accepted, and then used to verify a plan (UNSAFE, exit 1, is the point).
+	# The workspace builds on the hand-written rules alone (the household rules
+	# already know candles: they were acquired the same way).
 	rm -rf runs/kb-demo
-	$(BIN)/virf kb init runs/kb-demo
+	$(BIN)/virf kb init runs/kb-demo --scenario paper
 	$(BIN)/virf kb draft -w runs/kb-demo --query "candles near curtains and bedding" \
 	  --drafter replay:examples/knowledge-acquisition/drafts.jsonl --k 3
 	$(BIN)/virf kb decide 1 accept -w runs/kb-demo --reviewer demo

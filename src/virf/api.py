@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from virf.errors import InputError
-from virf.ontology.tbox import DEFAULT_SCENARIO, TBox, load_tbox
+from virf.ontology.tbox import TBox, load_tbox
 from virf.reasoning import Engine, make_engine
 from virf.schema import Report
 from virf.verify.verifier import Verifier
@@ -61,7 +61,7 @@ class LogicTutor:
 
     def __init__(
         self,
-        scenario: str = DEFAULT_SCENARIO,
+        scenario: str | None = None,
         engine: str = DEFAULT_ENGINE,
         timeout_s: float = 120.0,
         workers: int = 1,
@@ -70,7 +70,8 @@ class LogicTutor:
         kb: str | Path | None = None,
     ) -> None:
         """``kb``: a knowledge workspace (``virf kb init``) whose accepted
-        axioms are added to the built-in TBox."""
+        axioms are added to the built-in TBox.  ``scenario`` defaults to the
+        workspace's with ``kb``, else to the kitchen."""
         # Checked before the knowledge base loads: a bad option fails in milliseconds.
         timeout_s = check_timeout(timeout_s)
         workers = check_workers(workers)
@@ -164,9 +165,7 @@ class LogicTutor:
         return self.verifier.verify(self.scene(scene_path), load_plan_file(plan_path))
 
 
-def check_knowledge_base(
-    scenario: str = DEFAULT_SCENARIO, kb: str | Path | None = None
-) -> dict[str, Any]:
+def check_knowledge_base(scenario: str | None = None, kb: str | Path | None = None) -> dict[str, Any]:
     """``virf kb check``: the reference reasoner's verdict on the TBox (starts
     the JVM) and what the fast engine makes of it."""
     from virf.ontology import check

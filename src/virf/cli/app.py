@@ -76,13 +76,14 @@ app = typer.Typer(
 )
 
 ScenarioOpt = Annotated[
-    str,
+    str | None,
     typer.Option(
         "--scenario",
         "-s",
         help=(
             "Scenario module to load: a room (kitchen, living-room, bedroom, bathroom), "
-            "household (every room), paper (the hand-written rules only), appliances, cleaning."
+            "household (every room), paper (the hand-written rules only), appliances, cleaning "
+            "[default: kitchen, or the workspace's with --kb]."
         ),
     ),
 ]

@@ -18,7 +18,7 @@ kb_app = typer.Typer(
 
 @kb_app.command("check")
 def kb_check(
-    scenario: ScenarioOpt = "kitchen",
+    scenario: ScenarioOpt = None,
     kb: KbOpt = None,
     as_json: Annotated[
         bool, typer.Option("--json", help="Print the figures as one JSON object.")
@@ -35,7 +35,7 @@ def kb_check(
         typer.echo(json.dumps(result, indent=2, sort_keys=True))
     else:
         console = Console(highlight=False, width=150)
-        console.print(f"Scenario: {scenario}  (reasoner: {result['reasoner']})")
+        console.print(f"Scenario: {result['scenario']}  (reasoner: {result['reasoner']})")
         console.print(f"TBox consistent: {'yes' if result['consistent'] else 'NO'}")
         unsat = result["unsatisfiable_uscs"]
         console.print(
@@ -111,7 +111,7 @@ def kb_check(
 
 @kb_app.command("rules")
 def kb_rules(
-    scenario: ScenarioOpt = "kitchen",
+    scenario: ScenarioOpt = None,
     kb: KbOpt = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the rules as JSON.")] = False,
 ) -> None:

@@ -135,7 +135,7 @@ def _print_candidate(view: CandidateView) -> None:
 
 def kb_init(
     folder: Annotated[Path, typer.Argument(help="New folder for the workspace.")] = Path("virf-kb"),
-    scenario: ScenarioOpt = "kitchen",
+    scenario: ScenarioOpt = None,
     starter: Annotated[
         bool,
         typer.Option(
@@ -146,7 +146,7 @@ def kb_init(
     """Create a knowledge workspace: layered modules, a corpus folder and a database."""
     from virf.authoring.workspace import Workspace
 
-    ws = Workspace.init(folder, scenario, starter=starter)
+    ws = Workspace.init(folder, scenario or "kitchen", starter=starter)
     docs = len(list(ws.corpus_dir.iterdir()))
     typer.echo(f"created workspace {folder} (scenario {scenario}; {docs} documents in corpus/)")
     typer.echo(

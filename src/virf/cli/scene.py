@@ -35,7 +35,7 @@ def scene_show(
     as_json: Annotated[
         bool, typer.Option("--json", help="Print the canonical world as one JSON object.")
     ] = False,
-    scenario: ScenarioOpt = "kitchen",
+    scenario: ScenarioOpt = None,
 ) -> None:
     """Show how VIRF understood SCENE: the one canonical world it verifies against.
 

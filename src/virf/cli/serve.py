@@ -20,7 +20,7 @@ def serve(
     workers: Annotated[
         int, typer.Option(min=1, max=64, help="Processes, each with its own warm tutor.")
     ] = 1,
-    scenario: ScenarioOpt = "kitchen",
+    scenario: ScenarioOpt = None,
     engine: EngineOpt = "fast",
     kb: KbOpt = None,
     planner: Annotated[
@@ -62,6 +62,9 @@ def serve(
         )
     if api_key is None:
         typer.echo("no API key: listening on this machine only", err=True)
+    from virf.ontology.tbox import resolve_scenario
+
+    scenario = resolve_scenario(scenario, kb)
     # Each worker process builds its own app (and tutor) from these settings.
     settings = (
         scenario,

@@ -26,7 +26,7 @@ def verify(
         bool,
         typer.Option("--feedback", help="Also print the paper's feedback prompt for the planner."),
     ] = False,
-    scenario: ScenarioOpt = "kitchen",
+    scenario: ScenarioOpt = None,
     engine: EngineOpt = "fast",
     kb: KbOpt = None,
     timeout: Annotated[

@@ -12,8 +12,9 @@ from virf.ontology.owlapi import make_reasoner
 from virf.ontology.tbox import Vocabulary, load_tbox
 
 
-def check_tbox(scenario: str = "kitchen", kb: str | Path | None = None) -> dict[str, Any]:
+def check_tbox(scenario: str | None = None, kb: str | Path | None = None) -> dict[str, Any]:
     tbox = load_tbox(scenario, kb=kb)
+    scenario = tbox.scenario
     owl = tbox.owl  # starts the JVM
     vocab = tbox.vocabulary
     reasoner = make_reasoner("hermit", owl.root)

@@ -237,8 +237,20 @@ class TBox:
             return self._owl
 
 
+def resolve_scenario(scenario: str | None, kb: str | Path | None) -> str:
+    """The scenario a command means: the one named, else the workspace's with
+    ``kb``, else the kitchen."""
+    if scenario is not None:
+        return scenario
+    if kb is not None:
+        from virf.ontology.workspace import open_layout
+
+        return open_layout(kb).scenario
+    return DEFAULT_SCENARIO
+
+
 def load_tbox(
-    scenario: str = DEFAULT_SCENARIO,
+    scenario: str | None = None,
     extra_modules: tuple[str, ...] = (),
     kb: str | Path | None = None,
 ) -> TBox:
@@ -248,7 +260,9 @@ def load_tbox(
     ``kb`` is a knowledge workspace (``virf kb init``): its layered modules of
     reviewed axioms are imported on top of the built-in ones.  ``extra_modules``
     are further Manchester files imported into it (scaling runs, test fixtures,
-    a candidate's effect preview)."""
+    a candidate's effect preview).  ``scenario`` defaults to the workspace's
+    scenario with ``kb``, else to the kitchen."""
+    scenario = resolve_scenario(scenario, kb)
     names = scenario_names()
     if scenario not in names:
         raise InputError(
