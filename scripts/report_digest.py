@@ -30,7 +30,9 @@ def digest(report: Report) -> str:
 
 def main() -> None:
     root = Path(__file__).resolve().parent.parent
-    sab = Path(sys.argv[1]) if len(sys.argv) > 1 else root.parent / "shared/benchmarks/safeagentbench"
+    sab = (
+        Path(sys.argv[1]) if len(sys.argv) > 1 else root.parent / "shared/benchmarks/safeagentbench"
+    )
     tutor = LogicTutor()
     for example in sorted((root / "examples").iterdir()):
         if (example / "scene.json").is_file() and (example / "plan.txt").is_file():

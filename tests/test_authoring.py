@@ -53,7 +53,7 @@ def proposal(tmp: Path, *rules: dict[str, Any], **top: Any) -> Path:
 
 @pytest.fixture(scope="module")
 def ws(tmp_path_factory: pytest.TempPathFactory) -> Workspace:
-    return Workspace.init(tmp_path_factory.mktemp("kb") / "virf-kb")
+    return Workspace.init(tmp_path_factory.mktemp("kb") / "virf-kb", "paper")
 
 
 def items(report: Any) -> dict[str, str]:
@@ -255,7 +255,7 @@ def test_edit_sizes() -> None:
 
 # ---------------------------------------------------------------------- the LLM drafter
 def small_workspace(root: Path) -> Workspace:
-    ws = Workspace.init(root, starter=False)
+    ws = Workspace.init(root, "paper", starter=False)
     for name in ("nfpa-candle-safety.md", "fsis-microwave-food-safety.md"):
         shutil.copyfile(starter_corpus_dir() / name, ws.corpus_dir / name)
     return ws
@@ -341,7 +341,7 @@ def test_the_prompt_lists_the_vocabulary_it_may_use(ws: Workspace) -> None:
 # ---------------------------------------------------------------------- the terminal
 def test_the_workflow_from_the_terminal(cli: Callable[..., Result], tmp_path: Path) -> None:
     kb = tmp_path / "kb"
-    assert cli("kb", "init", kb).exit_code == 0
+    assert cli("kb", "init", kb, "--scenario", "paper").exit_code == 0
     out = cli(
         "kb",
         "propose",
@@ -385,7 +385,7 @@ def test_modules_and_decisions_are_kept_in_step(tmp_path: Path) -> None:
     assert header in module.read_text()
     assert oct(module.stat().st_mode & 0o777) != oct(0o600)  # not made private by the rewrite
     # A block no decision accepted (a hand edit) is refused.
-    other = Workspace.init(tmp_path / "kb", starter=False)
+    other = Workspace.init(tmp_path / "kb", "paper", starter=False)
     core = other.layout.module_path("core")
     core.write_text(core.read_text() + "\n# candidate 3: Stray\n")
     with pytest.raises(

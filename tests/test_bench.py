@@ -603,3 +603,13 @@ def test_a_note_says_why_a_task_is_missed_and_the_report_shows_it(tmp_path: Path
     bad.write_text(json.dumps({"notes": [{"file": "x.jsonl", "source_index": 1}]}))
     with pytest.raises(InputError, match="reason"):
         load_notes(bad)
+
+
+@needs_shared
+def test_every_note_names_a_task_of_the_dev_split() -> None:
+    data = json.loads(default_corrections_path().read_text())
+    assert data["notes"]
+    for n in data["notes"]:
+        task = json.loads((SHARED / n["file"]).read_text().splitlines()[n["line"] - 1])
+        assert (task["source_index"], task["scene_name"]) == (n["source_index"], n["scene"]), n
+        assert len(n["reason"]) > 40

@@ -231,7 +231,7 @@ CORRECTION = {
         ),
         (
             {"corections": []},
-            "unknown key 'corections'; closest: corrections; expected corrections, description",
+            "unknown key 'corections'; closest: corrections; expected corrections, description, notes",
         ),
         (
             {"corrections": [{k: v for k, v in CORRECTION.items() if k != "file"}]},
@@ -250,7 +250,7 @@ def test_malformed_corrections(tmp_path: Path, data: Any, message: str) -> None:
 
 def test_corrections_are_returned_as_written(tmp_path: Path) -> None:
     path = write(tmp_path / "c.json", json.dumps({"corrections": [CORRECTION]}))
-    assert load_corrections(path) == {("unsafe_detailed.jsonl", 148): CORRECTION}
+    assert load_corrections(path) == {("unsafe_detailed.jsonl", 148, None): CORRECTION}
     bundled = load_corrections(default_corrections_path())
     assert len(bundled) == len(json.loads(default_corrections_path().read_text())["corrections"])
     assert "not valid JSON" in refusal(load_corrections, write(tmp_path / "b.json", "{oops"))

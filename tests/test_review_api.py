@@ -555,7 +555,7 @@ def test_review_serves_until_ctrl_c(tmp_path: Path) -> None:
 
     from virf.authoring.workspace import Workspace
 
-    Workspace.init(tmp_path / "kb", starter=False).close()
+    Workspace.init(tmp_path / "kb", "paper", starter=False).close()
     cmd = [sys.executable, "-m", "virf.cli.main", "kb", "review", "-w", str(tmp_path / "kb")]
     proc = subprocess.Popen(
         [*cmd, "--port", "0", "--reviewer", "ana"],
@@ -594,7 +594,7 @@ def test_an_empty_real_workspace(tmp_path: Path) -> None:
     # including one too large for SQLite's integers, are plain 404s.
     from virf.authoring.workspace import Workspace
 
-    ws = Workspace.init(tmp_path / "kb", starter=False)
+    ws = Workspace.init(tmp_path / "kb", "paper", starter=False)
     try:
         client = TestClient(create_app(ws, "ana"), base_url="http://127.0.0.1")
         assert client.get("/api/candidates?status=all").json() == []

@@ -139,7 +139,7 @@ def test_review_over_the_real_workspace(browser: Browser, tmp_path: Path) -> Non
     from virf.cli.main import app
 
     root = tmp_path / "kb"
-    ws = Workspace.init(root)
+    ws = Workspace.init(root, "paper")
     proposal = tmp_path / "proposal.json"
     rule = {
         "equivalentClass": "TowelOnLitBurnerDanger",

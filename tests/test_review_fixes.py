@@ -37,8 +37,9 @@ def test_nested_contents_are_seen(tutor) -> None:
         ],
         "assertions": [{"subject": "Bowl_1", "property": "contains", "object": "Egg_1"}],
     }
-    status, concept, _ = _status(tutor, scene, ["find Bowl_1", "pick Bowl_1", *MICROWAVE_PLAN])
-    assert status == "UNSAFE" and concept == "MicrowaveSealedObjectDanger"
+    status, _, report = _status(tutor, scene, ["find Bowl_1", "pick Bowl_1", *MICROWAVE_PLAN])
+    assert status == "UNSAFE"
+    assert "MicrowaveSealedObjectDanger" in {v.id for v in report.violations}
 
 
 def test_ambiguous_type_is_a_question(tutor) -> None:

@@ -253,7 +253,7 @@ def test_run_requests_are_checked(client: TestClient) -> None:
 def test_the_review_page_is_a_section_of_the_service(tmp_path: Path) -> None:
     from virf.authoring.workspace import Workspace
 
-    ws = Workspace.init(tmp_path / "kb", starter=False)
+    ws = Workspace.init(tmp_path / "kb", "paper", starter=False)
     ws.close()
     app = create_app(workspace=tmp_path / "kb", reviewer="ana", api_key="k3y-for-tests")
     local = TestClient(app, base_url="http://127.0.0.1")

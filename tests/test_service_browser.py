@@ -246,7 +246,7 @@ def test_the_review_page_is_reached_from_the_service_page(browser: Browser, tmp_
 
     from virf.authoring.workspace import Workspace
 
-    Workspace.init(tmp_path / "kb", starter=False).close()
+    Workspace.init(tmp_path / "kb", "paper", starter=False).close()
     with (
         serving(create_app(workspace=tmp_path / "kb", reviewer="ana")) as address,
         page_at(browser, address) as page,

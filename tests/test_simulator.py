@@ -410,14 +410,22 @@ EVERY_VERB: list[tuple[str, tuple[str, ...], tuple[str, ...]]] = [
         ("StoveBurner_1 hasState OffState", "StoveKnob_1 hasState OffState"),
         ("StoveBurner_1 hasState OnState", "StoveKnob_1 hasState OnState"),
     ),
-    ("drop", ("Floor_1 supports Mug_1",), ("Robot_1 isHolding Mug_1",)),
+    (
+        "drop",
+        ("Floor_1 supports Mug_1", "Mug_1 hasState BrokenState"),
+        ("Robot_1 isHolding Mug_1",),
+    ),
     ("find Plate_1", ("Robot_1 isNear Plate_1",), ("Robot_1 isNear Bowl_1",)),
     (
         "pick Plate_1",
         ("Robot_1 isHolding Plate_1",),
         ("CounterTop_1 supports Plate_1", "Knife_1 isNear Plate_1", "Robot_1 isNear Plate_1"),
     ),
-    ("throw", ("Floor_1 supports Plate_1",), ("Robot_1 isHolding Plate_1",)),
+    (
+        "throw",
+        ("Floor_1 supports Plate_1", "Plate_1 hasState BrokenState"),
+        ("Robot_1 isHolding Plate_1",),
+    ),
 ]
 
 

@@ -165,7 +165,9 @@ class LogicTutor:
         return self.verifier.verify(self.scene(scene_path), load_plan_file(plan_path))
 
 
-def check_knowledge_base(scenario: str | None = None, kb: str | Path | None = None) -> dict[str, Any]:
+def check_knowledge_base(
+    scenario: str | None = None, kb: str | Path | None = None
+) -> dict[str, Any]:
     """``virf kb check``: the reference reasoner's verdict on the TBox (starts
     the JVM) and what the fast engine makes of it."""
     from virf.ontology import check

@@ -592,7 +592,8 @@ class Workspace:
         lines += [f"        {a}," for a in anns[:-1]] + [f"        {anns[-1]}"]
         lines += [
             "    EquivalentTo:",
-            f"        Annotations: :id {_literal(name + '-def')}",
+            f"        Annotations: :id {_literal(name + '-def')}, "
+            f":source {_literal(self._source(evidence_ids, modelling_decision))}",
             f"        {axiom}",
             "    SubClassOf: :UnsafeStateConcept",
             "",

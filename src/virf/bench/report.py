@@ -211,8 +211,9 @@ def render_markdown(
         "",
         "## Per room",
         "",
-        "Each task is verified with its room's scenario (the floor plan decides the room). Targets hold "
-        "in every room: recall ≥ 97%, false alarms ≤ 5%, fidelity on safe tasks ≥ 97%.",
+        "Each task is verified with its room's scenario (the floor plan decides the room). The targets apply "
+        "to every room: recall ≥ 97%, false alarms ≤ 5%, fidelity on safe tasks ≥ 97%; a miss or false alarm "
+        "whose label stands says why under *Misses* and *False alarms*.",
         "",
         *to_markdown(room_table(summary)),
         "",

@@ -139,7 +139,8 @@ def kb_init(
     starter: Annotated[
         bool,
         typer.Option(
-            "--starter/--no-starter", help="Copy the starter corpus (40 safety documents) in."
+            "--starter/--no-starter",
+            help="Copy the starter corpus (the bundled safety documents) in.",
         ),
     ] = True,
 ) -> None:
