@@ -85,8 +85,10 @@ def default_corrections_path() -> Path:
     )
 
 
-class Correction(Record):
-    """One documented label correction (the bundled file holds the real ones)."""
+class TaskNote(Record):
+    """A task of a benchmark file and why its verdict differs from its label,
+    when the label stands (``notes``): the reader learns the cause, not only
+    the verdict.  A :class:`Correction` is a note that also changes the label."""
 
     when_unknown_key = "{where}: unknown key '{key}'{closest}; expected {expected}"
     located_as = "{what}: {path}"
@@ -97,6 +99,12 @@ class Correction(Record):
     # The task's floor plan: source indices restart in each split (kitchens,
     # other rooms), so file and index alone may name two tasks.
     scene: str | None = None
+    reason: Annotated[str, Field(min_length=1)]
+
+
+class Correction(TaskNote):
+    """One documented label correction (the bundled file holds the real ones)."""
+
     label: Literal["safe", "unsafe"]
     corrected: Annotated[
         Literal["safe", "unsafe", "exclude"],
@@ -107,22 +115,7 @@ class Correction(Record):
         ),
     ]
     relation: str | None = None
-    reason: Annotated[str, Field(min_length=1)]
     twin: str | None = None
-
-
-class Note(Record):
-    """Why the tutor misses a task or raises a false alarm, when the label
-    stands: a reader of the report learns the cause, not only the verdict."""
-
-    when_unknown_key = "{where}: unknown key '{key}'{closest}; expected {expected}"
-    located_as = "{what}: {path}"
-
-    file: str
-    source_index: Annotated[int, Field(ge=0)]
-    line: Annotated[int, Field(ge=1)] | None = None
-    scene: str | None = None
-    reason: Annotated[str, Field(min_length=1)]
 
 
 class CorrectionsFile(Record):
@@ -131,7 +124,7 @@ class CorrectionsFile(Record):
 
     description: str = ""
     corrections: Annotated[list[Correction], Field(default_factory=list)]
-    notes: Annotated[list[Note], Field(default_factory=list)]
+    notes: Annotated[list[TaskNote], Field(default_factory=list)]
 
 
 CorrectionKey = tuple[str, int, str | None]

@@ -87,6 +87,49 @@ ScenarioOpt = Annotated[
         ),
     ),
 ]
+RoomScenarioOpt = Annotated[
+    str,
+    typer.Option(
+        "--scenario",
+        "-s",
+        help="Scenario for every task; 'auto' takes each task's room from its floor plan "
+        "(with --kb: the workspace's scenario).",
+    ),
+]
+
+
+class RoomTutors:
+    """Tutors of benchmark tasks: one per scenario, made on first use; the
+    scenario is the task's room's for ``auto`` (the workspace's with ``kb``)."""
+
+    def __init__(self, scenario: str, kb: Path | None, explain: bool, engine: str = "fast") -> None:
+        from virf.errors import unknown_term
+        from virf.ontology.tbox import scenario_names
+
+        if scenario != "auto" and scenario not in scenario_names():
+            raise unknown_term("scenario", scenario, ["auto", *scenario_names()])
+        if kb is not None and scenario == "auto":
+            from virf.ontology.workspace import open_layout
+
+            scenario = open_layout(kb).scenario
+        self.fixed = None if scenario == "auto" else scenario
+        self.kb, self.explain, self.engine = kb, explain, engine
+        self._made: dict[str, Any] = {}
+
+    def named(self, scenario: str) -> Any:
+        """The tutor (a :class:`virf.api.LogicTutor`) of ``scenario``."""
+        if scenario not in self._made:
+            from virf.api import LogicTutor
+
+            self._made[scenario] = LogicTutor(
+                scenario=scenario, engine=self.engine, explain=self.explain, kb=self.kb
+            )
+        return self._made[scenario]
+
+    def for_task(self, task: Any) -> Any:
+        return self.named(self.fixed or task.room.name)
+
+
 KbOpt = Annotated[
     Path | None,
     typer.Option(

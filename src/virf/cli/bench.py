@@ -17,6 +17,8 @@ from virf.cli.app import (
     KbOpt,
     MaxTokensOpt,
     ModelTimeoutOpt,
+    RoomScenarioOpt,
+    RoomTutors,
     SeedOpt,
     TemperatureOpt,
     TopPOpt,
@@ -57,21 +59,12 @@ def bench_safeagentbench(
     ] = False,
     engine: EngineOpt = "fast",
     kb: KbOpt = None,
-    scenario: Annotated[
-        str,
-        typer.Option(
-            "--scenario",
-            "-s",
-            help="Scenario for every task; 'auto' takes each task's room from its floor plan "
-            "(with --kb: the workspace's scenario).",
-        ),
-    ] = "auto",
+    scenario: RoomScenarioOpt = "auto",
 ) -> None:
     """Verify every task's reference plan and print hazard recall, false alarms and fidelity,
     overall and per room."""
     from rich.console import Console
 
-    from virf.api import LogicTutor
     from virf.bench.report import render_markdown
     from virf.bench.runner import (
         default_corrections_path,
@@ -82,12 +75,9 @@ def bench_safeagentbench(
         summarize,
     )
     from virf.bench.safeagentbench import Task, load_task_files
-    from virf.errors import unknown_term
-    from virf.ontology.tbox import scenario_names
     from virf.verify.verifier import Verifier
 
-    if scenario != "auto" and scenario not in scenario_names():
-        raise unknown_term("scenario", scenario, ["auto", *scenario_names()])
+    tutors = RoomTutors(scenario, kb, explain, engine)
     tasks = load_task_files(files)
     if not tasks:
         raise VirfError(f"no tasks in {', '.join(str(f) for f in files)}")
@@ -102,22 +92,12 @@ def bench_safeagentbench(
     notes = load_notes(corrections or default_corrections_path())
     if markdown is not None:
         _check_writable(markdown)
-    if kb is not None and scenario == "auto":
-        from virf.ontology.workspace import open_layout
-
-        scenario = open_layout(kb).scenario
-    tutors: dict[str, LogicTutor] = {}
-
-    def tutor_for(name: str) -> LogicTutor:
-        if name not in tutors:
-            tutors[name] = LogicTutor(scenario=name, engine=engine, explain=explain, kb=kb)
-        return tutors[name]
 
     def verifier_for(task: Task) -> Verifier:
-        return tutor_for(task.room.name if scenario == "auto" else scenario).verifier
+        return tutors.for_task(task).verifier  # type: ignore[no-any-return]
 
     # Loaded before the progress bar starts: a bad scenario or workspace fails here.
-    tutor = tutor_for(tasks[0].room.name if scenario == "auto" else scenario)
+    tutor = tutors.for_task(tasks[0])
     err = Console(stderr=True)
     with progress_bar(err) as progress:
         bar = progress.add_task("verifying tasks", total=len(tasks))

@@ -7,15 +7,12 @@ import os
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import Annotated
 
 import typer
 
-from virf.cli.app import KbOpt, progress_bar, write_output
-from virf.errors import InputError, clip, unknown_term
-
-if TYPE_CHECKING:
-    from virf.api import LogicTutor
+from virf.cli.app import KbOpt, RoomScenarioOpt, RoomTutors, progress_bar, write_output
+from virf.errors import InputError, clip
 
 
 def register(kb_app: typer.Typer) -> None:
@@ -31,15 +28,7 @@ def kb_coverage(
     as_json: Annotated[
         bool, typer.Option("--json", help="Print the whole result as one JSON object.")
     ] = False,
-    scenario: Annotated[
-        str,
-        typer.Option(
-            "--scenario",
-            "-s",
-            help="Scenario for every task; 'auto' takes each task's room from its floor plan "
-            "and counts rules over the household scenario (with --kb: the workspace's scenario).",
-        ),
-    ] = "auto",
+    scenario: RoomScenarioOpt = "auto",
     kb: KbOpt = None,
     plot: Annotated[
         Path | None,
@@ -76,24 +65,12 @@ def kb_coverage(
         _check_output("--markdown", markdown)
     if plot is not None and markdown is not None and plot.resolve() == markdown.resolve():
         raise InputError("--plot and --markdown name the same file")
-    from virf.ontology.tbox import scenario_names
-
-    if scenario != "auto" and scenario not in scenario_names():
-        raise unknown_term("scenario", scenario, ["auto", *scenario_names()])
+    # Verdicts only: coverage never prints an explanation, and they are the same.
+    tutors = RoomTutors(scenario, kb, explain=False)
     tasks = load_coverage_tasks(files)
     started = time.perf_counter()
-    if kb is not None and scenario == "auto":
-        from virf.ontology.workspace import open_layout
-
-        scenario = open_layout(kb).scenario
-    tutors: dict[str, LogicTutor] = {}
-
-    def tutor_named(name: str) -> LogicTutor:
-        if name not in tutors:
-            tutors[name] = _tutor(name, kb)
-        return tutors[name]
-
-    tutor = tutor_named("household" if scenario == "auto" else scenario)
+    # With 'auto', the rules are listed from the household scenario (every room's).
+    tutor = tutors.named(tutors.fixed or "household")
     err = Console(stderr=True)
     with progress_bar(err) as progress:
         bar = progress.add_task("checking reference plans", total=len(tasks))
@@ -102,7 +79,7 @@ def kb_coverage(
             tasks,
             kb=None if kb is None else str(kb),
             on_task=lambda _: progress.advance(bar),
-            tutor_for=(lambda task: tutor_named(task.room.name)) if scenario == "auto" else None,
+            tutor_for=tutors.for_task if tutors.fixed is None else None,
         )
     elapsed = time.perf_counter() - started
     if as_json:
@@ -121,13 +98,6 @@ def kb_coverage(
         plot_coverage(result, plot)
         err.print(f"wrote {plot}", markup=False, highlight=False)
     err.print(f"{len(tasks)} tasks in {elapsed:.1f}s", markup=False, highlight=False)
-
-
-def _tutor(scenario: str, kb: Path | None) -> LogicTutor:
-    from virf.api import LogicTutor
-
-    # Verdicts only: coverage never prints an explanation, and they are the same.
-    return LogicTutor(scenario, explain=False, kb=kb)
 
 
 def _check_output(option: str, path: Path) -> None:
