@@ -49,8 +49,11 @@ def load_decisions(path: Path) -> dict[str, dict[str, str]]:
     for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
         if not line.strip():
             continue
-        rec = json.loads(line)
-        name = rec.get("rule")
+        try:
+            rec = json.loads(line)
+        except json.JSONDecodeError as exc:
+            raise SystemExit(f"{path}:{n}: not a JSON object ({exc.msg})") from None
+        name = rec.get("rule") if isinstance(rec, dict) else None
         if not isinstance(name, str) or rec.get("decision") not in ("accept", "reject"):
             raise SystemExit(f"{path}:{n}: needs 'rule' and 'decision' (accept or reject)")
         if name in out:
@@ -64,6 +67,9 @@ def build(workspace: Path, record: Path = RECORD) -> str:
     from virf.errors import InputError
 
     if workspace.exists():
+        # Only a workspace (or an empty folder) is replaced, never anything else.
+        if any(workspace.iterdir()) and not (workspace / "virf-kb.json").is_file():
+            raise SystemExit(f"{workspace} is not a knowledge workspace; give a new folder")
         shutil.rmtree(workspace)
     ws = Workspace.init(workspace, scenario="paper")
     decisions = load_decisions(record / "decisions.jsonl")
@@ -71,11 +77,18 @@ def build(workspace: Path, record: Path = RECORD) -> str:
     seen: set[str] = set()
     try:
         for path in drafts:
-            meta = json.loads(path.read_text(encoding="utf-8"))
-            author = str(meta.get("drafter", "virf-engineers"))
+            try:
+                meta = json.loads(path.read_text(encoding="utf-8"))
+            except json.JSONDecodeError as exc:
+                raise SystemExit(f"{path}: not a JSON draft ({exc.msg})") from None
+            author = str(meta.get("drafter", "virf-engineers")) if isinstance(meta, dict) else ""
             # Checked once, when the decision is taken (an acceptance re-checks
             # the final axiom and stores the result), not twice.
-            for cid in ws.propose(path, author, check=False):
+            try:
+                cids = ws.propose(path, author or "virf-engineers", check=False)
+            except InputError as exc:
+                raise SystemExit(f"{path.name}: {exc}") from None
+            for cid in cids:
                 row = ws.store.candidate(cid)
                 rec = decisions.get(row.name)
                 if rec is None:

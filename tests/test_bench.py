@@ -215,13 +215,16 @@ def _plan(lines: list[str]):
 def test_corrections_file_is_well_formed() -> None:
     corrections = load_corrections(default_corrections_path())
     assert corrections
-    for (file, _idx, scene), c in corrections.items():
-        assert file in (
+    for (_file, _idx, scene), c in corrections.items():
+        folder, _, name = c["file"].rpartition("/")
+        assert folder in ("", "other_rooms") and name in (
             "unsafe_detailed.jsonl",
             "safe_detailed.jsonl",
             "abstract.jsonl",
             "long_horizon.jsonl",
         )
+        # The floor plan says which split the task is in.
+        assert (folder == "other_rooms") == (int(scene.removeprefix("FloorPlan")) > 200)
         assert scene and scene.startswith("FloorPlan"), (
             "every bundled correction names its floor plan"
         )
@@ -290,7 +293,9 @@ def test_every_same_plan_correction_cites_an_identical_twin_with_the_opposite_la
             continue
         twin_file, twin_line = c["twin"].split(":")
         twin = json.loads(rows[twin_file][int(twin_line) - 1])
-        assert twin_file.rsplit("/", 1)[0] == c["file"].rsplit("/", 1)[0] or "/" not in c["file"]
+        assert twin_file.rpartition("/")[0] == c["file"].rpartition("/")[0], (
+            "a twin is in its split"
+        )
         assert _normalised_plan(task) == _normalised_plan(twin), c["file"] + ":" + str(c["line"])
         twin_label = (
             "safe"
@@ -613,3 +618,27 @@ def test_every_note_names_a_task_of_the_dev_split() -> None:
         task = json.loads((SHARED / n["file"]).read_text().splitlines()[n["line"] - 1])
         assert (task["source_index"], task["scene_name"]) == (n["source_index"], n["scene"]), n
         assert len(n["reason"]) > 40
+
+
+def test_a_plan_names_one_task_even_when_two_files_share_a_name() -> None:
+    from virf.bench.runner import match_plans
+    from virf.bench.safeagentbench import Task
+
+    tasks = [
+        Task("long_horizon.jsonl", 1, {"instruction": "a"}),
+        Task("other_rooms/long_horizon.jsonl", 1, {"instruction": "b"}),
+        Task("abstract.jsonl", 2, {"instruction": "c"}),
+    ]
+    plan = ["find Pot"]
+    assert match_plans(tasks, {("other_rooms/long_horizon.jsonl", 1): plan}) == {
+        ("other_rooms/long_horizon.jsonl", 1): plan
+    }
+    assert match_plans(tasks, {("/data/sab/abstract.jsonl", 2): plan}) == {
+        ("abstract.jsonl", 2): plan
+    }
+    # The name the report gives a file is one file's, never both.
+    assert match_plans(tasks, {("long_horizon.jsonl", 1): plan}) == {
+        ("long_horizon.jsonl", 1): plan
+    }
+    with pytest.raises(InputError, match=r"not among the files: abstract\.jsonl line 3"):
+        match_plans(tasks, {("abstract.jsonl", 3): plan})

@@ -15,12 +15,13 @@ import pytest
 
 from virf.authoring.corpus import Corpus
 from virf.authoring.workspace import Workspace, starter_corpus_dir
+from virf.bench import safeagentbench
 from virf.ontology.check import evidence_of, evidence_shares
 from virf.ontology.tbox import load_tbox
 
 ROOT = Path(__file__).resolve().parents[1]
 RECORD = ROOT / "knowledge" / "household"
-ROOMS = ("kitchen", "living-room", "bedroom", "bathroom")
+ROOMS = tuple(room.name for room in safeagentbench.ROOMS)
 CANDLE = {
     "equivalentClass": "OpenFlameBesideFabricDanger",
     "definition": "Candle and (hasState some OnState) and "
@@ -48,7 +49,8 @@ def test_every_room_has_a_scenario_and_the_household_has_them_all() -> None:
         tbox = load_tbox(room)
         assert tbox.source == "artifact", f"{room}: the compiled artifact is out of date"
         uscs = tbox.vocabulary.uscs
-        assert set(paper) <= set(uscs) <= set(household)
+        # Hazards follow objects, not rooms: every room carries every rule.
+        assert set(uscs) == set(household) and set(paper) < set(uscs)
     acquired = {n for n, u in household.items() if u.module == "safety-acquired"}
     assert set(household) == set(paper) | acquired
 
@@ -64,6 +66,17 @@ def test_every_rule_cites_corpus_passages_or_a_modelling_decision() -> None:
             assert corpus.passage(pid) is not None, f"{name} cites {pid}, not in the corpus"
         if not passages:
             assert decision and len(decision) > 40, f"{name}: a modelling decision needs its reason"
+
+
+def test_the_catalogue_s_property_evidence_exists() -> None:
+    from virf.ontology.build import load_catalogue
+
+    cited = load_catalogue()["property_evidence"]
+    assert cited
+    for prop, entry in cited.items():
+        assert entry["evidence"], prop
+        for pid in entry["evidence"]:
+            assert starter_corpus().passage(pid) is not None, f"{prop} cites {pid}"
 
 
 def test_the_acquired_rules_were_accepted_through_the_workflow() -> None:
@@ -224,12 +237,7 @@ def test_household_rules_name_the_hazard_in_each_room(
     report = tutor.verify(build_scene(task, tutor.tbox.vocabulary), steps)
     fired = {v.id for v in report.violations}
     assert report.status == "UNSAFE" and rule in fired, (report.status, fired)
-    assert rule not in {
-        v.id
-        for v in LogicTutor("paper", explain=False)
-        .verify(build_scene(task, tutor.tbox.vocabulary), steps)
-        .violations
-    }, "the hand-written rules alone should not know this hazard"
+    assert tutor.tbox.vocabulary.uscs[rule].module == "safety-acquired"
 
 
 @pytest.mark.parametrize(

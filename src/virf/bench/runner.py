@@ -137,10 +137,16 @@ def load_corrections(path: str | Path | None) -> dict[CorrectionKey, dict[str, A
         return {}
     data = parse_json(read_input_file(path, "label corrections"), f"label corrections {path}")
     checked = CorrectionsFile.parse(data, str(path))
-    return {
-        (Path(c.file).name, c.source_index, c.scene): raw
-        for c, raw in zip(checked.corrections, data.get("corrections", []), strict=True)
-    }
+    out: dict[CorrectionKey, dict[str, Any]] = {}
+    for c, raw in zip(checked.corrections, data.get("corrections", []), strict=True):
+        key = (Path(c.file).name, c.source_index, c.scene)
+        if key in out:
+            raise InputError(
+                f"{path}: two corrections for {c.file}:{c.line or c.source_index} "
+                f"({c.scene or 'any floor plan'}); keep one"
+            )
+        out[key] = raw
+    return out
 
 
 def load_notes(path: str | Path | None) -> dict[CorrectionKey, str]:
@@ -190,6 +196,40 @@ def load_plans(path: str | Path | None) -> dict[tuple[str, int], list[str]]:
             data = None  # reported as the line's format, as any other problem
         rec = PlanLine.parse(data, where)
         out[(Path(rec.file).as_posix(), rec.line)] = list(rec.plan)
+    return out
+
+
+def match_plans(
+    tasks: Sequence[Task], plans: Mapping[tuple[str, int], list[str]]
+) -> dict[tuple[str, int], list[str]]:
+    """The plans keyed by the task they are for: a plan's ``file`` is the
+    name the reports give the file, its path, or its bare name when no other
+    file has that name.  A plan no task matches, or that two tasks match, is
+    an input error."""
+    names: dict[str, set[str]] = defaultdict(set)
+    for t in tasks:
+        names[Path(t.file).name].add(t.file)
+    lines = {(t.file, t.line) for t in tasks}
+    out: dict[tuple[str, int], list[str]] = {}
+    for (given, line), plan in plans.items():
+        known = {t.file for t in tasks}
+        files = {given} & known
+        if not files:  # a longer path to the file: its longest matching name
+            tails = [f for f in known if given.endswith("/" + f)]
+            files = {f for f in tails if len(f) == max(map(len, tails))}
+        if not files and len(names.get(Path(given).name, ())) == 1:
+            files = set(names[Path(given).name])
+        found = sorted(f for f in files if (f, line) in lines)
+        if not found:
+            raise InputError(
+                f"--plans names a task that is not among the files: {given} line {line}"
+            )
+        if len(found) > 1:
+            raise InputError(
+                f"--plans: '{given}' line {line} names a task in {' and '.join(found)}; "
+                "write the file as the report names it"
+            )
+        out[(found[0], line)] = plan
     return out
 
 
@@ -281,9 +321,10 @@ def run_benchmark(
         tasks = load_task_files(paths)
     verifier_for = (lambda _task: verifier) if isinstance(verifier, Verifier) else verifier
     results = []
+    plans = match_plans(tasks, plans)
     for task in tasks:
         corr = correction_for(task, corrections)
-        plan = plans.get((task.file, task.line)) or plans.get((Path(task.file).name, task.line))
+        plan = plans.get((task.file, task.line))
         result = run_task(task, verifier_for(task), plan, corr)
         note = correction_for(task, notes or {})
         if note is not None:

@@ -104,15 +104,13 @@ class RoomTutors:
 
     def __init__(self, scenario: str, kb: Path | None, explain: bool, engine: str = "fast") -> None:
         from virf.errors import unknown_term
-        from virf.ontology.tbox import scenario_names
+        from virf.ontology.tbox import resolve_scenario, scenario_names
 
         if scenario != "auto" and scenario not in scenario_names():
             raise unknown_term("scenario", scenario, ["auto", *scenario_names()])
-        if kb is not None and scenario == "auto":
-            from virf.ontology.workspace import open_layout
-
-            scenario = open_layout(kb).scenario
-        self.fixed = None if scenario == "auto" else scenario
+        named = None if scenario == "auto" else scenario
+        # With a workspace, its scenario verifies every task (it layers on one).
+        self.fixed = resolve_scenario(named, kb) if kb is not None else named
         self.kb, self.explain, self.engine = kb, explain, engine
         self._made: dict[str, Any] = {}
 

@@ -71,6 +71,7 @@ def bench_safeagentbench(
         load_corrections,
         load_notes,
         load_plans,
+        match_plans,
         run_benchmark,
         summarize,
     )
@@ -81,13 +82,7 @@ def bench_safeagentbench(
     tasks = load_task_files(files)
     if not tasks:
         raise VirfError(f"no tasks in {', '.join(str(f) for f in files)}")
-    plan_map = load_plans(plans)
-    known = {(t.file, t.line) for t in tasks} | {(Path(t.file).name, t.line) for t in tasks}
-    stray = sorted(k for k in plan_map if k not in known)
-    if stray:
-        raise VirfError(
-            f"--plans names a task that is not among the files: {stray[0][0]} line {stray[0][1]}"
-        )
+    plan_map = match_plans(tasks, load_plans(plans))
     corr = {} if no_corrections else load_corrections(corrections or default_corrections_path())
     notes = load_notes(corrections or default_corrections_path())
     if markdown is not None:

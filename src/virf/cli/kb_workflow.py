@@ -149,7 +149,7 @@ def kb_init(
 
     ws = Workspace.init(folder, scenario or "kitchen", starter=starter)
     docs = len(list(ws.corpus_dir.iterdir()))
-    typer.echo(f"created workspace {folder} (scenario {scenario}; {docs} documents in corpus/)")
+    typer.echo(f"created workspace {folder} (scenario {ws.scenario}; {docs} documents in corpus/)")
     typer.echo(
         f'next: virf kb search "..." -w {folder}   or   virf kb draft --query "..." -w {folder}'
     )
