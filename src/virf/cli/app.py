@@ -75,16 +75,23 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
 )
 
+_SCENARIOS = (
+    "a room (kitchen, living-room, bedroom, bathroom), household (every room), "
+    "paper (the hand-written rules only), appliances, cleaning"
+)
 ScenarioOpt = Annotated[
     str | None,
     typer.Option(
         "--scenario",
         "-s",
-        help=(
-            "Scenario module to load: a room (kitchen, living-room, bedroom, bathroom), "
-            "household (every room), paper (the hand-written rules only), appliances, cleaning "
-            "[default: kitchen, or the workspace's with --kb]."
-        ),
+        help=f"Scenario module to load: {_SCENARIOS} [default: kitchen, or the workspace's with --kb].",
+    ),
+]
+# For commands without --kb.
+PlainScenarioOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--scenario", "-s", help=f"Scenario module to load: {_SCENARIOS} [default: kitchen]."
     ),
 ]
 RoomScenarioOpt = Annotated[

@@ -15,7 +15,7 @@ from virf.cli.app import (
     BaseUrlOpt,
     MaxTokensOpt,
     ModelTimeoutOpt,
-    ScenarioOpt,
+    PlainScenarioOpt,
     SeedOpt,
     TemperatureOpt,
     WorkspaceOpt,
@@ -135,7 +135,7 @@ def _print_candidate(view: CandidateView) -> None:
 
 def kb_init(
     folder: Annotated[Path, typer.Argument(help="New folder for the workspace.")] = Path("virf-kb"),
-    scenario: ScenarioOpt = None,
+    scenario: PlainScenarioOpt = None,
     starter: Annotated[
         bool,
         typer.Option(

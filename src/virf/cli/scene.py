@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from virf.cli.app import ScenarioOpt
+from virf.cli.app import PlainScenarioOpt
 
 scene_app = typer.Typer(
     help="Show how a scene is understood; build scenes for benchmark tasks.", no_args_is_help=True
@@ -35,7 +35,7 @@ def scene_show(
     as_json: Annotated[
         bool, typer.Option("--json", help="Print the canonical world as one JSON object.")
     ] = False,
-    scenario: ScenarioOpt = None,
+    scenario: PlainScenarioOpt = None,
 ) -> None:
     """Show how VIRF understood SCENE: the one canonical world it verifies against.
 
