@@ -547,6 +547,7 @@ class Workspace:
     ) -> str:
         """The Manchester frames accepting the candidate adds to a layer module."""
         name = rule["name"]
+        source = _literal(self._source(evidence_ids, modelling_decision))
         lines = [f"# candidate {cid}: {name}"]
         # Every term the block uses is declared in it: OWLAPI's Manchester
         # parser does not look into already-loaded imports when it parses a
@@ -580,7 +581,7 @@ class Workspace:
             f":safetyWarning {_literal(rule['safety_warning'])}",
             f":triggerReason {_literal(rule['trigger_reason'])}",
             f":suggestion {_literal(rule['suggestion'])}",
-            f":source {_literal(self._source(evidence_ids, modelling_decision))}",
+            f":source {source}",
             f":checkAt {_literal(rule['check_at'])}",
             *(f":evidence {_literal(pid)}" for pid in evidence_ids),
             f":drafter {_literal(drafter)}",
@@ -592,8 +593,7 @@ class Workspace:
         lines += [f"        {a}," for a in anns[:-1]] + [f"        {anns[-1]}"]
         lines += [
             "    EquivalentTo:",
-            f"        Annotations: :id {_literal(name + '-def')}, "
-            f":source {_literal(self._source(evidence_ids, modelling_decision))}",
+            f"        Annotations: :id {_literal(name + '-def')}, :source {source}",
             f"        {axiom}",
             "    SubClassOf: :UnsafeStateConcept",
             "",

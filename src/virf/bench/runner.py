@@ -130,33 +130,36 @@ class CorrectionsFile(Record):
 CorrectionKey = tuple[str, int, str | None]
 
 
-def load_corrections(path: str | Path | None) -> dict[CorrectionKey, dict[str, Any]]:
-    """(file name, source_index, floor plan) -> correction record (as the file
-    writes it); a record without a floor plan applies to that index in any."""
+def load_annotations(
+    path: str | Path | None,
+) -> tuple[dict[CorrectionKey, dict[str, Any]], dict[CorrectionKey, str]]:
+    """The corrections file read once: (file name, source_index, floor plan)
+    -> correction record (as the file writes it), and -> note (why the
+    verdict differs from a label that stands).  A record without a floor plan
+    applies to that index in any."""
     if path is None:
-        return {}
+        return {}, {}
     data = parse_json(read_input_file(path, "label corrections"), f"label corrections {path}")
     checked = CorrectionsFile.parse(data, str(path))
-    out: dict[CorrectionKey, dict[str, Any]] = {}
+    corrections: dict[CorrectionKey, dict[str, Any]] = {}
     for c, raw in zip(checked.corrections, data.get("corrections", []), strict=True):
         key = (Path(c.file).name, c.source_index, c.scene)
-        if key in out:
+        if key in corrections:
             raise InputError(
                 f"{path}: two corrections for {c.file}:{c.line or c.source_index} "
                 f"({c.scene or 'any floor plan'}); keep one"
             )
-        out[key] = raw
-    return out
+        corrections[key] = raw
+    notes = {(Path(n.file).name, n.source_index, n.scene): n.reason for n in checked.notes}
+    return corrections, notes
+
+
+def load_corrections(path: str | Path | None) -> dict[CorrectionKey, dict[str, Any]]:
+    return load_annotations(path)[0]
 
 
 def load_notes(path: str | Path | None) -> dict[CorrectionKey, str]:
-    """(file name, source_index, floor plan) -> why the verdict differs from
-    the label (the file's ``notes`` list)."""
-    if path is None:
-        return {}
-    data = parse_json(read_input_file(path, "label corrections"), f"label corrections {path}")
-    checked = CorrectionsFile.parse(data, str(path))
-    return {(Path(n.file).name, n.source_index, n.scene): n.reason for n in checked.notes}
+    return load_annotations(path)[1]
 
 
 def correction_for(task: Task, corrections: Mapping[CorrectionKey, Any]) -> Any:

@@ -68,8 +68,7 @@ def bench_safeagentbench(
     from virf.bench.report import render_markdown
     from virf.bench.runner import (
         default_corrections_path,
-        load_corrections,
-        load_notes,
+        load_annotations,
         load_plans,
         match_plans,
         run_benchmark,
@@ -83,8 +82,9 @@ def bench_safeagentbench(
     if not tasks:
         raise VirfError(f"no tasks in {', '.join(str(f) for f in files)}")
     plan_map = match_plans(tasks, load_plans(plans))
-    corr = {} if no_corrections else load_corrections(corrections or default_corrections_path())
-    notes = load_notes(corrections or default_corrections_path())
+    corr, notes = load_annotations(corrections or default_corrections_path())
+    if no_corrections:
+        corr = {}
     if markdown is not None:
         _check_writable(markdown)
 

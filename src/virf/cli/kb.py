@@ -82,10 +82,9 @@ def kb_check(
         )
         console.print(to_rich(cats))
         ev = result["evidence"]
-        total = max(result["uscs"], 1)
         console.print(
-            f"Evidence: {ev['documents']} USCs ({100 * ev['documents'] / total:.1f}%) cite corpus "
-            f"passages; {ev['modelling_decisions']} ({100 * ev['modelling_decisions'] / total:.1f}%) "
+            f"Evidence: {ev['documents']} USCs ({100 * ev['share_documents']:.1f}%) cite corpus "
+            f"passages; {ev['modelling_decisions']} ({100 * ev['share_modelling_decisions']:.1f}%) "
             f"state a common-sense modelling decision; {ev['neither']} cite neither"
             + (f": {', '.join(ev['without_evidence'][:8])}" if ev["neither"] else "")
             + ("…" if ev["neither"] > 8 else "")
