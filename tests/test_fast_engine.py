@@ -19,7 +19,7 @@ from virf.api import LogicTutor
 from virf.ontology.tbox import load_tbox
 from virf.reasoning import Engine, make_engine
 from virf.reasoning.fast import FastEngine, fragment_of
-from virf.reasoning.program import compile_program
+from virf.reasoning.program import Model, compile_program
 from virf.schema import Fact, FactKind
 
 FULL = os.environ.get("VIRF_FULL") == "1"
@@ -117,19 +117,62 @@ def test_names_like_internal_ones_go_to_the_reference(
 
 def test_nested_trials_keep_the_outer_journal(engines: tuple[FastEngine, Engine]) -> None:
     fast, _ = engines
-    m, _ = fast._model([T("F", "Fridge")], frozenset())
-    outer = m.begin()
-    m.cls("F", "Apple")
-    inner = m.begin()
-    m.cls("F", "Mug")
-    m.run()
-    m.rollback(inner)
-    assert m.journal is not None  # the inner rollback must not stop the recording
-    m.cls("F", "Bowl")
-    m.run()
-    m.rollback(outer)
+    with fast._model([T("F", "Fridge")], frozenset()) as (m, _):
+        outer = m.begin()
+        m.cls("F", "Apple")
+        inner = m.begin()
+        m.cls("F", "Mug")
+        m.run()
+        m.rollback(inner)
+        assert m.journal is not None  # the inner rollback must not stop the recording
+        m.cls("F", "Bowl")
+        m.run()
+        m.rollback(outer)
+        assert m.journal is not None  # the question's own journal goes on
+        assert "Fridge" in m.types["F"]
+        assert not {"Apple", "Mug", "Bowl"} & m.types["F"]
     assert m.journal is None
-    assert not {"Apple", "Mug", "Bowl"} & m.types["F"]
+    assert "F" not in m.types  # the question's facts are gone with it
+
+
+def test_a_question_leaves_the_shared_model_as_it_found_it(
+    engines: tuple[FastEngine, Engine],
+) -> None:
+    """Every question grows the TBox's model and rolls it back: nothing of
+    one question, closures and fresh witnesses included, reaches the next."""
+    fast, _ = engines
+    prog, disabled = fast.program(frozenset())
+
+    def shape(m: Model) -> tuple[object, ...]:
+        return (
+            {x: frozenset(ts) for x, ts in m.types.items()},
+            {a: frozenset(xs) for a, xs in m.members.items()},
+            # A role's table may stay, empty: there are only so many roles.
+            {p: {x: frozenset(ys) for x, ys in t.items()} for p, t in m.succ.items() if t},
+            {p: {x: frozenset(ys) for x, ys in t.items()} for p, t in m.pred.items() if t},
+            {x: dict(t) for x, t in m.data.items()},
+            dict(m.closures),
+            dict(m.witness),
+            m.fresh,
+            m.version,
+            m.clash,
+        )
+
+    with prog.scratch(disabled) as m:
+        before = shape(m)
+    facts = [
+        T("Pot_1", "Pot"),
+        T("Stove_1", "StoveBurner"),
+        R("Pot_1", "isOnTopOf", "Stove_1"),
+        C("Pot_1", "contains"),
+    ]
+    fast.classify(facts, ["StoveBurner"])
+    fast.entails(facts, "StoveBurner", "Pot_1")
+    with prog.scratch(disabled) as m:
+        assert shape(m) == before
+        fresh = m.new_element()
+    with prog.scratch(disabled) as m:
+        assert m.new_element() == fresh  # witnesses are named alike every time
 
 
 def test_asserting_a_query_class_falls_back(engines: tuple[FastEngine, Engine]) -> None:

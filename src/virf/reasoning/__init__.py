@@ -12,7 +12,8 @@ Every question takes an optional ``deadline``; see :mod:`virf.deadlines`.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from importlib import import_module
 
@@ -64,6 +65,13 @@ class Engine(ABC):
     def fork(self) -> Engine:
         """An independent engine of the same kind, for another thread."""
         return type(self)(self.tbox, self.timeout_s)
+
+    @contextmanager
+    def sharing(self, facts: Collection[Fact]) -> Iterator[None]:
+        """A hint: most questions asked in the block are about sets of facts
+        that include ``facts`` (what no step of a plan changes).  An engine
+        may prepare for them once; the answers are the same either way."""
+        yield
 
     def classify(
         self, facts: Iterable[Fact], concepts: Sequence[str], *, deadline: float | None = None

@@ -24,7 +24,8 @@ from __future__ import annotations
 
 import threading
 from collections import Counter
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Collection, Iterator
+from collections.abc import Set as AbstractSet
 from contextlib import contextmanager
 from typing import Any
 
@@ -39,6 +40,7 @@ from virf.schema import Fact, FactKind
 # Names the engine uses for itself; an input name starting like one of these
 # could be confused with them, so such an input goes to the reference engine.
 _INTERNAL = ("owl:", "aux:", "{", "undefined:", "_:")
+_NONE: frozenset[str] = frozenset()
 
 
 def fragment_of(tbox: TBox) -> Fragment:
@@ -77,6 +79,7 @@ class _Eval:
         self._classical: dict[tuple[Expr, str], bool] = {}
         self._cert: dict[tuple[Expr, str], bool] = {}
         self._cert_not: dict[tuple[Expr, str], bool] = {}
+        self._candidates: dict[str, AbstractSet[str] | None] = {}
 
     def _fresh(self) -> None:
         if self._version != self.m.version:
@@ -84,6 +87,7 @@ class _Eval:
             self._classical.clear()
             self._cert.clear()
             self._cert_not.clear()
+            self._candidates.clear()
 
     # ------------------------------------------------------------------ classical
     def holds(self, e: Expr, x: str) -> bool:
@@ -183,6 +187,67 @@ class _Eval:
             if members is not None:
                 out = members if out is None else out & members
         return out
+
+    def candidates(self, e: Expr) -> AbstractSet[str] | None:
+        """A superset of the individuals at which ``e`` holds in the model
+        (None: possibly any).  Read from the class and role tables, so a
+        query is evaluated only where it can hold: checking every query at
+        every individual cost more than the rest of a verification."""
+        m, tag = self.m, e[0]
+        if tag == "C":
+            name = e[1]
+            if name in self.defs:
+                # Definitions share defined classes: each is read once per model.
+                self._fresh()
+                if name not in self._candidates:
+                    self._candidates[name] = self.candidates(self.defs[name])
+                return self._candidates[name]
+            if name in self.sinks or name == THING:
+                return None
+            return m.members.get(name, _NONE)
+        if tag == "and":
+            # Named conjuncts first: an action class absent from the state
+            # settles the question before any role is read.
+            both: set[str] | None = None
+            for named in (True, False):
+                for c in e[1]:
+                    if (c[0] == "C") is not named:
+                        continue
+                    part = self.candidates(c)
+                    if part is None:
+                        continue
+                    both = set(part) if both is None else both & part
+                    if not both:
+                        return both
+            return both
+        if tag == "or":
+            parts = [self.candidates(c) for c in e[1]]
+            if any(p is None for p in parts):
+                return None
+            return set().union(*parts)  # type: ignore[arg-type]
+        if tag == "some" or (tag == "min" and int(e[1]) >= 1):
+            role, filler = (e[1], e[2]) if tag == "some" else (e[2], e[3])
+            if role[0] in m.lazy:
+                return None
+            ends = self.candidates(filler)
+            back = (m.succ if role[1] else m.pred).get(role[0], {})
+            if ends is None:
+                forth = (m.pred if role[1] else m.succ).get(role[0], {})
+                return {x for x, ys in forth.items() if ys}
+            out: set[str] = set()
+            for y in ends:
+                out |= back.get(y, _NONE)
+            return out
+        if tag == "value":
+            role = e[1]
+            if role[0] in m.lazy:
+                return None
+            return set((m.succ if role[1] else m.pred).get(role[0], {}).get(e[2], _NONE))
+        if tag == "oneof":
+            return set(e[1])
+        if tag == "dvalue":
+            return {x for x, table in m.data.items() if e[2] in table.get(e[1], _NONE)}
+        return None
 
     def certain_not(self, e: Expr, x: str) -> bool:
         """Sound: True only if ``not e(x)`` is entailed, i.e. asserting ``e(x)``
@@ -351,25 +416,6 @@ class _Eval:
         raise Fallback(f"no model check for {k}")
 
 
-def _guard(e: Expr, defs: dict[str, Expr]) -> frozenset[str] | None:
-    """Named classes one of which every instance of ``e`` must belong to in
-    any interpretation (None when there is no such set)."""
-    tag = e[0]
-    if tag == "C":
-        if e[1] in defs:
-            return _guard(defs[e[1]], defs)
-        return None if e[1] == THING else frozenset([e[1]])
-    if tag == "and":
-        found = [g for g in (_guard(c, defs) for c in e[1]) if g is not None]
-        return min(found, key=lambda g: (len(g), sorted(g))) if found else None
-    if tag == "or":
-        parts = [_guard(c, defs) for c in e[1]]
-        if any(p is None for p in parts):
-            return None
-        return frozenset().union(*parts)  # type: ignore[arg-type]
-    return None
-
-
 def _assertable(e: Expr, defs: dict[str, Expr]) -> bool:
     tag = e[0]
     if tag == "C":
@@ -396,11 +442,9 @@ class FastEngine(Engine):
         self._reference: Engine | None = None
         self._counts: Counter[str] = Counter()
         self._lock = threading.Lock()
-        self._guards = {
-            q: g
-            for q in self.fragment.query_defs
-            if (g := _guard(("C", q), self.fragment.query_defs)) is not None
-        }
+        self._core: tuple[Model, frozenset[Fact]] | None = None  # see sharing()
+        # Classes the input may not assert: the rules do not define them.
+        self._defined = self.fragment.sinks | self.fragment.query_defs.keys()
 
     # ------------------------------------------------------------------ plumbing
     @property
@@ -434,12 +478,30 @@ class FastEngine(Engine):
             self._programs[without] = prog
         return prog, frozenset()
 
-    def _model(self, facts: list[Fact], without: frozenset[str]) -> tuple[Model, _Eval]:
+    @contextmanager
+    def _model(self, facts: list[Fact], without: frozenset[str]) -> Iterator[tuple[Model, _Eval]]:
+        """The least model of the facts, for the block's duration only."""
         if self.fragment.problems:
             raise Fallback("TBox outside the fragment: " + self.fragment.problems[0])
-        guarded = self.fragment.sinks | self.fragment.query_defs.keys()
+        core = self._core
+        if not without and core is not None and core[1].issubset(facts):
+            # The rules are monotone: the core's least model grown with the
+            # other facts is the least model of all of them.
+            m = core[0]
+            token = m.begin()
+            try:
+                self._load(m, [f for f in facts if f not in core[1]])
+                yield m, _Eval(m, self._definitions(without), self.fragment.sinks)
+            finally:
+                m.rollback(token)
+            return
         prog, disabled = self.program(without)
-        m = prog.base(disabled)
+        with prog.scratch(disabled) as m:
+            self._load(m, facts)
+            yield m, _Eval(m, self._definitions(without), self.fragment.sinks)
+
+    def _load(self, m: Model, facts: list[Fact]) -> None:
+        """Add the facts to the model and apply the rules."""
         # One pass: facts are only queued here; the rules (and the closure
         # checks) run afterwards, over all of them.
         for f in facts:
@@ -448,7 +510,7 @@ class FastEngine(Engine):
             if any(n.startswith(_INTERNAL) for n in names):
                 raise Fallback(f"the input name in '{f.render()}' looks like an internal name")
             if f.kind is FactKind.TYPE:
-                if f.object in guarded:
+                if f.object in self._defined:
                     raise Fallback(f"the input asserts the defined class {f.object}")
                 m.cls(f.subject, f.object)
             elif f.kind is FactKind.OBJECT:
@@ -458,7 +520,29 @@ class FastEngine(Engine):
             else:
                 m.close(f.subject, f.predicate, frozenset(members))
         m.run()
-        return m, _Eval(m, self._definitions(without), self.fragment.sinks)
+
+    @contextmanager
+    def sharing(self, facts: Collection[Fact]) -> Iterator[None]:
+        """Grow the model of ``facts`` once; a question in the block whose
+        facts include them starts from it, and adds only the rest."""
+        with self._lock:
+            core: tuple[Model, frozenset[Fact]] | None = None
+            if facts and not self.fragment.problems:
+                shared = frozenset(facts)
+                m = self.program(frozenset())[0].model()
+                try:
+                    self._load(m, sorted(shared))
+                except (Fallback, ChaseLimit):
+                    pass  # the questions will say so themselves, one by one
+                else:
+                    if m.clash is None:
+                        core = (m, shared)
+            before, self._core = self._core, core
+        try:
+            yield
+        finally:
+            with self._lock:
+                self._core = before
 
     @staticmethod
     def _checks(m: Model) -> list[Axiom]:
@@ -521,27 +605,25 @@ class FastEngine(Engine):
     # ------------------------------------------------------------------ engine API
     def _classify(self, facts: list[Fact], concepts: list[str]) -> Classification:
         def exact() -> Classification:
-            m, ev = self._model(facts, frozenset())
-            if m.clash is not None:
-                return Classification(False, {})
-            bad = ev.violations(self._checks(m))
-            if bad is not None:
-                raise Fallback(f"candidate model violates: {bad}")
-            abox = {f.subject for f in facts} | {
-                f.object for f in facts if f.kind is FactKind.OBJECT
-            }
-            found: dict[str, tuple[str, ...]] = {}
-            for concept in concepts:
-                check_deadline("while the fast engine classified the facts")
-                guard = self._guards.get(concept)
-                if guard is None:
-                    pool = abox
-                else:  # only members of the guard classes can satisfy the concept
-                    pool = set().union(*(m.members.get(g, ()) for g in guard)) & abox
-                names = tuple(x for x in sorted(pool) if self._decide(ev, concept, x))
-                if names:
-                    found[concept] = names
-            return Classification(True, found)
+            with self._model(facts, frozenset()) as (m, ev):
+                if m.clash is not None:
+                    return Classification(False, {})
+                bad = ev.violations(self._checks(m))
+                if bad is not None:
+                    raise Fallback(f"candidate model violates: {bad}")
+                abox = {f.subject for f in facts} | {
+                    f.object for f in facts if f.kind is FactKind.OBJECT
+                }
+                found: dict[str, tuple[str, ...]] = {}
+                for concept in concepts:
+                    check_deadline("while the fast engine classified the facts")
+                    # Only where the concept holds in the model can it be entailed.
+                    where = ev.candidates(("C", concept))
+                    pool = abox if where is None else abox & where
+                    names = tuple(x for x in sorted(pool) if self._decide(ev, concept, x))
+                    if names:
+                        found[concept] = names
+                return Classification(True, found)
 
         result: Classification = self._answer(
             exact, lambda: self.reference._classify(facts, concepts)
@@ -552,18 +634,18 @@ class FastEngine(Engine):
         self, facts: list[Fact], concept: str, individual: str, without: frozenset[str]
     ) -> bool:
         def exact() -> bool:
-            m, ev = self._model(facts, without)
             if individual.startswith(_INTERNAL):
                 raise Fallback(f"the individual '{individual}' looks like an internal name")
-            if individual not in m.types:  # before the model check: it is part of the model
-                m.element(individual)
-                m.run()
-            if m.clash is not None:
-                return True
-            bad = ev.violations(self._checks(m))
-            if bad is not None:
-                raise Fallback(f"candidate model violates: {bad}")
-            return self._decide(ev, concept, individual)
+            with self._model(facts, without) as (m, ev):
+                if individual not in m.types:  # before the model check: it is part of the model
+                    m.element(individual)
+                    m.run()
+                if m.clash is not None:
+                    return True
+                bad = ev.violations(self._checks(m))
+                if bad is not None:
+                    raise Fallback(f"candidate model violates: {bad}")
+                return self._decide(ev, concept, individual)
 
         result: bool = self._answer(
             exact,
@@ -573,13 +655,13 @@ class FastEngine(Engine):
 
     def _consistent(self, facts: list[Fact], without: frozenset[str]) -> bool:
         def exact() -> bool:
-            m, ev = self._model(facts, without)
-            if m.clash is not None:
-                return False
-            bad = ev.violations(self._checks(m))
-            if bad is not None:
-                raise Fallback(f"candidate model violates: {bad}")
-            return True
+            with self._model(facts, without) as (m, ev):
+                if m.clash is not None:
+                    return False
+                bad = ev.violations(self._checks(m))
+                if bad is not None:
+                    raise Fallback(f"candidate model violates: {bad}")
+                return True
 
         result: bool = self._answer(exact, lambda: self.reference._consistent(facts, without))
         return result

@@ -21,7 +21,8 @@ from __future__ import annotations
 
 import time
 from collections import defaultdict, deque
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from itertools import count
 from typing import Any
@@ -406,24 +407,36 @@ class Program:
             self.rtrig[p] = (tuple(self.role_up.get(p, ())), sides[0], sides[1])
         self._bases: dict[frozenset[str], Model] = {}
 
-    def base(self, disabled: frozenset[str] = frozenset()) -> Model:
+    def model(self, disabled: frozenset[str] = frozenset()) -> Model:
+        """A new least model of the TBox's own facts, the caller's to grow."""
+        m = Model(self, disabled)
+        for fact in self.facts:
+            if fact[0] == "element":
+                m.element(fact[1])
+            elif fact[0] == "role":
+                m.role(fact[1], fact[2], fact[3])
+            elif fact[0] == "data":
+                m.datum(fact[1], fact[2], fact[3])
+        m.run()
+        return m
+
+    @contextmanager
+    def scratch(self, disabled: frozenset[str] = frozenset()) -> Iterator[Model]:
         """The least model of the TBox's own facts (with the rules of the
-        ``disabled`` axioms switched off), built once and copied."""
+        ``disabled`` axioms switched off), to grow for one question: built
+        once, and rolled back to it when the block ends.  Rolling back costs
+        what the question added; copying the TBox's model for every question
+        cost more than answering most of them."""
         found = self._bases.get(disabled)
         if found is None:
             if len(self._bases) > 64:
                 self._bases.clear()
-            m = Model(self, disabled)
-            for fact in self.facts:
-                if fact[0] == "element":
-                    m.element(fact[1])
-                elif fact[0] == "role":
-                    m.role(fact[1], fact[2], fact[3])
-                elif fact[0] == "data":
-                    m.datum(fact[1], fact[2], fact[3])
-            m.run()
-            self._bases[disabled] = found = m
-        return found.copy()
+            self._bases[disabled] = found = self.model(disabled)
+        token = found.begin()
+        try:
+            yield found
+        finally:
+            found.rollback(token)
 
 
 def compile_program(frag: Fragment, without: frozenset[str]) -> Program:
@@ -487,42 +500,25 @@ class Model:
         # edges, so it also searches for one at its end.
         self._empty_lazy: list[tuple[str, str]] = []
 
-    def copy(self) -> Model:
-        assert not self.queue and self.journal is None
-        m = Model.__new__(Model)
-        m.prog = self.prog
-        m.disabled = self.disabled
-        m.types = {x: set(ts) for x, ts in self.types.items()}
-        m.members = defaultdict(set, {a: set(xs) for a, xs in self.members.items()})
-        m.succ = defaultdict(lambda: defaultdict(set))
-        for p, table in self.succ.items():
-            m.succ[p] = defaultdict(set, {x: set(ys) for x, ys in table.items()})
-        m.pred = defaultdict(lambda: defaultdict(set))
-        for p, table in self.pred.items():
-            m.pred[p] = defaultdict(set, {x: set(ys) for x, ys in table.items()})
-        m.data = defaultdict(lambda: defaultdict(set))
-        for x, table2 in self.data.items():
-            m.data[x] = defaultdict(set, {d: set(vs) for d, vs in table2.items()})
-        m.closures = dict(self.closures)
-        m.clash = self.clash
-        m.journal = None
-        m.queue = deque()
-        m.fresh = self.fresh
-        m.witness = dict(self.witness)
-        m.version = next(_STATES)
-        m.lazy = self.lazy
-        m._reached = {}
-        m._empty_lazy = list(self._empty_lazy)
-        return m
-
     def close(self, x: str, p: str, members: frozenset[str]) -> None:
         """``x p only {members}`` (nothing when empty); two closures on the
-        same pair intersect.  Only before the rules run."""
+        same pair intersect.  Before the next :meth:`run`: it checks the
+        edges that arrive against the closure."""
         key = (x, p)
         old = self.closures.get(key)
         self.closures[key] = members if old is None else old & members
-        if not self.closures[key] and p in self.lazy and key not in self._empty_lazy:
-            self._empty_lazy.append(key)
+        if self.journal is not None:
+            self.journal.append(("c", key, old))
+        if not self.closures[key]:
+            # Edges the rules saw before this closure (a model grown in
+            # stages) are not seen again: check them here.
+            there = self._stored((p, False), x)
+            if there and self.clash is None:
+                self.clash = f"{x} {p} {min(there)} contradicts '{x} {p} nothing'"
+            if p in self.lazy and key not in self._empty_lazy:
+                self._empty_lazy.append(key)
+                if self.journal is not None:
+                    self.journal.append(("z",))
         self.element(x)
         for member in members:
             self.element(member)
@@ -761,40 +757,56 @@ class Model:
                     break
 
     # ------------------------------------------------------------------ journal
-    def begin(self) -> tuple[int, int, str | None, bool]:
+    def begin(self) -> Token:
         """Start recording; :meth:`rollback` with the token restores this exact
-        state (including its version, so caches stay valid).  Calls nest: only
-        the outermost rollback stops the recording."""
+        state (including its version, so caches stay valid, and its count of
+        fresh names, so witnesses are named alike every time).  Calls nest:
+        only the outermost rollback stops the recording."""
         created = self.journal is None
         if self.journal is None:
             self.journal = []
-        return (len(self.journal), self.version, self.clash, created)
+        return (len(self.journal), self.version, self.clash, self.fresh, created)
 
-    def rollback(self, token: tuple[int, int, str | None, bool]) -> None:
-        mark, version, clash, created = token
+    def rollback(self, token: Token) -> None:
+        mark, version, clash, fresh, created = token
         assert self.journal is not None
         self.queue.clear()
+        # Emptied entries are removed, so a model that many questions grow
+        # and roll back does not keep every name it has seen.
         while len(self.journal) > mark:
             entry = self.journal.pop()
-            if entry[0] == "t":
+            tag = entry[0]
+            if tag == "t":
                 _, x, a = entry
                 self.types[x].discard(a)
-                self.members[a].discard(x)
-            elif entry[0] == "r":
+                _discard(self.members, a, x)
+            elif tag == "r":
                 _, p, x, y = entry
-                self.succ[p][x].discard(y)
-                self.pred[p][y].discard(x)
-            elif entry[0] == "d":
+                _discard(self.succ[p], x, y)
+                _discard(self.pred[p], y, x)
+            elif tag == "d":
                 _, x, d, v = entry
-                self.data[x][d].discard(v)
-            elif entry[0] == "w":
+                _discard(self.data[x], d, v)
+                if not self.data[x]:
+                    del self.data[x]
+            elif tag == "w":
                 del self.witness[entry[1]]
+            elif tag == "c":
+                _, key, old = entry
+                if old is None:
+                    del self.closures[key]
+                else:
+                    self.closures[key] = old
+            elif tag == "z":
+                self._empty_lazy.pop()
             else:
                 del self.types[entry[1]]
         self.clash = clash
         self.version = version
+        self.fresh = fresh
         if created:
             self.journal = None
+            self._reached.clear()
 
     # ------------------------------------------------------------------ checks
     def closure_violation(self) -> str | None:
@@ -806,6 +818,19 @@ class Model:
 
 
 _EMPTY: set[str] = set()
+# A journal position, the version, clash and fresh-name count it restores, and
+# whether the journal started with it.
+Token = tuple[int, int, str | None, int, bool]
+
+
+def _discard(table: dict[Any, set[Any]], key: Any, item: Any) -> None:
+    found = table.get(key)
+    if found is not None:
+        found.discard(item)
+        if not found:
+            del table[key]
+
+
 # Every model state gets a number never used before, so a cache keyed by it
 # cannot confuse two states.
 _STATES = count()

@@ -73,7 +73,9 @@ class Verifier:
         """``explain=False`` skips the minimal explanations (batch runs that only
         need verdicts): findings then carry no triggering facts, and whether
         they are definite is decided by one entailment test without the
-        assumed facts.
+        assumed facts.  Findings that still need their facts (a hazard left
+        at the end of the plan, for its onset; an uncertain one, for its
+        questions) get them, but not the background axioms.
 
         ``workers > 1`` classifies the plan's snapshots in parallel, each on
         its own engine instance (the paper's parallel step checking).  The
@@ -194,13 +196,37 @@ class Verifier:
         """The protocol's one loop: simulate the plan, classify each step's
         snapshot, place each finding at its step (an action's at the action),
         and stop at the first definite finding when ``until_definite``."""
-        explainer = Explainer(self.engine, self.vocab, deadline, self._tick)
+        explainer = Explainer(self.engine, self.vocab, deadline, self._tick, background=explain)
         trace = simulate(self.sim, self.sim.initial(scene), plan)
+        # What no step changes is reasoned about once, not at every step.
+        first, *rest = trace.states
+        unchanged = set(first.facts).intersection(*(state.facts for state in rest))
+        with self.engine.sharing(unchanged):
+            return self._classify_steps(
+                trace,
+                len(plan),
+                requirements,
+                deadline,
+                explainer,
+                explain=explain,
+                until_definite=until_definite,
+            )
+
+    def _classify_steps(
+        self,
+        trace: Trace,
+        plan_length: int,
+        requirements: Sequence[Requirement | Unreadable],
+        deadline: float,
+        explainer: Explainer,
+        *,
+        explain: bool,
+        until_definite: bool,
+    ) -> Walk:
         states, resolved, stop = trace.states, trace.resolved, trace.stop
         n = len(states) - 1
-
         findings: dict[int, list[Finding]] = {}
-        for f in requirement_findings(requirements, states, resolved, len(plan), self.vocab):
+        for f in requirement_findings(requirements, states, resolved, plan_length, self.vocab):
             findings.setdefault(f.step, []).append(f)
         checked = -1  # last snapshot the reasoner answered for
         seen: set[tuple[str, str]] = set()
