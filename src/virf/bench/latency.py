@@ -346,6 +346,7 @@ def run_latency(
     deadline_s: float = DEADLINE_S,
     cold: tuple[Path, Path] | None = None,
     cold_runs: int = 5,
+    cold_engines: Sequence[str] = ("fast", "reference"),
     progress: Callable[[str, int], Callable[[], None]] | None = None,
 ) -> dict[str, Any]:
     """All figures of ``virf bench latency`` as one dict.  ``cold``: the scene
@@ -358,8 +359,8 @@ def run_latency(
     # the machine down for the fresh processes.
     cold_rows: list[dict[str, Any]] = []
     if cold is not None and cold_runs > 0:
-        tick = bar("cold start", 2 * (cold_runs + 1))
-        cold_rows = cold_start_rows(*cold, runs=cold_runs, tick=tick)
+        tick = bar("cold start", len(cold_engines) * (cold_runs + 1))
+        cold_rows = cold_start_rows(*cold, engines=cold_engines, runs=cold_runs, tick=tick)
 
     tbox = load_tbox()
     fast = make_engine("fast", tbox)

@@ -169,6 +169,13 @@ def bench_latency(
     cold_runs: Annotated[
         int, typer.Option(min=0, help="Fresh processes per engine for the cold start (0 = skip).")
     ] = 5,
+    cold_engines: Annotated[
+        str,
+        typer.Option(
+            help="Engines whose cold start is timed, comma-separated (the reference "
+            "engine's takes about 10 s a process)."
+        ),
+    ] = "fast,reference",
 ) -> None:
     """Time the paper's method, the reference engine and the fast engine on the same plans."""
     from rich.console import Console
@@ -195,6 +202,12 @@ def bench_latency(
             f"--lengths '{lengths}': each length must be a multiple of 10 steps, "
             f"at most {MAX_PLAN_STEPS} (the plan limit)"
         )
+    cold_list = [e.strip() for e in cold_engines.split(",") if e.strip()]
+    for name in cold_list or [cold_engines]:
+        if name not in COLD_ENGINES:
+            raise VirfError(
+                f"--cold-engines: unknown engine '{name}'; choose from {', '.join(COLD_ENGINES)}"
+            )
     cold: tuple[Path, Path] | None = None
     if cold_runs:
         cold = (cold_example / "scene.json", cold_example / "plan.txt")
@@ -225,6 +238,7 @@ def bench_latency(
             lengths=length_list,
             cold=cold,
             cold_runs=cold_runs,
+            cold_engines=cold_list,
             progress=bar,
         )
     if as_json:
@@ -236,6 +250,9 @@ def bench_latency(
 
         write_output(markdown, render_markdown(figures, " ".join(["virf", *sys.argv[1:]])))
         typer.echo(f"wrote {markdown}", err=True)
+
+
+COLD_ENGINES = ("fast", "reference")
 
 
 def _whole_numbers(option: str, text: str, example: str) -> list[int]:
