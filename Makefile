@@ -13,7 +13,7 @@ STAMP  := $(VENV)/.virf-installed
 
 SAB    ?= ../shared/benchmarks/safeagentbench
 
-.PHONY: demo test test-full lint java chromium install clean bench-report bench-latency kb kb-household
+.PHONY: demo test test-full lint java chromium postgresql install clean bench-report bench-latency kb kb-household
 
 demo: $(STAMP)
 	$(BIN)/virf demo examples
@@ -35,7 +35,7 @@ demo: $(STAMP)
 	  examples/knowledge-acquisition/candle/plan.txt --kb runs/kb-demo || test $$? -eq 1
 	$(BIN)/virf kb audit -w runs/kb-demo
 
-test: $(STAMP) chromium
+test: $(STAMP) chromium postgresql
 	$(BIN)/ruff check src tests
 	$(BIN)/mypy
 	$(BIN)/lint-imports
@@ -43,7 +43,7 @@ test: $(STAMP) chromium
 
 # The full equivalence sweep: every SafeAgentBench dev plan and a few hundred
 # random scenes, plans and fact sets, fast engine against the reference.
-test-full: $(STAMP) chromium
+test-full: $(STAMP) chromium postgresql
 	$(BIN)/ruff check src tests
 	$(BIN)/mypy
 	$(BIN)/lint-imports
@@ -104,6 +104,15 @@ chromium:
 	  echo "chromium not found: installing it with apt (for the review page's browser test)"; \
 	  if [ "$$(id -u)" = 0 ]; then SUDO=""; else SUDO="sudo"; fi; \
 	  $$SUDO apt-get update -q && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -q chromium; \
+	fi
+
+# The run log can live on PostgreSQL; its tests start a real server from
+# Debian's package in a temporary folder.  Install it when missing.
+postgresql:
+	@if ! ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1 && ! command -v initdb >/dev/null 2>&1; then \
+	  echo "PostgreSQL not found: installing it with apt (for the run log's PostgreSQL tests)"; \
+	  if [ "$$(id -u)" = 0 ]; then SUDO=""; else SUDO="sudo"; fi; \
+	  $$SUDO apt-get update -q && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -q postgresql; \
 	fi
 
 clean:

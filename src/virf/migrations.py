@@ -1,5 +1,6 @@
-"""Append-only SQLite schema migrations, shared by every database VIRF writes
-(the planner's run log, a knowledge workspace's store).
+"""Append-only schema migrations, shared by every database VIRF writes (the
+planner's run log, a knowledge workspace's store).  They are written for
+SQLite; a run log on PostgreSQL runs the same ones (:mod:`virf.database`).
 
 A migration that has shipped is never edited: databases in the field already
 ran it, and the hash stored in ``_migrations`` turns an edit into a loud error
@@ -18,6 +19,7 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Final
 
+from virf.database import PostgresConnection, errors_of
 from virf.errors import EnvironmentProblem, InputError
 
 
@@ -34,6 +36,9 @@ class Migration:
 
 
 _MIGRATION_ID: Final = re.compile(r"^[0-9]{4}_[a-z0-9_]+$")
+
+# Any fixed number: the advisory lock that serialises migrations on a server.
+_LOCK_KEY: Final = 0x56495246
 
 _BOOKKEEPING: Final = """
 CREATE TABLE IF NOT EXISTS _migrations (
@@ -81,12 +86,21 @@ def check_migrations(migrations: Sequence[Migration]) -> None:
         statements(m.sql)
 
 
-def migrate(conn: sqlite3.Connection, migrations: Sequence[Migration], what: str) -> None:
+def migrate(
+    conn: sqlite3.Connection | PostgresConnection, migrations: Sequence[Migration], what: str
+) -> None:
     """Apply the migrations ``conn`` lacks (``conn`` in autocommit mode).
 
     ``what`` names the database in messages ("run log runs/log.sqlite")."""
+    postgres = isinstance(conn, PostgresConnection)
+    errors = errors_of(conn)
     try:
-        conn.execute("BEGIN IMMEDIATE")
+        if postgres:
+            conn.execute("BEGIN")
+            # Two service machines starting at once: one migrates, the other waits.
+            conn.execute("SELECT pg_advisory_xact_lock(?)", (_LOCK_KEY,))
+        else:
+            conn.execute("BEGIN IMMEDIATE")
         conn.execute(_BOOKKEEPING)
         applied = {row[0]: row[1] for row in conn.execute("SELECT id, sha256 FROM _migrations")}
         known = {m.id for m in migrations}
@@ -105,29 +119,32 @@ def migrate(conn: sqlite3.Connection, migrations: Sequence[Migration], what: str
                     )
                 continue
             for statement in statements(m.sql):
-                conn.execute(statement)
+                conn.execute(
+                    conn.translate(statement) if isinstance(conn, PostgresConnection) else statement
+                )
             conn.execute(
                 "INSERT INTO _migrations (id, sha256, applied_at) VALUES (?, ?, ?)",
                 (m.id, m.sha256, now()),
             )
         conn.execute("COMMIT")
-    except sqlite3.Error as exc:
+    except errors as exc:
         rollback(conn)
         if "not a database" in str(exc):
             raise InputError(f"{what} is not a SQLite database; choose another file") from None
-        raise EnvironmentProblem(f"cannot migrate {what}: {exc}") from None
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise EnvironmentProblem(f"cannot migrate {what}: {first}") from None
     except BaseException:
         rollback(conn)
         raise
 
 
-def rollback(conn: sqlite3.Connection) -> None:
+def rollback(conn: sqlite3.Connection | PostgresConnection) -> None:
     # The failure may have ended the transaction already; the original error
     # is the one worth reporting.
-    with contextlib.suppress(sqlite3.Error):
+    with contextlib.suppress(*errors_of(conn)):
         conn.execute("ROLLBACK")
 
 
-def applied_migrations(conn: sqlite3.Connection) -> list[str]:
+def applied_migrations(conn: sqlite3.Connection | PostgresConnection) -> list[str]:
     """Ids of the migrations a database has run, oldest first."""
     return [r[0] for r in conn.execute("SELECT id FROM _migrations ORDER BY id").fetchall()]

@@ -74,7 +74,10 @@ def plan(
     task_id: Annotated[
         str, typer.Option(help="Task id (keys replay files and the run log).")
     ] = "task",
-    log: Annotated[Path | None, typer.Option(help="SQLite run log of every model call.")] = None,
+    log: Annotated[
+        str | None,
+        typer.Option(help="Run log of every model call: a SQLite file or a postgresql:// URL."),
+    ] = None,
     as_json: Annotated[
         bool,
         typer.Option(

@@ -30,7 +30,11 @@ def serve(
         ),
     ] = None,
     run_log: Annotated[
-        Path | None, typer.Option(help="SQLite run log of the runs' model calls.")
+        str | None,
+        typer.Option(
+            help="Run log of the runs' model calls: a SQLite file, or a postgresql:// URL "
+            "that several service machines share."
+        ),
     ] = None,
     workspace: Annotated[
         Path | None,
@@ -65,6 +69,10 @@ def serve(
     from virf.ontology.tbox import resolve_scenario
 
     scenario = resolve_scenario(scenario, kb)
+    if run_log is not None:
+        from virf.planner.runlog import RunLog
+
+        RunLog(run_log).close()  # a log that cannot be opened fails now, not at the first run
     # Each worker process builds its own app (and tutor) from these settings.
     settings = (
         scenario,
@@ -72,7 +80,7 @@ def serve(
         str(kb) if kb else None,
         api_key,
         planner,
-        str(run_log) if run_log else None,
+        run_log,
         str(workspace) if workspace else None,
         reviewer or default_reviewer(),
     )

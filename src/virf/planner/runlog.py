@@ -1,13 +1,13 @@
-"""The SQLite run log: every model call an apprentice makes, for audit and replay.
+"""The run log: every model call an apprentice makes, for audit and replay.
 
-The schema evolves only by appending to ``MIGRATIONS`` (see
-:mod:`virf.migrations`).
+A SQLite file, or a PostgreSQL database given by URL where several service
+machines share one log (:mod:`virf.database`).  The schema evolves only by
+appending to ``MIGRATIONS`` (see :mod:`virf.migrations`).
 """
 
 from __future__ import annotations
 
 import json
-import sqlite3
 import threading
 import uuid
 from collections.abc import Sequence
@@ -17,6 +17,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import Final, Self
 
+from virf.database import connect, errors_of, is_url, shown
 from virf.errors import EnvironmentProblem, InputError
 from virf.migrations import Migration, applied_migrations, check_migrations, migrate
 from virf.migrations import now as _now
@@ -75,9 +76,9 @@ class CallRecord:
 
 
 class RunLog:
-    """An append-only SQLite log of model calls for one run (``run_id``).
+    """An append-only log of model calls for one run (``run_id``).
 
-    Several runs may share one file; each row carries its run id.  Safe to
+    Several runs may share one log; each row carries its run id.  Safe to
     share between threads of one process: writes are serialised by a lock.
     """
 
@@ -89,34 +90,31 @@ class RunLog:
         migrations: Sequence[Migration] = MIGRATIONS,
     ) -> None:
         check_migrations(migrations)
-        self.path = Path(path)
+        # A URL stays a string: Path would fold its '//'.
+        self.path: str | Path = path if is_url(path) else Path(path)
         # A fresh id per run keeps two runs in one file apart; callers that
         # resume a run pass its id explicitly.
         self.run_id = run_id if run_id is not None else _new_run_id()
         if not self.run_id:
             raise InputError("run id must be a non-empty string")
-        if self.path.is_dir():
-            raise InputError(f"run log {self.path} is a directory; choose a file path")
-        if not self.path.parent.is_dir():
-            raise InputError(f"run log folder {self.path.parent} does not exist; create it first")
         self._lock = threading.Lock()
-        try:
-            # Autocommit mode: transactions are opened explicitly where needed.
-            self._conn = sqlite3.connect(
-                self.path, timeout=30.0, isolation_level=None, check_same_thread=False
-            )
-        except sqlite3.Error as exc:
-            raise EnvironmentProblem(f"cannot open run log {self.path}: {exc}") from None
+        self._conn = connect(self.path, "run log")
+        self._errors = errors_of(self._conn)
         try:
             self._migrate(migrations)
         except BaseException:
             self._conn.close()
             raise
 
+    @property
+    def where(self) -> str:
+        """The log for messages (a URL without its password)."""
+        return shown(self.path)
+
     # -- schema ------------------------------------------------------------
 
     def _migrate(self, migrations: Sequence[Migration]) -> None:
-        migrate(self._conn, migrations, f"run log {self.path}")
+        migrate(self._conn, migrations, f"run log {self.where}")
 
     def applied_migrations(self) -> list[str]:
         """Ids of the migrations this database has run, oldest first."""
@@ -147,6 +145,7 @@ class RunLog:
         prompt = json.dumps(list(messages), ensure_ascii=False)
         with self._lock:
             try:
+                # RETURNING: PostgreSQL has no last row id (SQLite has both).
                 cur = self._conn.execute(
                     """
                     INSERT INTO model_calls (
@@ -154,6 +153,7 @@ class RunLog:
                         reply, ok, reason, prompt_tokens, completion_tokens, latency_ms,
                         attempts, created_at
                     ) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)
+                    RETURNING id
                     """,
                     (
                         self.run_id,
@@ -174,10 +174,9 @@ class RunLog:
                         _now(),
                     ),
                 )
-            except sqlite3.Error as exc:
-                raise EnvironmentProblem(f"cannot write run log {self.path}: {exc}") from None
-        row_id = cur.lastrowid
-        assert row_id is not None
+                row_id = int(cur.fetchone()[0])
+            except self._errors as exc:
+                raise EnvironmentProblem(f"cannot write run log {self.where}: {exc}") from None
         return row_id
 
     def calls(self, *, run_id: str | None = None, task_id: str | None = None) -> list[CallRecord]:

@@ -112,7 +112,7 @@ def create_app(
     api_key: str | None = None,
     timeout_s: float = 120.0,
     planner: str | None = None,
-    run_log: Path | None = None,
+    run_log: str | Path | None = None,
     answer_wait_s: float = 600.0,
     workspace: Path | None = None,
     reviewer: str = "reviewer",
@@ -276,7 +276,7 @@ def app_from_environment() -> FastAPI:
         kb=Path(kb) if kb else None,
         api_key=api_key,
         planner=planner,
-        run_log=Path(run_log) if run_log else None,
+        run_log=run_log,
         workspace=Path(workspace) if workspace else None,
         reviewer=reviewer,
     )

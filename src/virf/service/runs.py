@@ -109,7 +109,7 @@ class Runs:
         tutors: Any,
         *,
         planner: str | None,
-        run_log: Path | None,
+        run_log: str | Path | None,
         answer_wait_s: float = 600.0,
     ) -> None:
         self.tutors, self.planner, self.run_log = tutors, planner, run_log
