@@ -25,7 +25,7 @@ from virf.planner import MIGRATIONS, Migration, RunLog
 
 # A migration every dialect reads: what a later VIRF might add.
 LATER = Migration(
-    "0002_test_notes",
+    "0099_test_notes",
     """
     ALTER TABLE model_calls ADD COLUMN note TEXT;
     CREATE TABLE notes (id INTEGER PRIMARY KEY AUTOINCREMENT, body TEXT NOT NULL, score REAL);
@@ -77,10 +77,10 @@ def test_a_later_migration_keeps_the_rows_and_an_older_virf_refuses_the_log(targ
 
 def test_a_failed_migration_leaves_nothing_behind(target: str) -> None:
     RunLog(target, run_id="a").close()
-    broken = Migration("0002_broken", "CREATE TABLE half (x TEXT); INSERT INTO nowhere VALUES (1);")
+    broken = Migration("0099_broken", "CREATE TABLE half (x TEXT); INSERT INTO nowhere VALUES (1);")
     with pytest.raises(EnvironmentProblem, match="cannot migrate run log"):
         RunLog(target, run_id="a", migrations=(*MIGRATIONS, broken))
-    half = Migration("0002_half", "CREATE TABLE half (x TEXT);")
+    half = Migration("0099_half", "CREATE TABLE half (x TEXT);")
     with RunLog(target, run_id="a", migrations=(*MIGRATIONS, half)) as log:
         # 'half' went with the rest of the failed migration: it can be created again.
         assert log.applied_migrations()[-1] == half.id
@@ -198,3 +198,105 @@ def test_service_runs_are_recorded_in_the_shared_log(pg: str) -> None:
         assert state["state"] == "done", state
     with RunLog(pg) as log:
         assert log.calls(task_id="demo-fridge")
+
+
+def _wait(client: TestClient, run_id: str, states: tuple[str, ...]) -> dict:
+    for _ in range(600):
+        state: dict = client.get(f"/v1/runs/{run_id}").json()
+        if state["state"] in states:
+            return state
+        time.sleep(0.05)
+    raise AssertionError(f"run {run_id} never reached {states}: {state}")
+
+
+def test_any_worker_shows_streams_and_answers_a_run(target: str, tmp_path: Path) -> None:
+    """Two workers (two apps) with one run log: a run started on one is
+    shown, answered and streamed on the other, which never ran it."""
+    from virf.service.app import create_app
+
+    folder = ROOT / "examples" / "unknown-material-microwave"
+    plan = json.loads((folder / "plan.txt").read_text())
+    replay = tmp_path / "replay.jsonl"
+    replay.write_text(json.dumps({"task_id": "q", "iteration": 0, "text": "\n".join(plan)}) + "\n")
+    one = create_app(planner=f"replay:{replay}", run_log=target)
+    two = create_app(planner=f"replay:{replay}", run_log=target)
+    with TestClient(one) as first, TestClient(two) as second:
+        started = first.post(
+            "/v1/plan",
+            json={
+                "scene": json.loads((folder / "scene.json").read_text()),
+                "instruction": "Heat the cup in the microwave.",
+                "task_id": "q",
+            },
+        )
+        assert started.status_code == 202, started.text
+        run_id = started.json()["id"]
+        waiting = _wait(second, run_id, ("waiting", "done", "failed"))
+        assert waiting["state"] == "waiting", waiting
+        keys = [q["key"] for q in waiting["questions"]]
+        refused = second.post(f"/v1/runs/{run_id}/answers", json={"answers": {"nope": "x"}})
+        assert refused.status_code == 400 and "asked no question 'nope'" in refused.text
+        answers = dict(zip(keys, ["Glass", "yes", "yes", "yes"], strict=True))
+        answered = second.post(f"/v1/runs/{run_id}/answers", json={"answers": answers})
+        assert answered.status_code == 200, answered.text
+        with second.stream("GET", f"/v1/runs/{run_id}/events") as stream:
+            kinds = [
+                line.split(": ", 1)[1] for line in stream.iter_lines() if line.startswith("event: ")
+            ]
+        assert kinds[-1] == "result" and "turn" in kinds, kinds
+        there = second.get(f"/v1/runs/{run_id}").json()
+        assert there == first.get(f"/v1/runs/{run_id}").json()
+        assert there["state"] == "done" and there["result"]["outcome"] == "APPROVED", there
+    with TestClient(create_app(run_log=target)) as third:
+        assert third.get("/v1/runs/nothing").status_code == 404
+
+
+def test_virf_serve_with_two_workers_shares_its_runs(tmp_path: Path) -> None:
+    """A real `virf serve --workers 2 --run-log`: whichever process a request
+    reaches, a run is shown, answered and finished."""
+    import httpx
+
+    from virf.service.bench import Server
+
+    folder = ROOT / "examples" / "unknown-material-microwave"
+    plan = json.loads((folder / "plan.txt").read_text())
+    replay = tmp_path / "replay.jsonl"
+    replay.write_text(json.dumps({"task_id": "q", "iteration": 0, "text": "\n".join(plan)}) + "\n")
+    server = Server(2, "--run-log", str(tmp_path / "runs.db"), "--planner", f"replay:{replay}")
+    try:
+        server.wait_ready()
+        workers = set()
+        for _ in range(200):  # both processes answer before the run starts
+            workers.add(httpx.get(f"{server.url}/v1/health", timeout=10).json()["worker"])
+            if len(workers) == 2:
+                break
+            time.sleep(0.05)
+        assert len(workers) == 2, workers
+        body = {
+            "scene": json.loads((folder / "scene.json").read_text()),
+            "instruction": "Heat the cup in the microwave.",
+            "task_id": "q",
+        }
+        run = httpx.post(f"{server.url}/v1/plan", json=body, timeout=30).json()
+        for _ in range(600):
+            # A new connection each time: any worker may take it.
+            state = httpx.get(f"{server.url}/v1/runs/{run['id']}", timeout=10)
+            assert state.status_code == 200, state.text
+            if state.json()["state"] == "waiting":
+                break
+            time.sleep(0.05)
+        keys = [q["key"] for q in state.json()["questions"]]
+        answers = dict(zip(keys, ["Glass", "yes", "yes", "yes"], strict=True))
+        posted = httpx.post(
+            f"{server.url}/v1/runs/{run['id']}/answers", json={"answers": answers}, timeout=10
+        )
+        assert posted.status_code == 200, posted.text
+        for _ in range(600):
+            state = httpx.get(f"{server.url}/v1/runs/{run['id']}", timeout=10)
+            assert state.status_code == 200, state.text
+            if state.json()["state"] in ("done", "failed"):
+                break
+            time.sleep(0.05)
+        assert state.json()["result"]["outcome"] == "APPROVED", state.json()
+    finally:
+        server.close()

@@ -66,6 +66,12 @@ def serve(
         )
     if api_key is None:
         typer.echo("no API key: listening on this machine only", err=True)
+    if workers > 1 and run_log is None:
+        typer.echo(
+            "no --run-log: each worker keeps its own runs, so a run's URLs must reach the "
+            "worker that started it; give --run-log to share runs between workers",
+            err=True,
+        )
     from virf.ontology.tbox import resolve_scenario
 
     scenario = resolve_scenario(scenario, kb)

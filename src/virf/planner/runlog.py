@@ -49,6 +49,28 @@ MIGRATIONS: Final[tuple[Migration, ...]] = (
         CREATE INDEX model_calls_by_task ON model_calls (run_id, task_id, iteration, method);
         """,
     ),
+    # The service's runs, so that any of its workers (or machines, on a
+    # shared PostgreSQL log) can show a run, stream it and take its answers.
+    Migration(
+        "0002_service_runs",
+        """
+        CREATE TABLE service_runs (
+            id         TEXT    PRIMARY KEY,
+            state      TEXT    NOT NULL,
+            asks       INTEGER NOT NULL,
+            body       TEXT    NOT NULL,
+            updated_at TEXT    NOT NULL
+        );
+        CREATE TABLE service_answers (
+            id         INTEGER PRIMARY KEY AUTOINCREMENT,
+            run_id     TEXT    NOT NULL,
+            asks       INTEGER NOT NULL,
+            answers    TEXT    NOT NULL,
+            created_at TEXT    NOT NULL
+        );
+        CREATE INDEX service_answers_by_run ON service_answers (run_id, asks);
+        """,
+    ),
 )
 
 
@@ -228,6 +250,55 @@ class RunLog:
                 "SELECT run_id FROM model_calls GROUP BY run_id ORDER BY MIN(id)"
             ).fetchall()
         return [r[0] for r in rows]
+
+    # -- the service's runs -----------------------------------------------------
+
+    def save_run(self, run_id: str, state: str, asks: int, body: dict[str, object]) -> None:
+        """Record a service run as it stands now (replacing what was there)."""
+        with self._lock:
+            try:
+                self._conn.execute(
+                    """
+                    INSERT INTO service_runs (id, state, asks, body, updated_at)
+                    VALUES (?, ?, ?, ?, ?)
+                    ON CONFLICT (id) DO UPDATE SET state = excluded.state,
+                        asks = excluded.asks, body = excluded.body,
+                        updated_at = excluded.updated_at
+                    """,
+                    (run_id, state, asks, json.dumps(body, sort_keys=True), _now()),
+                )
+            except self._errors as exc:
+                raise EnvironmentProblem(f"cannot write run log {self.where}: {exc}") from None
+
+    def load_run(self, run_id: str) -> dict[str, object] | None:
+        """A service run as last recorded, or None."""
+        with self._lock:
+            row = self._conn.execute(
+                "SELECT body FROM service_runs WHERE id = ?", (run_id,)
+            ).fetchone()
+        return None if row is None else dict(json.loads(row[0]))
+
+    def post_answers(self, run_id: str, asks: int, answers: dict[str, str]) -> None:
+        """Answers for the ``asks``-th time the run waits (any worker may take them)."""
+        with self._lock:
+            try:
+                self._conn.execute(
+                    "INSERT INTO service_answers (run_id, asks, answers, created_at) "
+                    "VALUES (?, ?, ?, ?)",
+                    (run_id, asks, json.dumps(answers, sort_keys=True), _now()),
+                )
+            except self._errors as exc:
+                raise EnvironmentProblem(f"cannot write run log {self.where}: {exc}") from None
+
+    def posted_answers(self, run_id: str, asks: int) -> dict[str, str] | None:
+        """The first answers posted for that wait of the run, or None yet."""
+        with self._lock:
+            row = self._conn.execute(
+                "SELECT answers FROM service_answers WHERE run_id = ? AND asks = ? "
+                "ORDER BY id LIMIT 1",
+                (run_id, asks),
+            ).fetchone()
+        return None if row is None else {str(k): str(v) for k, v in json.loads(row[0]).items()}
 
     # -- lifetime ------------------------------------------------------------
 

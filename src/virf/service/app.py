@@ -17,6 +17,7 @@ processes do, ``--workers``).
 from __future__ import annotations
 
 import hmac
+import os
 import threading
 from collections.abc import Awaitable, Callable
 from dataclasses import asdict
@@ -29,6 +30,7 @@ from fastapi.responses import JSONResponse, RedirectResponse, Response, Streamin
 from pydantic import BaseModel, ConfigDict
 
 from virf.api import LogicTutor
+from virf.database import shown
 from virf.errors import EnvironmentProblem, InputError, VirfError
 from virf.ontology.tbox import DEFAULT_SCENARIO
 from virf.service.runs import AnswersRequest, PlanRequest, Runs
@@ -206,6 +208,8 @@ def create_app(
             "knowledge": tbox.source,
             "kb": str(kb) if kb is not None else None,
             "review": "/review/" if workspace is not None else None,
+            "worker": os.getpid(),  # which process answered (several with --workers)
+            "run_log": shown(run_log) if run_log is not None else None,
         }
 
     def known_run(run_id: str) -> Any:
@@ -265,7 +269,6 @@ def app_from_environment() -> FastAPI:
     """The app of one ``virf serve --workers N`` process, from the settings the
     command left in the environment (uvicorn starts workers by import path)."""
     import ast
-    import os
 
     scenario, engine, kb, api_key, planner, run_log, workspace, reviewer = ast.literal_eval(
         os.environ["VIRF_SERVE_SETTINGS"]

@@ -74,7 +74,8 @@ def _free_port() -> int:
 class Server:
     """``virf serve`` in a child process, until closed."""
 
-    def __init__(self, workers: int) -> None:
+    def __init__(self, workers: int, *options: str) -> None:
+        """``options``: more ``virf serve`` options (``--run-log``, ``--planner``)."""
         self.port = _free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         self.process = subprocess.Popen(
@@ -87,6 +88,7 @@ class Server:
                 str(self.port),
                 "--workers",
                 str(workers),
+                *options,
             ],
             stdout=subprocess.DEVNULL,
             stderr=subprocess.PIPE,

@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import queue
 import threading
+import time
 import uuid
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import asdict
@@ -33,6 +34,7 @@ from virf.schema import Question
 from virf.world.scene import build_scene
 
 MAX_RUNS: Final = 100  # kept in memory; the oldest finished ones go first
+POLL_S: Final = 0.5  # how often a run log is read for another worker's run or answers
 State = Literal["running", "waiting", "done", "failed"]
 
 
@@ -69,7 +71,10 @@ class _Locked:
 
 
 class Run:
-    def __init__(self, run_id: str) -> None:
+    """A run this worker is carrying out.  With a run log, every change is
+    also recorded there, for the other workers to show."""
+
+    def __init__(self, run_id: str, store: RunLog | None = None) -> None:
         self.id = run_id
         self.state: State = "running"
         self.turns: list[dict[str, Any]] = []
@@ -77,8 +82,10 @@ class Run:
         self.result: dict[str, Any] | None = None
         self.error: str | None = None
         self.asks = 0  # times the run has waited for answers
-        self.changed = threading.Condition()
+        self.changed: Any = threading.Condition()
         self.answers: queue.Queue[Answers] = queue.Queue()
+        self._store = store
+        self._save()
 
     def public(self) -> dict[str, Any]:
         with self.changed:
@@ -89,18 +96,78 @@ class Run:
                 "questions": [q.model_dump(mode="json") for q in self.questions],
                 "result": self.result,
                 "error": self.error,
+                "asks": self.asks,
             }
+
+    def _save(self) -> None:
+        if self._store is not None:
+            self._store.save_run(self.id, self.state, self.asks, self.public())
 
     def _update(self, **changes: Any) -> None:
         with self.changed:
             for key, value in changes.items():
                 setattr(self, key, value)
+            self._save()
             self.changed.notify_all()
 
     def add_turn(self, turn: Turn) -> None:
         with self.changed:
             self.turns.append(asdict(turn))
+            self._save()
             self.changed.notify_all()
+
+
+class _Polled:
+    """Stands in for a run's condition when the run is another worker's: a
+    wait is a pause, then a fresh read of the run log."""
+
+    def __init__(self, run: SharedRun) -> None:
+        self._run = run
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, *_: object) -> None:
+        return None
+
+    def wait(self, timeout: float) -> None:
+        time.sleep(min(timeout, POLL_S))
+        self._run.reload()
+
+
+class SharedRun:
+    """A run another worker (or machine) is carrying out, as its run log
+    records it: shown, streamed and answered through the log."""
+
+    def __init__(self, run_id: str, store: RunLog, body: Mapping[str, Any]) -> None:
+        self.id = run_id
+        self._store = store
+        self.changed = _Polled(self)
+        self._read(body)
+
+    def _read(self, body: Mapping[str, Any]) -> None:
+        self.state: State = body["state"]
+        self.turns: list[dict[str, Any]] = list(body["turns"])
+        self.questions = [Question.model_validate(q) for q in body["questions"]]
+        self.result: dict[str, Any] | None = body["result"]
+        self.error: str | None = body["error"]
+        self.asks: int = int(body["asks"])
+
+    def reload(self) -> None:
+        body = self._store.load_run(self.id)
+        if body is not None:
+            self._read(body)
+
+    def public(self) -> dict[str, Any]:
+        return {
+            "id": self.id,
+            "state": self.state,
+            "turns": list(self.turns),
+            "questions": [q.model_dump(mode="json") for q in self.questions],
+            "result": self.result,
+            "error": self.error,
+            "asks": self.asks,
+        }
 
 
 class Runs:
@@ -116,6 +183,8 @@ class Runs:
         self.answer_wait_s = answer_wait_s
         self._runs: dict[str, Run] = {}
         self._lock = threading.Lock()
+        # The runs' own record: what lets another worker show a run.
+        self.store = RunLog(run_log, run_id="service") if run_log is not None else None
 
     def start(self, request: PlanRequest) -> Run:
         spec = request.planner or self.planner
@@ -135,7 +204,7 @@ class Runs:
             if log is not None:
                 log.close()
             raise
-        run = Run(uuid.uuid4().hex[:12])
+        run = Run(uuid.uuid4().hex[:12], self.store)
         with self._lock:
             finished = [k for k, r in self._runs.items() if r.state in ("done", "failed")]
             for old in finished[: max(0, len(self._runs) - MAX_RUNS + 1)]:
@@ -152,10 +221,7 @@ class Runs:
 
         def policy(questions: Sequence[Question]) -> Answers:
             run._update(state="waiting", questions=list(questions), asks=run.asks + 1)
-            try:
-                given = run.answers.get(timeout=self.answer_wait_s)
-            except queue.Empty:
-                given = {}
+            given = self._wait_for_answers(run)
             run._update(state="running", questions=[])
             return given
 
@@ -187,18 +253,38 @@ class Runs:
         threading.Thread(target=work, name=f"virf-run-{run.id}", daemon=True).start()
         return run
 
-    def get(self, run_id: str) -> Run:
+    def _wait_for_answers(self, run: Run) -> Answers:
+        """The answers posted to this worker, or to any worker through the
+        run log; none when nobody answers in time (fail closed)."""
+        end = time.monotonic() + self.answer_wait_s
+        while True:
+            left = end - time.monotonic()
+            if left <= 0:
+                return {}
+            try:
+                return run.answers.get(timeout=min(left, POLL_S) if self.store else left)
+            except queue.Empty:
+                if self.store is not None:
+                    posted = self.store.posted_answers(run.id, run.asks)
+                    if posted is not None:
+                        return posted
+
+    def get(self, run_id: str) -> Run | SharedRun:
         with self._lock:
             run = self._runs.get(run_id)
-        if run is None:
+        if run is not None:
+            return run
+        body = self.store.load_run(run_id) if self.store is not None else None
+        if body is None:
             raise KeyError(run_id)
-        return run
+        return SharedRun(run_id, self.store, body)  # type: ignore[arg-type]
 
-    def answer(self, run: Run, answers: Mapping[str, str]) -> None:
+    def answer(self, run: Run | SharedRun, answers: Mapping[str, str]) -> None:
         with run.changed:
             if run.state != "waiting":
                 raise InputError(f"run {run.id} is {run.state}, not waiting for answers")
             asked = {q.key: q for q in run.questions}
+            asks = run.asks
         vocab = self.tutors.get(None, None)[0].tbox.vocabulary
         settled: dict[str, str] = {}
         for key, value in answers.items():
@@ -212,9 +298,13 @@ class Runs:
             canonical = check_answer(question, value, vocab)
             if canonical is not None:
                 settled[key] = canonical
-        run.answers.put(settled)
+        if isinstance(run, Run):
+            run.answers.put(settled)
+        else:  # another worker's run: it finds them in the log
+            assert self.store is not None
+            self.store.post_answers(run.id, asks, settled)
 
-    def events(self, run: Run) -> Iterator[str]:
+    def events(self, run: Run | SharedRun) -> Iterator[str]:
         """Server-sent events: each turn as it comes, the questions each time
         the run waits for answers, and the result (or the failure) at the end."""
         sent = 0
