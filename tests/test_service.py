@@ -265,3 +265,35 @@ def test_the_review_page_is_a_section_of_the_service(tmp_path: Path) -> None:
     assert local.get("/review/api/candidates").status_code == 401  # the service's key guards it
     assert local.get("/review/api/candidates", headers=key).json() == []
     assert local.get("/review", follow_redirects=False).headers["location"] == "/review/"
+
+
+def test_a_worker_switches_nagle_off_on_each_connection(monkeypatch: pytest.MonkeyPatch) -> None:
+    """With --workers N an accepted socket keeps Nagle's algorithm on (asyncio
+    does not recognise the socket a worker rebuilds); the protocol turns it off."""
+    import socket
+
+    from uvicorn.protocols.http.h11_impl import H11Protocol
+
+    from virf.service.tcp import NoDelayH11Protocol
+
+    class Transport:
+        def __init__(self, sock: socket.socket) -> None:
+            self.sock = sock
+
+        def get_extra_info(self, name: str) -> object:
+            return self.sock if name == "socket" else None
+
+    seen = []
+    monkeypatch.setattr(H11Protocol, "connection_made", lambda self, t: seen.append(t))
+    listener = socket.create_server(("127.0.0.1", 0))
+    with listener, socket.create_connection(listener.getsockname()):
+        conn, _ = listener.accept()
+        with conn:
+            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 0)
+            transport = Transport(conn)
+            NoDelayH11Protocol.connection_made(
+                object.__new__(NoDelayH11Protocol),
+                transport,  # type: ignore[arg-type]
+            )
+            assert conn.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) == 1
+    assert seen == [transport]  # uvicorn's own set-up still runs

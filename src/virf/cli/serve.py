@@ -59,6 +59,8 @@ def serve(
     """Serve the tutor over HTTP: /v1/verify, /v1/plan runs, /v1/rules, /v1/health, the page at / (OpenAPI docs at /docs)."""
     import uvicorn
 
+    from virf.service.tcp import NoDelayH11Protocol
+
     if api_key is None and host not in LOCAL_HOSTS:
         raise InputError(
             f"--host {host} without an API key would let anyone verify through this machine; "
@@ -104,7 +106,7 @@ def serve(
             workspace=workspace,
             reviewer=reviewer or default_reviewer(),
         )
-        uvicorn.run(app, host=host, port=port, log_level="warning")
+        uvicorn.run(app, host=host, port=port, log_level="warning", http=NoDelayH11Protocol)
     else:
         uvicorn.run(
             "virf.service.app:app_from_environment",
@@ -113,4 +115,5 @@ def serve(
             port=port,
             workers=workers,
             log_level="warning",
+            http=NoDelayH11Protocol,
         )

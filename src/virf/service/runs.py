@@ -89,15 +89,7 @@ class Run:
 
     def public(self) -> dict[str, Any]:
         with self.changed:
-            return {
-                "id": self.id,
-                "state": self.state,
-                "turns": list(self.turns),
-                "questions": [q.model_dump(mode="json") for q in self.questions],
-                "result": self.result,
-                "error": self.error,
-                "asks": self.asks,
-            }
+            return _public(self)
 
     def _save(self) -> None:
         if self._store is not None:
@@ -115,6 +107,19 @@ class Run:
             self.turns.append(asdict(turn))
             self._save()
             self.changed.notify_all()
+
+
+def _public(run: Run | SharedRun) -> dict[str, Any]:
+    """What ``GET /v1/runs/{id}`` shows of a run, and what the run log keeps."""
+    return {
+        "id": run.id,
+        "state": run.state,
+        "turns": list(run.turns),
+        "questions": [q.model_dump(mode="json") for q in run.questions],
+        "result": run.result,
+        "error": run.error,
+        "asks": run.asks,
+    }
 
 
 class _Polled:
@@ -159,15 +164,7 @@ class SharedRun:
             self._read(body)
 
     def public(self) -> dict[str, Any]:
-        return {
-            "id": self.id,
-            "state": self.state,
-            "turns": list(self.turns),
-            "questions": [q.model_dump(mode="json") for q in self.questions],
-            "result": self.result,
-            "error": self.error,
-            "asks": self.asks,
-        }
+        return _public(self)
 
 
 class Runs:

@@ -1,0 +1,26 @@
+"""HTTP connections that send each answer at once.
+
+``virf serve --workers N`` hands its listening socket to N processes.  The
+socket each worker rebuilds from it no longer says it is TCP, so asyncio
+does not switch Nagle's algorithm off for the connections it accepts, and
+every answer waited about 40 ms for the client's delayed acknowledgement
+(measured: 1.5 ms a request with one worker, 44 ms with two, for an app that
+does nothing).  This protocol switches it off itself.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import socket
+
+from uvicorn.protocols.http.h11_impl import H11Protocol
+
+
+class NoDelayH11Protocol(H11Protocol):
+    def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
+        sock = transport.get_extra_info("socket")
+        if sock is not None:
+            with contextlib.suppress(OSError):
+                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        super().connection_made(transport)
