@@ -107,7 +107,8 @@ chromium:
 	fi
 
 # The run log can live on PostgreSQL; its tests start a real server from
-# Debian's package in a temporary folder.  Install it when missing.
+# Debian's package in a temporary folder.  Install it when missing (Debian
+# also creates and starts a system cluster on port 5432; the tests do not use it).
 postgresql:
 	@if ! ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1 && ! command -v initdb >/dev/null 2>&1; then \
 	  echo "PostgreSQL not found: installing it with apt (for the run log's PostgreSQL tests)"; \

@@ -3,8 +3,9 @@
 Debian's ``postgresql`` package provides the server (``make test`` installs
 it when missing).  The server refuses to run as root, so under root it runs
 as the ``postgres`` user the package creates.  It listens on 127.0.0.1 only,
-on a free port, and trusts local connections: nothing outside the test can
-reach it, and it is stopped and deleted at the end of the session.
+on a free port, and trusts local connections: no other machine can reach it
+(another user of this one could, while it runs; it holds only test data),
+and it is stopped and deleted at the end of the session.
 """
 
 from __future__ import annotations
@@ -65,12 +66,13 @@ def postgres_url() -> Iterator[str]:
             detail = (result.stderr or result.stdout).strip().splitlines()
             raise RuntimeError(f"{args[0]} failed: {detail[-1] if detail else result.returncode}")
 
-    run(str(folder / "initdb"), "-D", str(data), "-U", "virf", "--auth=trust", "-E", "UTF8")
     options = f"-p {port} -k {work} -c listen_addresses=127.0.0.1 -c fsync=off"
-    run(str(folder / "pg_ctl"), "-D", str(data), "-l", str(log), "-o", options, "-w", "start")
     try:
+        run(str(folder / "initdb"), "-D", str(data), "-U", "virf", "--auth=trust", "-E", "UTF8")
+        run(str(folder / "pg_ctl"), "-D", str(data), "-l", str(log), "-o", options, "-w", "start")
         yield f"postgresql://virf@127.0.0.1:{port}/postgres"
     finally:
+        # Also after a start that timed out: the server may be up all the same.
         subprocess.run(
             [*prefix, str(folder / "pg_ctl"), "-D", str(data), "-m", "immediate", "stop"],
             capture_output=True,

@@ -36,8 +36,15 @@ def is_url(target: str | Path) -> bool:
 
 
 def shown(target: str | Path) -> str:
-    """The target for messages: a URL without its password."""
-    return re.sub(r"(://[^:/@]*):[^@/]*@", r"\1:***@", str(target))
+    """The target for messages: a URL without its password (in either place)."""
+    text = re.sub(r"(://[^:/@]*):[^@/]*@", r"\1:***@", str(target))
+    return re.sub(r"([?&]password=)[^&]*", r"\1***", text)
+
+
+def first_line(exc: BaseException) -> str:
+    """A driver's error as one line (psycopg's run over several)."""
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
 
 
 class PostgresConnection:
@@ -57,12 +64,12 @@ class PostgresConnection:
         try:
             self._conn = psycopg.connect(url, autocommit=True, connect_timeout=10)
         except psycopg.Error as exc:
-            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            raise EnvironmentProblem(f"cannot connect to {shown(url)}: {first}") from None
+            raise EnvironmentProblem(f"cannot connect to {shown(url)}: {first_line(exc)}") from None
 
     def execute(self, sql: str, params: Sequence[Any] = ()) -> Any:
         # VIRF's SQL has no literal '?' or '%': placeholders are the only ones.
-        return self._conn.execute(sql.replace("?", "%s"), tuple(params))
+        # Without parameters psycopg reads the text as it is.
+        return self._conn.execute(sql.replace("?", "%s"), tuple(params) if params else None)
 
     @staticmethod
     def translate(ddl: str) -> str:

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Final
 
-from virf.database import PostgresConnection, errors_of
+from virf.database import PostgresConnection, errors_of, first_line
 from virf.errors import EnvironmentProblem, InputError
 
 
@@ -131,8 +131,7 @@ def migrate(
         rollback(conn)
         if "not a database" in str(exc):
             raise InputError(f"{what} is not a SQLite database; choose another file") from None
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise EnvironmentProblem(f"cannot migrate {what}: {first}") from None
+        raise EnvironmentProblem(f"cannot migrate {what}: {first_line(exc)}") from None
     except BaseException:
         rollback(conn)
         raise

@@ -17,7 +17,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import Final, Self
 
-from virf.database import connect, errors_of, is_url, shown
+from virf.database import PostgresConnection, connect, errors_of, first_line, is_url, shown
 from virf.errors import EnvironmentProblem, InputError
 from virf.migrations import Migration, applied_migrations, check_migrations, migrate
 from virf.migrations import now as _now
@@ -122,6 +122,7 @@ class RunLog:
         self._lock = threading.Lock()
         self._conn = connect(self.path, "run log")
         self._errors = errors_of(self._conn)
+        self._postgres = isinstance(self._conn, PostgresConnection)
         try:
             self._migrate(migrations)
         except BaseException:
@@ -167,7 +168,6 @@ class RunLog:
         prompt = json.dumps(list(messages), ensure_ascii=False)
         with self._lock:
             try:
-                # RETURNING: PostgreSQL has no last row id (SQLite has both).
                 cur = self._conn.execute(
                     """
                     INSERT INTO model_calls (
@@ -175,8 +175,9 @@ class RunLog:
                         reply, ok, reason, prompt_tokens, completion_tokens, latency_ms,
                         attempts, created_at
                     ) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)
-                    RETURNING id
-                    """,
+                    """
+                    # PostgreSQL has no last row id; SQLite before 3.35 has no RETURNING.
+                    + (" RETURNING id" if self._postgres else ""),
                     (
                         self.run_id,
                         method,
@@ -196,9 +197,13 @@ class RunLog:
                         _now(),
                     ),
                 )
-                row_id = int(cur.fetchone()[0])
+                found = cur.fetchone()[0] if self._postgres else cur.lastrowid
+                assert found is not None  # every INSERT makes a row with an id
+                row_id = int(found)
             except self._errors as exc:
-                raise EnvironmentProblem(f"cannot write run log {self.where}: {exc}") from None
+                raise EnvironmentProblem(
+                    f"cannot write run log {self.where}: {first_line(exc)}"
+                ) from None
         return row_id
 
     def calls(self, *, run_id: str | None = None, task_id: str | None = None) -> list[CallRecord]:
@@ -268,14 +273,13 @@ class RunLog:
                     (run_id, state, asks, json.dumps(body, sort_keys=True), _now()),
                 )
             except self._errors as exc:
-                raise EnvironmentProblem(f"cannot write run log {self.where}: {exc}") from None
+                raise EnvironmentProblem(
+                    f"cannot write run log {self.where}: {first_line(exc)}"
+                ) from None
 
     def load_run(self, run_id: str) -> dict[str, object] | None:
         """A service run as last recorded, or None."""
-        with self._lock:
-            row = self._conn.execute(
-                "SELECT body FROM service_runs WHERE id = ?", (run_id,)
-            ).fetchone()
+        row = self._read_one("SELECT body FROM service_runs WHERE id = ?", (run_id,))
         return None if row is None else dict(json.loads(row[0]))
 
     def post_answers(self, run_id: str, asks: int, answers: dict[str, str]) -> None:
@@ -288,17 +292,27 @@ class RunLog:
                     (run_id, asks, json.dumps(answers, sort_keys=True), _now()),
                 )
             except self._errors as exc:
-                raise EnvironmentProblem(f"cannot write run log {self.where}: {exc}") from None
+                raise EnvironmentProblem(
+                    f"cannot write run log {self.where}: {first_line(exc)}"
+                ) from None
 
     def posted_answers(self, run_id: str, asks: int) -> dict[str, str] | None:
         """The first answers posted for that wait of the run, or None yet."""
-        with self._lock:
-            row = self._conn.execute(
-                "SELECT answers FROM service_answers WHERE run_id = ? AND asks = ? "
-                "ORDER BY id LIMIT 1",
-                (run_id, asks),
-            ).fetchone()
+        row = self._read_one(
+            "SELECT answers FROM service_answers WHERE run_id = ? AND asks = ? ORDER BY id LIMIT 1",
+            (run_id, asks),
+        )
         return None if row is None else {str(k): str(v) for k, v in json.loads(row[0]).items()}
+
+    def _read_one(self, sql: str, params: tuple[object, ...]) -> tuple[str, ...] | None:
+        with self._lock:
+            try:
+                row: tuple[str, ...] | None = self._conn.execute(sql, params).fetchone()
+            except self._errors as exc:
+                raise EnvironmentProblem(
+                    f"cannot read run log {self.where}: {first_line(exc)}"
+                ) from None
+        return row
 
     # -- lifetime ------------------------------------------------------------
 

@@ -67,10 +67,11 @@ class Engine(ABC):
         return type(self)(self.tbox, self.timeout_s)
 
     @contextmanager
-    def sharing(self, facts: Collection[Fact]) -> Iterator[None]:
+    def sharing(self, facts: Collection[Fact], *, deadline: float | None = None) -> Iterator[None]:
         """A hint: most questions asked in the block are about sets of facts
         that include ``facts`` (what no step of a plan changes).  An engine
-        may prepare for them once; the answers are the same either way."""
+        may prepare for them once, by ``deadline``; the answers are the same
+        either way."""
         yield
 
     def classify(

@@ -33,7 +33,15 @@ from virf.errors import VirfError
 from virf.ontology.fragment import Axiom, Expr, Fragment, Role
 from virf.ontology.iri import NOTHING, THING
 from virf.ontology.tbox import TBox
-from virf.reasoning import Classification, Engine, ReasonerFailure, check_deadline, make_engine
+from virf.reasoning import (
+    Classification,
+    DeadlineExceeded,
+    Engine,
+    ReasonerFailure,
+    check_deadline,
+    make_engine,
+    until,
+)
 from virf.reasoning.program import ChaseLimit, Model, Program, compile_program
 from virf.schema import Fact, FactKind
 
@@ -128,7 +136,8 @@ class _Eval:
         if tag == "oneof":
             return x in e[1]
         if tag == "dvalue":
-            return e[2] in m.data[x][e[1]] if x in m.data else False
+            # .get: a read must not add entries the journal does not know of.
+            return e[2] in m.data.get(x, {}).get(e[1], _NONE)
         raise Fallback(f"cannot evaluate {tag}")
 
     # ------------------------------------------------------------------ certain
@@ -171,7 +180,7 @@ class _Eval:
         if tag == "oneof":
             return x in e[1]
         if tag == "dvalue":
-            return x in m.data and e[2] in m.data[x][e[1]]
+            return e[2] in m.data.get(x, {}).get(e[1], _NONE)
         return False
 
     def bound(self, r: Role, x: str) -> frozenset[str] | None:
@@ -522,7 +531,7 @@ class FastEngine(Engine):
         m.run()
 
     @contextmanager
-    def sharing(self, facts: Collection[Fact]) -> Iterator[None]:
+    def sharing(self, facts: Collection[Fact], *, deadline: float | None = None) -> Iterator[None]:
         """Grow the model of ``facts`` once; a question in the block whose
         facts include them starts from it, and adds only the rest."""
         with self._lock:
@@ -531,9 +540,10 @@ class FastEngine(Engine):
                 shared = frozenset(facts)
                 m = self.program(frozenset())[0].model()
                 try:
-                    self._load(m, sorted(shared))
-                except (Fallback, ChaseLimit):
-                    pass  # the questions will say so themselves, one by one
+                    with until(deadline):
+                        self._load(m, sorted(shared))
+                except (Fallback, ChaseLimit, DeadlineExceeded):
+                    pass  # the questions will meet it themselves, one by one
                 else:
                     if m.clash is None:
                         core = (m, shared)
@@ -542,7 +552,9 @@ class FastEngine(Engine):
             yield
         finally:
             with self._lock:
-                self._core = before
+                # Blocks of two threads may end out of order: leave a newer core alone.
+                if self._core is core:
+                    self._core = before
 
     @staticmethod
     def _checks(m: Model) -> list[Axiom]:

@@ -13,6 +13,7 @@ an open question).  Model calls go to the server's run log.
 from __future__ import annotations
 
 import json
+import logging
 import queue
 import threading
 import time
@@ -33,6 +34,7 @@ from virf.planner.questions import Answers, check_answer
 from virf.schema import Question
 from virf.world.scene import build_scene
 
+_logger = logging.getLogger(__name__)
 MAX_RUNS: Final = 100  # kept in memory; the oldest finished ones go first
 POLL_S: Final = 0.5  # how often a run log is read for another worker's run or answers
 State = Literal["running", "waiting", "done", "failed"]
@@ -83,17 +85,25 @@ class Run:
         self.error: str | None = None
         self.asks = 0  # times the run has waited for answers
         self.changed: Any = threading.Condition()
-        self.answers: queue.Queue[Answers] = queue.Queue()
+        # Answers with the wait they answer (``asks``): answers that come too
+        # late for one wait must not answer the next one's questions.
+        self.answers: queue.Queue[tuple[int, Answers]] = queue.Queue()
         self._store = store
-        self._save()
+        if store is not None:  # a log that cannot be written refuses the run
+            store.save_run(self.id, self.state, self.asks, self.public())
 
     def public(self) -> dict[str, Any]:
         with self.changed:
             return _public(self)
 
     def _save(self) -> None:
-        if self._store is not None:
+        if self._store is None:
+            return
+        try:
             self._store.save_run(self.id, self.state, self.asks, self.public())
+        except VirfError as exc:
+            # The run goes on; the other workers show it as last recorded.
+            _logger.warning("run %s: %s", self.id, exc)
 
     def _update(self, **changes: Any) -> None:
         with self.changed:
@@ -201,14 +211,20 @@ class Runs:
             if log is not None:
                 log.close()
             raise
-        run = Run(uuid.uuid4().hex[:12], self.store)
         with self._lock:
             finished = [k for k, r in self._runs.items() if r.state in ("done", "failed")]
             for old in finished[: max(0, len(self._runs) - MAX_RUNS + 1)]:
                 del self._runs[old]
-            if len(self._runs) >= MAX_RUNS:
+            try:
+                if len(self._runs) >= MAX_RUNS:
+                    raise InputError(f"{MAX_RUNS} runs are in progress; wait for one to finish")
+                # A whole uuid: runs of several machines share one log.
+                run = Run(uuid.uuid4().hex, self.store)
+            except BaseException:
                 apprentice.close()
-                raise InputError(f"{MAX_RUNS} runs are in progress; wait for one to finish")
+                if log is not None:
+                    log.close()
+                raise
             self._runs[run.id] = run
         checked = tutor
         if method.knowledge != "all":
@@ -259,7 +275,10 @@ class Runs:
             if left <= 0:
                 return {}
             try:
-                return run.answers.get(timeout=min(left, POLL_S) if self.store else left)
+                asks, given = run.answers.get(timeout=min(left, POLL_S) if self.store else left)
+                if asks == run.asks:
+                    return given
+                # Answers to an earlier wait, which ended without them.
             except queue.Empty:
                 if self.store is not None:
                     posted = self.store.posted_answers(run.id, run.asks)
@@ -296,7 +315,10 @@ class Runs:
             if canonical is not None:
                 settled[key] = canonical
         if isinstance(run, Run):
-            run.answers.put(settled)
+            with run.changed:
+                if run.state != "waiting" or run.asks != asks:
+                    raise InputError(f"run {run.id} stopped waiting for these answers")
+                run.answers.put((asks, settled))
         else:  # another worker's run: it finds them in the log
             assert self.store is not None
             self.store.post_answers(run.id, asks, settled)

@@ -201,7 +201,7 @@ class Verifier:
         # What no step changes is reasoned about once, not at every step.
         first, *rest = trace.states
         unchanged = set(first.facts).intersection(*(state.facts for state in rest))
-        with self.engine.sharing(unchanged):
+        with self.engine.sharing(unchanged, deadline=deadline):
             return self._classify_steps(
                 trace,
                 len(plan),
