@@ -43,6 +43,7 @@ from virf.bench.agents import (
 from virf.bench.agents_report import FILES, Table, collect, render_csv, write_outputs
 from virf.bench.safeagentbench import Task, load_tasks
 from virf.errors import InputError
+from virf.planner import MIGRATIONS as RUN_LOG_MIGRATIONS
 from virf.planner import Apprentice, make_apprentice
 from virf.planner.methods import METHODS, get_method
 
@@ -307,7 +308,11 @@ def test_results_store_schema(tmp_path: Path) -> None:
     db = tmp_path / "s.sqlite"
     config = AgentConfig.build(f"replay:{REPLAY}")
     with ResultStore(db, config) as store:
-        assert store.applied_migrations() == ["0001_model_calls", "0101_agent_results"]
+        # The run log's migrations, then the results' own.
+        assert store.applied_migrations() == [
+            *(m.id for m in RUN_LOG_MIGRATIONS),
+            "0101_agent_results",
+        ]
     # Shipped migrations are frozen: add a new one instead of editing this.
     assert AGENT_MIGRATIONS[0].sha256 == FROZEN_AGENT_MIGRATION
     with ResultStore(db, config) as store:

@@ -26,6 +26,7 @@ MESSAGES = [{"role": "user", "content": "Slice the apple."}]
 # database that already ran it.  Add a new migration instead of changing these.
 FROZEN = {
     "0001_model_calls": "f445010d532d9ce411eb0f1f348c7573499c0e94707c60cea6b535a4b133b0e2",
+    "0002_service_runs": "301e6977802e3441f6a2500798520fd24ea8d25d50447efbbf4a76419b43851b",
 }
 
 EXTRA = Migration(
