@@ -291,9 +291,9 @@ class Runs:
         if run is not None:
             return run
         body = self.store.load_run(run_id) if self.store is not None else None
-        if body is None:
+        if self.store is None or body is None:
             raise KeyError(run_id)
-        return SharedRun(run_id, self.store, body)  # type: ignore[arg-type]
+        return SharedRun(run_id, self.store, body)
 
     def answer(self, run: Run | SharedRun, answers: Mapping[str, str]) -> None:
         with run.changed:
