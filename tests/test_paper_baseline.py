@@ -101,6 +101,56 @@ def test_script_rejects_a_bad_fact(tmp_path: Path) -> None:
         paper_baseline.load_job(path)
 
 
+@pytest.mark.parametrize("limit", [0, -5, "60", True])
+def test_a_call_limit_must_be_a_positive_number(tmp_path: Path, limit: object) -> None:
+    tbox = tmp_path / "tbox.owl"
+    tbox.write_text("", encoding="utf-8")
+    job = {"tbox": str(tbox), "namespace": NS, "concepts": [], "plans": []}
+    path = tmp_path / "job.json"
+    path.write_text(json.dumps({**job, "call_timeout_s": limit}), encoding="utf-8")
+    with pytest.raises(paper_baseline.JobError, match="'call_timeout_s' must be a positive"):
+        paper_baseline.load_job(path)
+
+
+def test_the_call_limit_reaches_owlready2s_subprocess_arguments(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """owlready2 hands one dict of keyword arguments to each subprocess.run
+    that starts Pellet; the limit goes there.  (A stand-in module: owlready2
+    itself lives only in .venv-paper.)"""
+    import sys
+    import types
+
+    owl = types.ModuleType("owlready2")
+    owl.VERSION = "stand-in"  # type: ignore[attr-defined]
+    owl.JAVA_EXE = "java-that-is-not-there"  # type: ignore[attr-defined]
+    reasoning = types.ModuleType("owlready2.reasoning")
+    reasoning._subprocess_kargs = {}  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "owlready2", owl)
+    monkeypatch.setitem(sys.modules, "owlready2.reasoning", reasoning)
+    tbox = tmp_path / "tbox.owl"
+    tbox.write_text("", encoding="utf-8")
+    job = {"tbox": str(tbox), "namespace": NS, "concepts": [], "plans": [], "call_timeout_s": 7}
+    path = tmp_path / "job.json"
+    path.write_text(json.dumps(job), encoding="utf-8")
+    assert paper_baseline.main([str(path), str(tmp_path / "out.json")]) == 0
+    assert reasoning._subprocess_kargs == {"timeout": 7.0}  # type: ignore[attr-defined]
+
+
+def test_a_plan_with_a_failed_call_has_no_time() -> None:
+    from virf.bench.latency import _paper_plan_ms
+
+    finding = [{"concept": "C", "individual": "x"}]
+    ok = {"step_ms": [10.0, 20.0, 30.0], "findings": [[], finding, []], "consistent": [True] * 3}
+    assert _paper_plan_ms(ok) == 30.0  # the paper's loop stops at its first finding
+    timed_out = {
+        "step_ms": [10.0, 120000.0],
+        "findings": [[], {"error": "TimeoutExpired: ... timed out after 120 seconds"}],
+        "consistent": [True, None],
+    }
+    assert _paper_plan_ms(timed_out) is None
+
+
 @pytest.mark.skipif(
     os.environ.get("VIRF_PAPER_BASELINE") != "1",
     reason="needs .venv-paper (owlready2 0.49 from PyPI) and a JVM per snapshot; "

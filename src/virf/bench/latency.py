@@ -36,6 +36,7 @@ from typing import Any
 
 from virf.api import LogicTutor
 from virf.bench.coldstart import cold_start_rows
+from virf.bench.paper import PAPER_CALL_TIMEOUT_S
 from virf.bench.safeagentbench import build_scene as task_scene
 from virf.bench.safeagentbench import load_tasks
 from virf.errors import InputError
@@ -319,8 +320,8 @@ def _paper_plan_ms(plan: dict[str, Any]) -> float | None:
     for ms, found, consistent in zip(
         plan["step_ms"], plan["findings"], plan["consistent"], strict=False
     ):
-        if ms is None:
-            return None
+        if ms is None or (consistent is None and isinstance(found, dict)):
+            return None  # a call failed or ran out of time: the plan has no time
         total += ms
         if found or consistent is False:
             break
@@ -776,7 +777,9 @@ def render_markdown(fig: dict[str, Any], command: str) -> str:
         "* **(a) the paper's method**: owlready2 0.49 with its bundled Pellet, one reasoner call",
         "  per plan step on a fresh copy of ontology + ABox, stopping at the first step where",
         "  it finds a hazard (the paper's loop). It runs in its own virtualenv (`.venv-paper`):",
-        "  owlready2 0.50/0.51 bundle jars built for Java 25 and fail on Java 17.",
+        "  owlready2 0.50/0.51 bundle jars built for Java 25 and fail on Java 17. A Pellet",
+        f"  call is stopped after {PAPER_CALL_TIMEOUT_S:g} s; a plan with a call stopped or failed",
+        "  has no time.",
         "* **(b) the reference engine**: HermiT 1.4 in-process (OWLAPI 5 through JPype), one",
         "  fresh reasoner per question, including the minimal explanations of the report.",
         "* **(c) the fast engine** (the default): the same reports from compiled rules and",

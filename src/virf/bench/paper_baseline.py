@@ -68,6 +68,12 @@ def main(argv: list[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 2
+    if job.get("call_timeout_s"):
+        # owlready2 passes this dict to every subprocess.run that starts
+        # Pellet: a call over the limit is killed and its snapshot is an
+        # error, instead of the run waiting for it without end.
+        reasoning: Any = importlib.import_module("owlready2.reasoning")
+        reasoning._subprocess_kargs["timeout"] = float(job["call_timeout_s"])
     out: dict[str, Any] = {
         "owlready2": str(owl.VERSION),
         "java": java_version(str(owl.JAVA_EXE)),
@@ -110,6 +116,11 @@ def load_job(path: Path) -> dict[str, Any]:
     if not Path(job["tbox"]).is_file():
         raise JobError(f"TBox file not found: {job['tbox']}")
     job.setdefault("individual_namespace", job["namespace"])
+    limit = job.get("call_timeout_s")
+    if limit is not None and (
+        isinstance(limit, bool) or not isinstance(limit, (int, float)) or limit <= 0
+    ):
+        raise JobError("'call_timeout_s' must be a positive number of seconds")
     concepts = job.get("concepts")
     if not isinstance(concepts, list) or not all(isinstance(c, str) for c in concepts):
         raise JobError("job needs 'concepts', a list of class names")
