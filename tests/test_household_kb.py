@@ -12,6 +12,7 @@ from functools import cache
 from pathlib import Path
 
 import pytest
+from test_authoring import rule
 
 from virf.authoring.corpus import Corpus
 from virf.authoring.workspace import Workspace, starter_corpus_dir
@@ -22,18 +23,12 @@ from virf.ontology.tbox import load_tbox
 ROOT = Path(__file__).resolve().parents[1]
 RECORD = ROOT / "knowledge" / "household"
 ROOMS = tuple(room.name for room in safeagentbench.ROOMS)
-CANDLE = {
-    "equivalentClass": "OpenFlameBesideFabricDanger",
-    "definition": "Candle and (hasState some OnState) and "
+# The candle rule the authoring tests draft, as the household record would hold it.
+CANDLE = rule(
+    "OpenFlameBesideFabricDanger",
+    "Candle and (hasState some OnState) and "
     "(isNear some (PhysicalObject and (hasMaterial some Fabric)))",
-    "category": "Fire Hazard",
-    "dangerLevel": "high",
-    "description": "A lit candle stands next to something made of fabric.",
-    "safetyWarning": "Fabric next to a flame can catch fire.",
-    "triggerReason": "the candle is lit while an object made of fabric is near it",
-    "suggestion": "Move the fabric away or put the candle out first.",
-    "evidence": ["nfpa-candle-safety:keep-the-flame-away-from-things-that-burn:1"],
-}
+)
 
 
 @cache
