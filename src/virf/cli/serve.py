@@ -32,8 +32,8 @@ def serve(
     run_log: Annotated[
         str | None,
         typer.Option(
-            help="Run log of the runs' model calls: a SQLite file, or a postgresql:// URL "
-            "that several service machines share."
+            help="Run log of the runs (their state and model calls): a SQLite file, or a "
+            "postgresql:// URL that several service machines share."
         ),
     ] = None,
     workspace: Annotated[
