@@ -1,7 +1,7 @@
 """Reference vectors of all-MiniLM-L6-v2 from the real sentence-transformers stack.
 
 VIRF computes sentence embeddings with its own NumPy forward pass
-(``virf.authoring.embed``); ``tests/test_retrieval.py`` compares it with the
+(``virf.embed``); ``tests/test_retrieval.py`` compares it with the
 vectors this script writes.  Run it in a scratch virtualenv OUTSIDE the
 repository, because torch is not a VIRF dependency:
 

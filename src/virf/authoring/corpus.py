@@ -60,7 +60,7 @@ from virf.authoring.documents import (
 from virf.errors import InputError, clip
 
 if TYPE_CHECKING:
-    from virf.authoring.embed import Embedder
+    from virf.embed import Embedder
 
 # Bump when the files below change shape or the indexed text changes.
 INDEX_FORMAT = 1
@@ -121,7 +121,7 @@ class Corpus:
     @property
     def embedder(self) -> Embedder:
         if self._embedder is None:
-            from virf.authoring.embed import default_embedder
+            from virf.embed import default_embedder
 
             self._embedder = default_embedder()
         return self._embedder
@@ -391,7 +391,7 @@ class Corpus:
         reuse: dict[str, npt.NDArray[np.float32]],
         progress: Progress | None,
     ) -> npt.NDArray[np.float32]:
-        from virf.authoring.embed import DIMENSION
+        from virf.embed import DIMENSION
 
         out = np.zeros((len(texts), DIMENSION), dtype=np.float32)
         todo = [i for i, d in enumerate(digests) if d not in reuse]
@@ -417,7 +417,7 @@ class Corpus:
     ) -> tuple[str, list[str], list[str], npt.NDArray[np.float32]] | None:
         """(key, passage ids, text digests, vectors) of the cached index if it
         was built by this model and format; None if absent or unreadable."""
-        from virf.authoring.embed import DIMENSION
+        from virf.embed import DIMENSION
 
         try:
             with np.load(self.cache_dir / INDEX_CACHE, allow_pickle=False) as data:

@@ -308,7 +308,7 @@ class Workspace:
 
     # ------------------------------------------------------------------ checks
     def _vocabulary_index(self, vocab: Vocabulary) -> VocabularyIndex:
-        from virf.authoring.embed import default_embedder
+        from virf.embed import default_embedder
 
         with self._lock:
             if self._index is None or self._index.vocab is not vocab:
