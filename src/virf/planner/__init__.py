@@ -5,6 +5,7 @@ from __future__ import annotations
 from virf.migrations import Migration
 from virf.planner.apprentices import (
     Apprentice,
+    Attachment,
     Proposal,
     ProposalRequest,
     ReplayApprentice,
@@ -20,6 +21,7 @@ from virf.planner.runlog import MIGRATIONS, CallRecord, RunLog
 __all__ = [
     "MIGRATIONS",
     "Apprentice",
+    "Attachment",
     "CallRecord",
     "ClientSettings",
     "Deadline",

@@ -23,10 +23,12 @@ Offline apprentices:
 
 from __future__ import annotations
 
+import base64
+import hashlib
 import json
 from abc import ABC, abstractmethod
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
 from typing import Annotated, Any, Final, Self
@@ -78,11 +80,36 @@ class Proposal:
 
 
 @dataclass(frozen=True)
+class Attachment:
+    """An image sent with a request's last user message (a vision model's input).
+
+    The bytes travel as a data URL; the run log keeps only ``ref``, because a
+    log holding every camera frame would grow by megabytes a call.
+    """
+
+    name: str
+    media_type: str
+    data: bytes = field(repr=False)
+
+    @property
+    def digest(self) -> str:
+        return hashlib.sha256(self.data).hexdigest()
+
+    @property
+    def ref(self) -> str:
+        return f"{self.name} ({self.media_type}, sha256:{self.digest[:16]})"
+
+    def data_url(self) -> str:
+        return f"data:{self.media_type};base64,{base64.b64encode(self.data).decode('ascii')}"
+
+
+@dataclass(frozen=True)
 class ProposalRequest:
     """What the loop asked for: the chat and where in the run it belongs.
 
     ``deadline`` is the run's: a client abandons a request still running when
-    it passes.  It is not part of what is logged or replayed.
+    it passes.  It is not part of what is logged or replayed.  ``images`` go
+    with the last user message.
     """
 
     messages: tuple[tuple[str, str], ...]
@@ -90,9 +117,19 @@ class ProposalRequest:
     iteration: int
     method: str
     deadline: Deadline | None = None
+    images: tuple[Attachment, ...] = ()
 
-    def as_messages(self) -> list[dict[str, str]]:
-        return [{"role": role, "content": content} for role, content in self.messages]
+    def as_messages(self) -> list[dict[str, Any]]:
+        out: list[dict[str, Any]] = [
+            {"role": role, "content": content} for role, content in self.messages
+        ]
+        if self.images:
+            out[self.last_user()]["images"] = [image.ref for image in self.images]
+        return out
+
+    def last_user(self) -> int:
+        """The index of the message the images go with."""
+        return max(i for i, (role, _) in enumerate(self.messages) if role == "user")
 
 
 def check_request(
@@ -101,6 +138,7 @@ def check_request(
     iteration: int,
     method: str,
     deadline: Deadline | None = None,
+    images: Sequence[Attachment] = (),
 ) -> ProposalRequest:
     """Validate the loop's arguments once, for every apprentice alike."""
     if not isinstance(task_id, str) or not task_id:
@@ -124,7 +162,11 @@ def check_request(
                 f"message {n} has unsupported keys {', '.join(extra)}; use role and content"
             )
         pairs.append((role, content))
-    return ProposalRequest(tuple(pairs), task_id, iteration, method, deadline)
+    if images and not any(role == "user" for role, _ in pairs):
+        raise InputError("images need a user message to go with")
+    if not all(isinstance(image, Attachment) for image in images):
+        raise InputError("images must be Attachment objects")
+    return ProposalRequest(tuple(pairs), task_id, iteration, method, deadline, tuple(images))
 
 
 def empty_reason(text: str | None) -> str | None:
@@ -164,12 +206,16 @@ class Apprentice(ABC):
         iteration: int,
         method: str,
         deadline: Deadline | None = None,
+        images: Sequence[Attachment] = (),
     ) -> Proposal:
-        """Ask for one plan.  Never returns an empty or malformed reply as ``ok``.
+        """Ask for one plan (or, with ``images``, one reading of them).  Never
+        returns an empty or malformed reply as ``ok``.
 
         A request still running when ``deadline`` passes is abandoned and
         comes back as a failed proposal; offline apprentices answer at once."""
-        return self._propose(check_request(messages, task_id, iteration, method, deadline))
+        return self._propose(
+            check_request(messages, task_id, iteration, method, deadline, images)
+        )
 
     @abstractmethod
     def _propose(self, request: ProposalRequest) -> Proposal: ...

@@ -54,6 +54,9 @@ from urllib.parse import urlsplit
 import openai
 from openai.types.chat import (
     ChatCompletionAssistantMessageParam,
+    ChatCompletionContentPartImageParam,
+    ChatCompletionContentPartParam,
+    ChatCompletionContentPartTextParam,
     ChatCompletionMessageParam,
     ChatCompletionSystemMessageParam,
     ChatCompletionUserMessageParam,
@@ -220,9 +223,23 @@ def is_local(base_url: str) -> bool:
 
 def _sdk_messages(request: ProposalRequest) -> list[ChatCompletionMessageParam]:
     out: list[ChatCompletionMessageParam] = []
-    for role, content in request.messages:
+    with_images = request.last_user() if request.images else -1
+    for n, (role, content) in enumerate(request.messages):
         if role == "system":
             out.append(ChatCompletionSystemMessageParam(role="system", content=content))
+        elif role == "user" and n == with_images:
+            # The vision form every compatible server reads: text, then each
+            # image as a data URL (no server here can fetch a file path).
+            parts: list[ChatCompletionContentPartParam] = [
+                ChatCompletionContentPartTextParam(type="text", text=content)
+            ]
+            parts += [
+                ChatCompletionContentPartImageParam(
+                    type="image_url", image_url={"url": image.data_url()}
+                )
+                for image in request.images
+            ]
+            out.append(ChatCompletionUserMessageParam(role="user", content=parts))
         elif role == "user":
             out.append(ChatCompletionUserMessageParam(role="user", content=content))
         else:

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 from types import TracebackType
-from typing import Final, Self
+from typing import Any, Final, Self
 
 from virf.database import PostgresConnection, connect, errors_of, first_line, is_url, shown
 from virf.errors import EnvironmentProblem, InputError
@@ -155,7 +155,7 @@ class RunLog:
         ask: int,
         apprentice: str,
         model: str | None,
-        messages: Sequence[dict[str, str]],
+        messages: Sequence[dict[str, Any]],
         reply: str | None,
         ok: bool,
         reason: str,
