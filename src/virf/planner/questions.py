@@ -25,7 +25,8 @@ Question keys and the answers that settle them:
 * ``contents:contains:X`` or ``contents:supports:X``: ``yes`` (the listed
   contents are complete: the list is closed for X, and X leaves the scene's
   ``unknown_contents``);
-* ``confirm:S P O``: ``yes``;
+* ``confirm:S P O``: ``yes``, or ``no`` for a fact the scene marked
+  ``assumed`` (the entry is removed);
 * ``which:TERM``: one of the instances offered (``Bowl_2``);
 * ``where:TERM``: a receptacle of the scene, optionally after ``in`` or
   ``on`` (``on CounterTop_1``);
@@ -234,8 +235,13 @@ def _settle(data: dict[str, Any], q: Question, value: str, vocab: Vocabulary) ->
         data["closed_world"] = closed
         return True
     if q.kind == "confirm":
-        if value != "yes" or q.fact is None or q.fact.subject not in declared:
+        if q.fact is None or q.fact.subject not in declared:
             return False
+        if value == "no":
+            # Only what the scene itself marked as assumed (perception unsure
+            # of it) can be taken back; the reader's own assumptions (a knob
+            # controls the burners) are not entries to remove.
+            return _retract(data, q.fact, vocab, Provenance.ASSUMED)
         if q.fact.predicate == "rdf:type":
             data["instances"] = [
                 *data.get("instances", []),
@@ -345,8 +351,13 @@ def _named_type(term: str, vocab: Vocabulary) -> tuple[str, str | None] | None:
     return None
 
 
-def _retract(data: dict[str, Any], wrong: Triple, vocab: Vocabulary) -> bool:
-    """Remove the scene entry that states ``wrong``.
+def _retract(
+    data: dict[str, Any],
+    wrong: Triple,
+    vocab: Vocabulary,
+    provenance: Provenance = Provenance.SCENE,
+) -> bool:
+    """Remove the scene entry that states ``wrong`` (with ``provenance``).
 
     The entry is found by the scene reader itself: it is the one without
     which the rebuilt scene no longer holds the fact, so inverse properties
@@ -356,7 +367,7 @@ def _retract(data: dict[str, Any], wrong: Triple, vocab: Vocabulary) -> bool:
     the plan produced) cannot be retracted."""
     fact = Fact.from_triple(wrong)
     try:
-        if build_scene(data, vocab).facts.get(fact) is not Provenance.SCENE:
+        if build_scene(data, vocab).facts.get(fact) is not provenance:
             return False
     except InputError:
         return False

@@ -112,6 +112,9 @@ class AssertionEntry(Record):
         Literal["object_property", "data_property"],
         Says("{where}: type '{text}' must be object_property or data_property"),
     ] = "object_property"
+    # A fact the source is not sure of (perception below its confidence
+    # threshold): a hazard that needs it is UNKNOWN, with it as the question.
+    assumed: Annotated[bool, Says("{where}: 'assumed' must be true or false")] = False
 
 
 def _one_visible_line(name: str) -> str:
@@ -256,12 +259,19 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
     facts: dict[Fact, Provenance] = {}
     spelling: dict[Fact, Fact] = {}
 
-    def state_fact(subject: str, value: str, written: Fact) -> None:
+    def state(fact: Fact, assumed: bool) -> None:
+        # Stated once for sure, a fact stays sure however often it is assumed.
+        if not assumed:
+            facts[fact] = Provenance.SCENE
+        else:
+            facts.setdefault(fact, Provenance.ASSUMED)
+
+    def state_fact(subject: str, value: str, written: Fact, assumed: bool = False) -> None:
         """A state, material or attribute of ``subject``, whatever property named it."""
         kind = _value_kind(value, classes, vocab)
         assert kind is not None  # callers pass only value individuals
         fact = Fact(subject, VALUE_PROPERTY[kind], value)
-        facts[fact] = Provenance.SCENE
+        state(fact, assumed)
         if written != fact:
             spelling.setdefault(fact, written)
 
@@ -353,7 +363,7 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
             if not isinstance(obj, bool) and str(obj).lower() not in ("true", "false"):
                 raise InputError(f"{where}: {prop} takes true or false, not '{clip(str(obj))}'")
             value = str(obj).lower()
-            facts[Fact(subj, prop, value, FactKind.DATA)] = Provenance.SCENE
+            state(Fact(subj, prop, value, FactKind.DATA), a.assumed)
             continue
         if kind == "data_property" and prop not in VALUE_PROPERTY.values():
             # Appendix C writes states as data values; a relation between two
@@ -374,14 +384,14 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
                         f"{where}: {prop} needs a state, material or attribute, "
                         f"not '{clip(written_obj)}'"
                     )
-                state_fact(subj, target, written)
+                state_fact(subj, target, written, a.assumed)
                 continue
             fact = _canonical_direction(subj, prop, target, vocab)
             if fact.subject not in classes or (
                 fact.object not in classes and fact.object not in vocab.individuals
             ):
                 raise InputError(f"{where}: '{target}' must be a declared instance for {prop_name}")
-            facts[fact] = Provenance.SCENE
+            state(fact, a.assumed)
             if fact != written:
                 spelling.setdefault(fact, written)
 
