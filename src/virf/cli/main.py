@@ -4,12 +4,13 @@ lists them."""
 
 from __future__ import annotations
 
-from virf.cli import bench, kb, plan, scene, serve, verify
+from virf.cli import bench, kb, perceive, plan, scene, serve, verify
 from virf.cli.app import app, main
 
 app.command()(verify.verify)
 app.command()(verify.demo)
 app.command()(plan.plan)
+app.command()(perceive.perceive)
 app.command()(serve.serve)
 app.add_typer(kb.kb_app, name="kb")
 app.add_typer(scene.scene_app, name="scene")

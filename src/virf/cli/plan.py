@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 from typing import Annotated, Any
@@ -17,12 +18,19 @@ from virf.cli.app import (
     SeedOpt,
     TemperatureOpt,
     TopPOpt,
+    write_output,
+)
+from virf.cli.perceive import (
+    BboxUnitsOpt,
+    DetectionsOpt,
+    OpenContentsOpt,
+    ThresholdOpt,
+    run_perception,
 )
 from virf.errors import VirfError
 
 
 def plan(
-    scene: Annotated[Path, typer.Option("--scene", help="Scene ABox JSON file.")],
     instruction: Annotated[str, typer.Option("--instruction", "-i", help="What the user asks.")],
     planner: Annotated[
         str,
@@ -32,6 +40,10 @@ def plan(
             help="openai:MODEL (any OpenAI-compatible server) or replay:FILE (a recorded run).",
         ),
     ],
+    scene: Annotated[
+        Path | None,
+        typer.Option("--scene", help="Scene ABox JSON file (or perceive one with --images)."),
+    ] = None,
     base_url: BaseUrlOpt = None,
     api_key_env: ApiKeyEnvOpt = None,
     temperature: TemperatureOpt = None,
@@ -86,6 +98,30 @@ def plan(
     ] = False,
     engine: EngineOpt = "fast",
     kb: KbOpt = None,
+    images: Annotated[
+        list[Path] | None,
+        typer.Option(
+            "--images",
+            help="Camera images to perceive the scene from, instead of --scene (repeat the "
+            "option for several views); needs --vlm.",
+        ),
+    ] = None,
+    vlm: Annotated[
+        str | None,
+        typer.Option(
+            "--vlm",
+            help="Vision model for --images: openai:MODEL or replay:FILE. --base-url and "
+            "--api-key-env apply to it too.",
+        ),
+    ] = None,
+    detections: DetectionsOpt = None,
+    threshold: ThresholdOpt = 0.5,
+    open_contents: OpenContentsOpt = False,
+    bbox_units: BboxUnitsOpt = "pixels",
+    scene_out: Annotated[
+        Path | None,
+        typer.Option("--scene-out", help="With --images: write the perceived scene here."),
+    ] = None,
 ) -> None:
     """Let the apprentice plan and the tutor verify until a plan is approved (Algorithm 1).
 
@@ -103,13 +139,42 @@ def plan(
     from virf.planner.questions import answers_file, deny
     from virf.world.scene import build_scene, load_scene_data
 
+    if (scene is None) == (not images):
+        raise VirfError("give the scene as --scene FILE or as --images IMAGE... (one of them)")
+    if images and vlm is None:
+        raise VirfError("--images needs a vision model: --vlm openai:MODEL or --vlm replay:FILE")
+    if vlm is not None and not images:
+        raise VirfError("--vlm reads camera images: give them with --images")
     run_log: Any = None
     try:
         # Started first: the deadline bounds the whole run, loading included.
         clock = Deadline(run_deadline(deadline))
-        data = load_scene_data(scene)
         tutor = LogicTutor(engine=engine, kb=kb)
         vocab = tutor.tbox.vocabulary
+        if scene is not None:
+            data = load_scene_data(scene)
+            name = scene.stem
+        else:
+            assert images is not None and vlm is not None
+            # Uncertain readings become the tutor's questions, asked below
+            # like any other (Algorithm 1), and the answers update this scene.
+            data = run_perception(
+                images,
+                vlm,
+                vocab,
+                log=log,
+                detections=detections,
+                threshold=threshold,
+                open_contents=open_contents,
+                bbox_units=bbox_units,
+                deadline=clock,
+                base_url=base_url,
+                api_key_env=api_key_env,
+                timeout_s=timeout,
+            ).scene
+            name = "perceived"
+            if scene_out is not None:
+                write_output(scene_out, json.dumps(data, indent=2, ensure_ascii=False) + "\n")
         build_scene(data, vocab)  # bad scenes fail here, before any model call
         policy = (
             answers_file(answers)
@@ -146,7 +211,7 @@ def plan(
                 data,
                 apprentice,
                 tutor.verifier,
-                lambda d: build_scene(d, vocab, name=scene.stem),
+                lambda d: build_scene(d, vocab, name=name),
                 vocab,
                 max_iter=max_iter,
                 answer=policy,

@@ -1,0 +1,107 @@
+"""Camera images as the vision model receives them: whole views, and crops.
+
+Pillow reads the file, so a file that is not an image fails here with one
+line, before any model call; the bytes sent are the file's own (a crop is
+re-encoded as PNG, losslessly).
+"""
+
+from __future__ import annotations
+
+import io
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Final
+
+from PIL import Image, UnidentifiedImageError
+
+from virf.errors import InputError, printable, read_input_bytes
+from virf.planner import Attachment
+
+# Well above a phone camera's JPEG, well below what a chat request may carry
+# once base64 has grown it by a third.
+MAX_IMAGE_BYTES: Final = 20 * 1024 * 1024
+MEDIA_TYPES: Final = {
+    "PNG": "image/png",
+    "JPEG": "image/jpeg",
+    "WEBP": "image/webp",
+    "GIF": "image/gif",
+}
+# A crop keeps some surroundings: the material of a rim or handle is often
+# read from what is around it.
+CROP_MARGIN: Final = 0.1
+BBOX_UNITS: Final = ("pixels", "normalized", "per-mille")
+
+
+@dataclass(frozen=True)
+class View:
+    """One camera image of the scene."""
+
+    name: str
+    image: Attachment
+    width: int
+    height: int
+
+    @property
+    def key(self) -> str:
+        """What the run log and replay files know this view's calls by: its
+        content, so a renamed file replays and an edited one does not."""
+        return f"perceive:{self.image.digest[:16]}"
+
+
+def load_view(path: str | Path) -> View:
+    p = Path(path)
+    data = read_input_bytes(p, "image", MAX_IMAGE_BYTES)
+    try:
+        with Image.open(io.BytesIO(data)) as img:
+            kind = img.format or ""
+            width, height = img.size
+            img.verify()
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError):
+        raise InputError(
+            f"image {printable(str(p))} is not an image Pillow can read; "
+            f"use {', '.join(MEDIA_TYPES)}"
+        ) from None
+    if kind not in MEDIA_TYPES:
+        raise InputError(
+            f"image {printable(str(p))} is {kind or 'of an unknown format'}, which vision "
+            f"models do not take; convert it to {', '.join(MEDIA_TYPES)}"
+        )
+    return View(p.name, Attachment(p.name, MEDIA_TYPES[kind], data), width, height)
+
+
+def pixel_box(
+    bbox: tuple[float, float, float, float] | None, view: View, units: str
+) -> tuple[int, int, int, int] | None:
+    """``bbox`` in the image's pixels, clamped to it; None when nothing is left."""
+    if bbox is None:
+        return None
+    x1, y1, x2, y2 = bbox
+    scale = {"pixels": (1.0, 1.0), "normalized": (view.width, view.height)}.get(
+        units, (view.width / 1000, view.height / 1000)
+    )
+    left, right = sorted((x1 * scale[0], x2 * scale[0]))
+    top, bottom = sorted((y1 * scale[1], y2 * scale[1]))
+    box = (
+        max(0, round(left)),
+        max(0, round(top)),
+        min(view.width, round(right)),
+        min(view.height, round(bottom)),
+    )
+    return box if box[2] > box[0] and box[3] > box[1] else None
+
+
+def crop(view: View, box: tuple[int, int, int, int], name: str) -> Attachment:
+    """The object's region of ``view`` (with a margin), as a PNG."""
+    x1, y1, x2, y2 = box
+    mx, my = round((x2 - x1) * CROP_MARGIN), round((y2 - y1) * CROP_MARGIN)
+    region = (
+        max(0, x1 - mx),
+        max(0, y1 - my),
+        min(view.width, x2 + mx),
+        min(view.height, y2 + my),
+    )
+    with Image.open(io.BytesIO(view.image.data)) as img:
+        part = img.convert("RGB").crop(region)
+        out = io.BytesIO()
+        part.save(out, format="PNG")
+    return Attachment(name, "image/png", out.getvalue())
