@@ -578,3 +578,142 @@ def _print_agents(table: Any) -> None:
     console.print(to_rich(master_table(table)))
     for name, n in table.partial.items():
         console.print(f"left out: {name} (stored for {n}/{len(table.tasks)} of these tasks)")
+
+
+@bench_app.command("perception")
+def bench_perception(
+    cases_dir: Annotated[
+        Path,
+        typer.Argument(
+            help="Folder of perception cases (images, gold.json, replies); see examples/perception."
+        ),
+    ],
+    vlm: Annotated[
+        str | None,
+        typer.Option(
+            "--vlm",
+            help="Run a live vision model (openai:MODEL) instead of each case's recorded replies.",
+        ),
+    ] = None,
+    mode: Annotated[
+        str,
+        typer.Option(
+            help="cascade (the paper's VLM cascade), hybrid (detector boxes, where a case "
+            "has detections.json) or both."
+        ),
+    ] = "both",
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print one JSON object: every case and the totals.")
+    ] = False,
+    markdown: Annotated[
+        Path | None, typer.Option(help="Also write the tables as Markdown to this path.")
+    ] = None,
+    base_url: BaseUrlOpt = None,
+    api_key_env: ApiKeyEnvOpt = None,
+    timeout: ModelTimeoutOpt = None,
+    engine: EngineOpt = "fast",
+    kb: KbOpt = None,
+) -> None:
+    """Perceive each case, then report precision and recall of objects, attributes and
+    relations, the safety facts recovered, and whether the tutor's verdict on the case's
+    plan is the same with the perceived scene as with the gold one."""
+    from rich.console import Console
+
+    from virf.api import LogicTutor
+    from virf.bench.perception import load_cases, run_cases, to_json
+    from virf.bench.perception import markdown as render
+    from virf.planner import make_apprentice
+
+    modes = {"both": ("cascade", "hybrid"), "cascade": ("cascade",), "hybrid": ("hybrid",)}
+    if mode not in modes:
+        raise VirfError(f"mode '{mode}' is unknown; choose cascade, hybrid or both")
+    if vlm is not None and vlm.startswith("replay:"):
+        raise VirfError(
+            "--vlm takes a live model (openai:MODEL); recorded replies come "
+            "from each case's replay files"
+        )
+    cases = load_cases(cases_dir)
+    tutor = LogicTutor(engine=engine, kb=kb)
+    live = None
+    if vlm is not None:
+        spec = vlm
+
+        def live(case: Any, mode: str) -> Any:
+            return make_apprentice(
+                spec, base_url=base_url, api_key_env=api_key_env, timeout_s=timeout
+            )
+
+    err = Console(stderr=True)
+    with progress_bar(err) as progress:
+        bar = progress.add_task("perceiving cases", total=None)
+        run = run_cases(
+            cases,
+            tutor.tbox.vocabulary,
+            tutor.verifier,
+            vlm=live,
+            modes=modes[mode],
+            progress=lambda what: progress.update(bar, description=f"perceiving {what}"),
+        )
+    if as_json:
+        typer.echo(to_json(run))
+    else:
+        _print_perception(run)
+    if markdown is not None:
+        write_output(markdown, render(run))
+        err.print(f"wrote {markdown}")
+
+
+def _print_perception(run: Any) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    from virf.bench.perception import percent
+
+    console = Console(highlight=False, width=130)
+    table = Table(
+        "case",
+        "mode",
+        "objects P/R",
+        "attributes P/R",
+        "relations P/R",
+        "safety facts",
+        "gold",
+        "perceived",
+        title="Perception, case by case",
+    )
+    for s in run.scores:
+        table.add_row(
+            s.case,
+            s.mode,
+            f"{percent(s.objects.precision)} / {percent(s.objects.recall)}",
+            f"{percent(s.attributes.precision)} / {percent(s.attributes.recall)}",
+            f"{percent(s.relations.precision)} / {percent(s.relations.recall)}",
+            f"{s.safety_recovered}/{s.safety_facts}",
+            s.gold_verdict or "-",
+            (s.perceived_verdict or "-") + (" (hazard lost)" if s.hazard_lost else ""),
+        )
+    console.print(table)
+    totals = Table(
+        "mode",
+        "objects F1",
+        "attributes F1",
+        "relations F1",
+        "safety facts recovered",
+        "same verdict",
+        "hazards lost",
+        title="Totals",
+    )
+    for t in run.as_json()["totals"]:
+        totals.add_row(
+            t["mode"],
+            percent(t["objects"]["f1"]),
+            percent(t["attributes"]["f1"]),
+            percent(t["relations"]["f1"]),
+            f"{t['safety_recovered']}/{t['safety_facts']}",
+            f"{t['same_verdict']}/{t['verdicts_compared']}",
+            str(t["hazards_lost"]),
+        )
+    console.print(totals)
+    lost = [s for s in run.scores if s.missing]
+    for s in lost:
+        console.print(f"{s.case} ({s.mode}): the tutor needed {', '.join(s.missing)}", markup=False)
