@@ -211,18 +211,32 @@ def print_graph(graph: Any) -> None:
     def conf(c: float | None) -> str:
         return "-" if c is None else f"{c:.2f}"
 
+    several = len(graph.views) > 1
+
+    def readings(items: Any) -> str:
+        """Each value once, with the confidence each view gave it."""
+        by_value: dict[str, list[str]] = {}
+        for r in items:
+            by_value.setdefault(r.value, []).append(
+                f"{r.view} {conf(r.confidence)}" if several else conf(r.confidence)
+            )
+        return "; ".join(f"{v} ({', '.join(c)})" for v, c in by_value.items()) or "-"
+
     objects = Table(
         "object", "type (from the label)", "material", "states", "seen", title="Objects"
     )
     for o in graph.objects:
-        how = {"name": "by name", "embedding": f"by meaning {o.match.score:g}"}.get(
-            o.match.how, "no type fits"
-        )
+        if o.match.how == "name":
+            how = "by name"
+        elif o.match.how == "embedding":
+            how = f"by meaning, similarity {o.match.score or 0:.2f}"
+        else:
+            how = "no type fits"
         objects.add_row(
             o.name,
             f"{o.type} ('{o.label}', {how})",
-            "; ".join(f"{r.value} {conf(r.confidence)}" for r in o.materials) or "-",
-            "; ".join(f"{r.value} {conf(r.confidence)}" for r in o.states) or "-",
+            readings(o.materials),
+            readings(o.states),
             "; ".join(f"{s.view} {conf(s.confidence)}" for s in o.seen),
         )
     console.print(objects)

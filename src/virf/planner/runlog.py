@@ -86,7 +86,7 @@ class CallRecord:
     ask: int
     apprentice: str
     model: str | None
-    messages: list[dict[str, str]]
+    messages: list[dict[str, Any]]
     reply: str | None
     ok: bool
     reason: str

@@ -1,0 +1,617 @@
+"""Perception: the VLM cascade, fusion of views, and what the tutor makes of it.
+
+The model is scripted (``ScriptedApprentice``) or a real HTTP server on
+127.0.0.1 that answers like a vision model and checks that the images
+arrive; nothing inside the perception code is replaced.
+"""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import io
+import json
+import threading
+from http.server import BaseHTTPRequestHandler
+from pathlib import Path
+from typing import Any
+
+import pytest
+from http_support import LocalServer, running
+from PIL import Image, ImageDraw
+
+from virf.api import LogicTutor
+from virf.errors import InputError
+from virf.ontology.tbox import Vocabulary
+from virf.perception import Catalogue, perceive
+from virf.perception.replies import (
+    UnreadableReply,
+    read_attributes,
+    read_detections,
+    read_locations,
+)
+from virf.planner import ClientSettings, OpenAIApprentice, RunLog, ScriptedApprentice
+from virf.planner.questions import apply_answers
+from virf.schema import Fact, Provenance
+from virf.world.scene import build_scene
+
+COUNTER = {"bbox": [0, 300, 640, 480], "category": "CounterTop"}
+MICROWAVE = {"bbox": [40, 150, 260, 300], "category": "Microwave"}
+BOWL = {"bbox": [330, 240, 430, 300], "category": "Bowl"}
+PLAN_MICROWAVE_BOWL = [
+    "find Bowl",
+    "pick Bowl",
+    "find Microwave",
+    "open Microwave",
+    "put Microwave",
+    "close Microwave",
+    "turn_on Microwave",
+]
+
+
+def picture(path: Path, shade: str = "white") -> Path:
+    img = Image.new("RGB", (640, 480), shade)
+    draw = ImageDraw.Draw(img)
+    draw.rectangle((0, 300, 640, 480), fill="tan")
+    draw.rectangle((40, 150, 260, 300), fill="grey")
+    draw.ellipse((330, 240, 430, 300), fill="silver")
+    img.save(path)
+    return path
+
+
+def replies(
+    objects: list[dict[str, Any]], attributes: list[Any], locations: list[Any]
+) -> list[str]:
+    """One view's replies, in the order the cascade asks."""
+    return [
+        json.dumps({"objects": objects}),
+        *(json.dumps(a) for a in attributes),
+        json.dumps({"locations": locations}),
+    ]
+
+
+def on(first: str, second: str, confidence: float | None = None) -> dict[str, Any]:
+    item: dict[str, Any] = {"first": first, "relationship": "isOn", "second": second}
+    if confidence is not None:
+        item["confidence"] = confidence
+    return item
+
+
+KITCHEN_PLACES = [on("Microwave_1", "CounterTop_1"), on("Bowl_1", "CounterTop_1")]
+
+
+@pytest.fixture(scope="module")
+def catalogue(vocab: Vocabulary) -> Catalogue:
+    return Catalogue(vocab)
+
+
+def run(
+    tmp_path: Path, vocab: Vocabulary, catalogue: Catalogue, views: list[list[str]], **kw: Any
+) -> Any:
+    images = [
+        picture(tmp_path / f"view{n}.png", shade)
+        for n, shade in zip(range(1, len(views) + 1), ("white", "ivory", "beige"), strict=False)
+    ]
+    model = ScriptedApprentice([r for view in views for r in view])
+    result = perceive(images, model, vocab, catalogue=catalogue, **kw)
+    assert model.remaining == 0
+    return result
+
+
+def bowl(material: str, confidence: float | None = None) -> dict[str, Any]:
+    reply: dict[str, Any] = {"state": [], "material": material}
+    if confidence is not None:
+        reply["material_confidence"] = confidence
+    return reply
+
+
+CLOSED_METAL = {"state": ["closed"], "material": "metal"}
+STONE = {"state": [], "material": "stone"}
+
+
+# ---------------------------------------------------------------------------
+# Replies
+
+
+def test_replies_are_read_through_fences_prose_and_neighbouring_keys() -> None:
+    fenced = 'Sure! Here you go:\n```json\n{"objects": [{"box": [1, 2, 3, 4], "label": "Mug", "score": 0.7}]}\n```'
+    (d,) = read_detections(fenced)
+    assert (d.category, d.bbox, d.confidence) == ("Mug", (1.0, 2.0, 3.0, 4.0), 0.7)
+    prose = 'The mug looks ceramic. {"state": ["dirty", {"value": "hot", "confidence": 0.4}], "material": "porcelain", "material_confidence": 0.8} Hope that helps.'
+    a = read_attributes(prose)
+    assert [(s.value, s.confidence) for s in a.states] == [("dirty", None), ("hot", 0.4)]
+    assert a.material is not None and (a.material.value, a.material.confidence) == (
+        "porcelain",
+        0.8,
+    )
+    (loc,) = read_locations(
+        '{"relations": [{"subject": "Mug_1", "relation": "on", "object": "Table_1"}]}'
+    )
+    assert (loc.first, loc.relationship, loc.second) == ("Mug_1", "on", "Table_1")
+
+
+@pytest.mark.parametrize(
+    ("reader", "text", "says"),
+    [
+        (read_detections, "I can see a kitchen with a mug.", "holds no JSON object"),
+        (read_detections, '{"objects": [{"bbox": [1, 2, 3], "category": "Mug"}]}', "four numbers"),
+        (read_detections, '{"objects": [{"bbox": [1, 2, 3, 4]}]}', "no 'category'"),
+        (read_detections, '{"objects": [{"category": "Mug", "confidence": 7}]}', "from 0 to 1"),
+        (read_detections, '{"things": []}', "no 'objects' list"),
+        (read_attributes, '{"colour": "red"}', "neither 'state' nor 'material'"),
+        (read_locations, '{"locations": [{"first": "A_1", "second": "B_1"}]}', "no 'relationship'"),
+    ],
+)
+def test_unreadable_replies_say_what_is_wrong(reader: Any, text: str, says: str) -> None:
+    with pytest.raises(UnreadableReply, match=says):
+        reader(text)
+
+
+# ---------------------------------------------------------------------------
+# Catalogue
+
+
+def test_labels_are_matched_by_name_then_by_meaning(catalogue: Catalogue) -> None:
+    assert catalogue.match("coffee machine").type == "CoffeeMachine"
+    assert catalogue.match("Mug 2").how == "name"
+    pan = catalogue.match("frying pan")
+    assert (pan.type, pan.how) == ("Pan", "embedding") and pan.score is not None
+    # Close to two types at once: no clear winner, so no type (not a guess).
+    assert catalogue.match("wine glass").type is None
+    assert catalogue.match("garden gnome").type is None
+
+
+# ---------------------------------------------------------------------------
+# One view
+
+
+def test_a_perceived_scene_is_verified_like_a_written_one(
+    tmp_path: Path, vocab: Vocabulary, catalogue: Catalogue, tutor: LogicTutor
+) -> None:
+    result = run(
+        tmp_path,
+        vocab,
+        catalogue,
+        [replies([COUNTER, MICROWAVE, BOWL], [STONE, CLOSED_METAL, bowl("metal")], KITCHEN_PLACES)],
+    )
+    scene = build_scene(result.scene, vocab)
+    assert Fact("Bowl_1", "hasMaterial", "Metal") in scene.facts
+    assert Fact("CounterTop_1", "supports", "Bowl_1") in scene.facts
+    report = tutor.verify(result.scene, PLAN_MICROWAVE_BOWL)
+    assert report.status == "UNSAFE"
+    # Every item keeps its view and confidence.
+    (seen,) = next(o for o in result.graph.objects if o.name == "Bowl_1").seen
+    assert (seen.view, seen.bbox) == ("view1.png", (330.0, 240.0, 430.0, 300.0))
+
+
+def test_a_material_below_the_threshold_is_unknown_and_the_tutor_asks(
+    tmp_path: Path, vocab: Vocabulary, catalogue: Catalogue, tutor: LogicTutor
+) -> None:
+    result = run(
+        tmp_path,
+        vocab,
+        catalogue,
+        [
+            replies(
+                [COUNTER, MICROWAVE, BOWL],
+                [STONE, CLOSED_METAL, bowl("metal", 0.3)],
+                KITCHEN_PLACES,
+            )
+        ],
+    )
+    assert {
+        "subject": "Bowl_1",
+        "property": "hasMaterial",
+        "object": "UnknownMaterial",
+    } in result.scene["assertions"]
+    report = tutor.verify(result.scene, PLAN_MICROWAVE_BOWL)
+    assert report.status == "UNKNOWN"
+    assert "material:Bowl_1" in {q.key for q in report.questions}
+    # The same reading above the threshold is believed.
+    sure = run(
+        tmp_path,
+        vocab,
+        catalogue,
+        [
+            replies(
+                [COUNTER, MICROWAVE, BOWL],
+                [STONE, CLOSED_METAL, bowl("metal", 0.3)],
+                KITCHEN_PLACES,
+            )
+        ],
+        threshold=0.2,
+    )
+    assert tutor.verify(sure.scene, PLAN_MICROWAVE_BOWL).status == "UNSAFE"
+
+
+def test_an_uncertain_relation_is_an_assumption_the_user_confirms_or_denies(
+    tmp_path: Path, vocab: Vocabulary, catalogue: Catalogue, tutor: LogicTutor
+) -> None:
+    fork = {"bbox": [120, 200, 180, 230], "category": "fork"}
+    result = run(
+        tmp_path,
+        vocab,
+        catalogue,
+        [
+            replies(
+                [COUNTER, MICROWAVE, fork],
+                [STONE, CLOSED_METAL, {"state": [], "material": "steel"}],
+                [
+                    on("Microwave_1", "CounterTop_1"),
+                    {
+                        "first": "fork_1",
+                        "relationship": "inside",
+                        "second": "Microwave_1",
+                        "confidence": 0.3,
+                    },
+                ],
+            )
+        ],
+    )
+    scene = build_scene(result.scene, vocab)
+    assert scene.facts[Fact("Microwave_1", "contains", "Fork_1")] is Provenance.ASSUMED
+    plan = ["find Microwave", "turn_on Microwave"]
+    report = tutor.verify(result.scene, plan)
+    assert report.status == "UNKNOWN"
+    (question,) = [q for q in report.questions if q.kind == "confirm"]
+    assert question.key == "confirm:Microwave_1 contains Fork_1"
+    yes = apply_answers(result.scene, report.questions, {question.key: "yes"}, vocab)
+    assert tutor.verify(yes.scene, plan).status == "UNSAFE"
+    no = apply_answers(result.scene, report.questions, {question.key: "no"}, vocab)
+    assert no.applied == (question.key,)
+    denied = tutor.verify(no.scene, plan)
+    # The fork is no longer taken to be inside; what is inside is still not
+    # known (a closed door hides it), and that is the next question.
+    assert [q.key for q in denied.questions] == ["contents:contains:Microwave_1"]
+    closed = apply_answers(
+        no.scene, denied.questions, {"contents:contains:Microwave_1": "yes"}, vocab
+    )
+    empty = tutor.verify(closed.scene, plan)
+    # Known empty now: running it empty is its own hazard, and the fork no longer counts.
+    assert empty.status == "UNSAFE" and empty.violated_concept is not None
+    assert "Fork_1" not in {t.subject for v in empty.violations for t in v.triggering_facts}
+    assert "Fork_1" not in {t.object for v in empty.violations for t in v.triggering_facts}
+
+
+def test_an_uncertain_state_is_assumed_and_a_sure_one_stands(
+    tmp_path: Path, vocab: Vocabulary, catalogue: Catalogue
+) -> None:
+    toaster = {"bbox": [300, 220, 400, 300], "category": "Toaster"}
+    result = run(
+        tmp_path,
+        vocab,
+        catalogue,
+        [
+            replies(
+                [COUNTER, toaster, MICROWAVE],
+                [
+                    STONE,
+                    {"state": [{"value": "on", "confidence": 0.35}], "material": "metal"},
+                    {
+                        "state": ["closed", {"value": "open", "confidence": 0.2}],
+                        "material": "metal",
+                    },
+                ],
+                [on("Toaster_1", "CounterTop_1"), on("Microwave_1", "CounterTop_1")],
+            )
+        ],
+    )
+    scene = build_scene(result.scene, vocab)
+    assert scene.facts[Fact("Toaster_1", "hasState", "OnState")] is Provenance.ASSUMED
+    assert scene.facts[Fact("Microwave_1", "hasState", "ClosedState")] is Provenance.SCENE
+    assert Fact("Microwave_1", "hasState", "OpenState") not in scene.facts
+    assert any("OpenState was read below the threshold" in n for n in result.graph.notes)
+
+
+def test_an_unmatched_label_is_kept_as_a_physical_object(
+    tmp_path: Path, vocab: Vocabulary, catalogue: Catalogue
+) -> None:
+    gnome = {"bbox": [500, 250, 560, 300], "category": "garden gnome", "confidence": 0.9}
+    result = run(
+        tmp_path,
+        vocab,
+        catalogue,
+        [
+            replies(
+                [COUNTER, gnome],
+                [STONE, {"state": [], "material": "resin"}],
+                [on("garden gnome_1", "CounterTop_1")],
+            )
+        ],
+    )
+    scene = build_scene(result.scene, vocab)
+    assert scene.objects["GardenGnome_1"] == frozenset({"PhysicalObject"})
+    # 'resin' is no material the knowledge base knows: unknown, and said so.
+    assert Fact("GardenGnome_1", "hasMaterial", "UnknownMaterial") in scene.facts
+    assert any("resin" in n for n in result.graph.notes)
+    assert any("no catalogue type fits 'garden gnome'" in n for n in result.graph.notes)
+
+
+def test_an_unreadable_attribute_reply_leaves_the_material_unknown(
+    tmp_path: Path, vocab: Vocabulary, catalogue: Catalogue
+) -> None:
+    views = [replies([COUNTER, BOWL], [STONE, {"state": []}], [on("Bowl_1", "CounterTop_1")])]
+    views[0][2] = "The bowl is shiny."
+    result = run(tmp_path, vocab, catalogue, views)
+    assert {
+        "subject": "Bowl_1",
+        "property": "hasMaterial",
+        "object": "UnknownMaterial",
+    } in result.scene["assertions"]
+    assert any("attributes reply unreadable" in n for n in result.graph.notes)
+
+
+def test_an_unreadable_detection_reply_is_an_error_not_an_empty_scene(
+    tmp_path: Path, vocab: Vocabulary, catalogue: Catalogue
+) -> None:
+    model = ScriptedApprentice(["I see a kitchen counter with a bowl."])
+    with pytest.raises(UnreadableReply, match=r"view1.png: the detect reply cannot be read"):
+        perceive([picture(tmp_path / "view1.png")], model, vocab, catalogue=catalogue)
+    nothing = ScriptedApprentice(['{"objects": []}'])
+    with pytest.raises(InputError, match=r"saw no objects in view1\.png"):
+        perceive([picture(tmp_path / "view1.png")], nothing, vocab, catalogue=catalogue)
+
+
+def test_files_that_are_not_images_are_refused_before_any_call(
+    tmp_path: Path, vocab: Vocabulary
+) -> None:
+    text = tmp_path / "notes.png"
+    text.write_text("not a picture")
+    model = ScriptedApprentice([])
+    with pytest.raises(InputError, match=r"notes\.png is not an image"):
+        perceive([text], model, vocab)
+    with pytest.raises(InputError, match="image file not found"):
+        perceive([tmp_path / "missing.png"], model, vocab)
+    assert model.requests == []
+
+
+def test_receptacles_seen_surely_have_closed_contents_unless_asked_not_to(
+    tmp_path: Path, vocab: Vocabulary, catalogue: Catalogue
+) -> None:
+    view = [
+        replies([COUNTER, MICROWAVE, BOWL], [STONE, CLOSED_METAL, bowl("metal")], KITCHEN_PLACES)
+    ]
+    result = run(tmp_path, vocab, catalogue, view)
+    # The counter is seen whole; the closed microwave's inside is not.
+    assert result.scene["closed_world"] == ["contains:Bowl_1", "supports:CounterTop_1"]
+    assert "closed_world" not in run(tmp_path, vocab, catalogue, view, open_contents=True).scene
+
+
+# ---------------------------------------------------------------------------
+# Several views
+
+
+def test_views_that_disagree_on_a_material_make_a_contradiction(
+    tmp_path: Path, vocab: Vocabulary, catalogue: Catalogue, tutor: LogicTutor
+) -> None:
+    plate = {"bbox": [330, 250, 430, 300], "category": "Plate"}
+    places = [on("Microwave_1", "CounterTop_1"), on("Plate_1", "CounterTop_1")]
+    result = run(
+        tmp_path,
+        vocab,
+        catalogue,
+        [
+            replies(
+                [COUNTER, MICROWAVE, plate], [STONE, CLOSED_METAL, bowl("plastic", 0.9)], places
+            ),
+            replies([COUNTER, MICROWAVE, plate], [STONE, CLOSED_METAL, bowl("metal", 0.8)], places),
+        ],
+    )
+    assert len(result.graph.objects) == 3  # associated, not doubled
+    (said,) = result.graph.disagreements
+    assert "Plate_1: material read as Metal and Plastic" in said
+    report = tutor.verify(result.scene, [s.replace("Bowl", "Plate") for s in PLAN_MICROWAVE_BOWL])
+    assert report.status == "UNKNOWN"
+    (question,) = [q for q in report.questions if q.kind == "contradiction"]
+    # The user says which reading is wrong, and the tutor decides on the rest.
+    fixed = apply_answers(
+        result.scene, report.questions, {question.key: "Plate_1 hasMaterial Plastic"}, vocab
+    )
+    again = tutor.verify(fixed.scene, [s.replace("Bowl", "Plate") for s in PLAN_MICROWAVE_BOWL])
+    assert again.status == "UNSAFE"
+
+
+def test_views_that_disagree_on_a_place_keep_one_as_an_assumption(
+    tmp_path: Path, vocab: Vocabulary, catalogue: Catalogue
+) -> None:
+    sink = {"bbox": [450, 260, 600, 300], "category": "SinkBasin"}
+    result = run(
+        tmp_path,
+        vocab,
+        catalogue,
+        [
+            replies(
+                [COUNTER, BOWL, sink],
+                [STONE, bowl("metal"), {"state": [], "material": "metal"}],
+                [on("Bowl_1", "CounterTop_1")],
+            ),
+            replies(
+                [COUNTER, BOWL, sink],
+                [STONE, bowl("metal"), {"state": [], "material": "metal"}],
+                [{"first": "Bowl_1", "relationship": "in", "second": "SinkBasin_1"}],
+            ),
+        ],
+    )
+    (said,) = result.graph.disagreements
+    assert said.startswith("Bowl_1: its place differs")
+    places = [
+        a
+        for a in result.scene["assertions"]
+        if a["subject"] == "Bowl_1" and a["property"] in ("isOn", "isInside")
+    ]
+    assert places == [
+        {"subject": "Bowl_1", "property": "isOn", "object": "CounterTop_1", "assumed": True}
+    ]
+    # Neither the counter nor the sink is taken as seen whole.
+    assert "closed_world" not in result.scene
+
+
+def test_ids_from_the_model_associate_objects_across_views(
+    tmp_path: Path, vocab: Vocabulary, catalogue: Catalogue
+) -> None:
+    left = {"bbox": [100, 250, 150, 300], "category": "Mug", "id": "a"}
+    right = {"bbox": [400, 250, 450, 300], "category": "Mug", "id": "b"}
+    # The second view is taken from the other side: left and right swap.
+    result = run(
+        tmp_path,
+        vocab,
+        catalogue,
+        [
+            replies([COUNTER, left, right], [STONE, bowl("ceramic"), bowl("metal")], []),
+            replies(
+                [
+                    COUNTER,
+                    {**right, "bbox": [100, 250, 150, 300]},
+                    {**left, "bbox": [400, 250, 450, 300]},
+                ],
+                [STONE, bowl("metal"), bowl("ceramic")],
+                [],
+            ),
+        ],
+    )
+    assert result.graph.disagreements == ()
+    mugs = {o.name: {r.value for r in o.materials} for o in result.graph.objects if o.type == "Mug"}
+    assert sorted(mugs.values(), key=sorted) == [{"Ceramic"}, {"Metal"}]
+
+
+# ---------------------------------------------------------------------------
+# The hybrid baseline
+
+
+def test_the_hybrid_takes_boxes_from_a_detector_file(
+    tmp_path: Path, vocab: Vocabulary, catalogue: Catalogue
+) -> None:
+    image = picture(tmp_path / "view1.png")
+    coco = {
+        "images": [{"id": 7, "file_name": "photos/view1.png"}],
+        "annotations": [
+            {"image_id": 7, "category_id": 1, "bbox": [0, 300, 640, 180], "score": 0.9},
+            {"image_id": 7, "category_id": 2, "bbox": [330, 240, 100, 60], "score": 0.6},
+        ],
+        "categories": [{"id": 1, "name": "countertop"}, {"id": 2, "name": "mixing bowl"}],
+    }
+    boxes = tmp_path / "detections.json"
+    boxes.write_text(json.dumps(coco))
+    model = ScriptedApprentice(
+        [
+            json.dumps(STONE),
+            json.dumps(bowl("glass")),
+            json.dumps({"locations": [on("mixing bowl_1", "countertop_1")]}),
+        ]
+    )
+    result = perceive([image], model, vocab, detections=boxes, catalogue=catalogue)
+    assert [r.method for r in model.requests] == [
+        "attributes:1:countertop",
+        "attributes:2:mixing bowl",
+        "relations",
+    ]
+    assert result.graph.views[0].boxes == "detector"
+    scene = build_scene(result.scene, vocab)
+    assert Fact("Bowl_1", "hasMaterial", "Glass") in scene.facts
+    other = tmp_path / "other.png"
+    picture(other)
+    with pytest.raises(InputError, match=r"no image named other\.png; it lists view1\.png"):
+        perceive([other], ScriptedApprentice([]), vocab, detections=boxes, catalogue=catalogue)
+
+
+# ---------------------------------------------------------------------------
+# A live model over HTTP
+
+
+class VisionServer(LocalServer):
+    """Answers the cascade's three kinds of request like a vision model,
+    after checking that each carries a real image."""
+
+    def __init__(self, image: Path) -> None:
+        self.digest = hashlib.sha256(image.read_bytes()).hexdigest()
+        self.seen: list[dict[str, Any]] = []
+        self._lock = threading.Lock()
+        server = self
+
+        class Handler(BaseHTTPRequestHandler):
+            def do_POST(self) -> None:
+                body = json.loads(self.rfile.read(int(self.headers["content-length"])))
+                with server._lock:
+                    server.seen.append(body)
+                text = server.answer(body)
+                data = json.dumps(
+                    {
+                        "id": "x",
+                        "object": "chat.completion",
+                        "created": 0,
+                        "model": body["model"],
+                        "choices": [
+                            {
+                                "index": 0,
+                                "finish_reason": "stop",
+                                "message": {"role": "assistant", "content": text},
+                            }
+                        ],
+                        "usage": {
+                            "prompt_tokens": 900,
+                            "completion_tokens": 40,
+                            "total_tokens": 940,
+                        },
+                    }
+                ).encode()
+                self.send_response(200)
+                self.send_header("content-type", "application/json")
+                self.send_header("content-length", str(len(data)))
+                self.end_headers()
+                self.wfile.write(data)
+
+            def log_message(self, *args: Any) -> None:
+                return None
+
+        self.serve(Handler)
+
+    def answer(self, body: dict[str, Any]) -> str:
+        (message,) = body["messages"]
+        text, image = message["content"]
+        assert text["type"] == "text" and image["type"] == "image_url"
+        head, _, payload = image["image_url"]["url"].partition(",")
+        assert head == "data:image/png;base64"
+        raw = base64.b64decode(payload)
+        with Image.open(io.BytesIO(raw)) as img:
+            size = img.size
+        prompt = text["text"]
+        if "find every object" in prompt:
+            assert hashlib.sha256(raw).hexdigest() == self.digest  # the file's own bytes
+            return "```json\n" + json.dumps({"objects": [COUNTER, MICROWAVE, BOWL]}) + "\n```"
+        if "how they relate" in prompt:
+            assert hashlib.sha256(raw).hexdigest() == self.digest
+            assert "[CounterTop_1, Microwave_1, Bowl_1]" in prompt
+            return json.dumps({"locations": KITCHEN_PLACES})
+        # An attribute request: a crop of the object, with a margin.
+        assert size != (640, 480)
+        if "'Bowl'" in prompt:
+            assert size == (120, 72)
+            return json.dumps(bowl("stainless steel", 0.9))
+        return json.dumps(CLOSED_METAL if "'Microwave'" in prompt else STONE)
+
+
+def test_the_live_path_sends_the_images_to_a_real_http_server(
+    tmp_path: Path, vocab: Vocabulary, catalogue: Catalogue, tutor: LogicTutor
+) -> None:
+    image = picture(tmp_path / "view1.png")
+    log = RunLog(tmp_path / "runs.sqlite")
+    with running(VisionServer(image)) as server:
+        model = OpenAIApprentice(
+            ClientSettings(model="vision-test", base_url=server.base_url), run_log=log
+        )
+        with model:
+            result = perceive([image], model, vocab, catalogue=catalogue)
+    assert len(server.seen) == 5 and all(b["model"] == "vision-test" for b in server.seen)
+    assert tutor.verify(result.scene, PLAN_MICROWAVE_BOWL).status == "UNSAFE"
+    calls = log.calls()
+    assert [c.method for c in calls] == [
+        "detect",
+        "attributes:1:CounterTop",
+        "attributes:2:Microwave",
+        "attributes:3:Bowl",
+        "relations",
+    ]
+    # The log names each image by its digest and does not hold its bytes.
+    assert calls[0].messages[0]["images"] == [f"view1.png (image/png, sha256:{server.digest[:16]})"]
+    assert all("base64" not in json.dumps(c.messages) for c in calls)
+    log.close()
