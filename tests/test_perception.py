@@ -372,8 +372,8 @@ def test_receptacles_seen_surely_have_closed_contents_unless_asked_not_to(
         replies([COUNTER, MICROWAVE, BOWL], [STONE, CLOSED_METAL, bowl("metal")], KITCHEN_PLACES)
     ]
     result = run(tmp_path, vocab, catalogue, view)
-    # The counter is seen whole; the closed microwave's inside is not.
-    assert result.scene["closed_world"] == ["contains:Bowl_1", "supports:CounterTop_1"]
+    # The counter is seen whole; inside a bowl or a closed microwave is not.
+    assert result.scene["closed_world"] == ["supports:CounterTop_1"]
     assert "closed_world" not in run(tmp_path, vocab, catalogue, view, open_contents=True).scene
 
 
@@ -615,3 +615,134 @@ def test_the_live_path_sends_the_images_to_a_real_http_server(
     assert calls[0].messages[0]["images"] == [f"view1.png (image/png, sha256:{server.digest[:16]})"]
     assert all("base64" not in json.dumps(c.messages) for c in calls)
     log.close()
+
+
+# ---------------------------------------------------------------------------
+# The commands, on the bundled cases
+
+CASES = Path(__file__).resolve().parent.parent / "examples" / "perception"
+
+
+def test_virf_perceive_writes_a_scene_the_tutor_verifies(cli: Any, tmp_path: Path) -> None:
+    case = CASES / "views-disagree"
+    out, graph = tmp_path / "scene.json", tmp_path / "graph.json"
+    result = cli(
+        "perceive",
+        case / "view1.png",
+        case / "view2.png",
+        "--vlm",
+        f"replay:{case / 'replay.jsonl'}",
+        "--out",
+        out,
+        "--graph",
+        graph,
+    )
+    assert result.exit_code == 0, result.output
+    assert "Plate_1: material read as Metal and Plastic" in result.output
+    assert json.loads(graph.read_text())["disagreements"]
+    verdict = cli("verify", out, case / "plan.txt", "--json")
+    assert verdict.exit_code == 3 and json.loads(verdict.stdout)["status"] == "UNKNOWN"
+    as_json = cli(
+        "perceive",
+        case / "view1.png",
+        case / "view2.png",
+        "--vlm",
+        f"replay:{case / 'replay.jsonl'}",
+        "--json",
+    )
+    data = json.loads(as_json.stdout)
+    assert set(data) == {"graph", "scene"} and data["scene"]["name"] == "perceived"
+
+
+@pytest.mark.parametrize(
+    ("args", "says"),
+    [
+        (["--vlm", "replay:{case}/replay.jsonl", "{case}/gold.json"], "is not an image"),
+        (["--vlm", "replay:{case}/replay.jsonl", "{case}/nowhere.png"], "image file not found"),
+        (
+            ["--vlm", "replay:{case}/replay.jsonl", "{other}/view1.png"],
+            "has no proposal for task perceive:",
+        ),
+        (["--vlm", "magic:eye", "{case}/view1.png"], "unknown planner 'magic:eye'"),
+        (
+            ["--vlm", "replay:{case}/replay.jsonl", "--bbox-units", "inches", "{case}/view1.png"],
+            "choose pixels, normalized, per-mille",
+        ),
+        (
+            ["--vlm", "replay:{case}/replay.jsonl", "--threshold", "2", "{case}/view1.png"],
+            "--threshold",
+        ),
+    ],
+)
+def test_virf_perceive_refuses_bad_input_in_one_line(
+    cli: Any, tmp_path: Path, args: list[str], says: str
+) -> None:
+    out = tmp_path / "scene.json"
+    filled = [a.format(case=CASES / "correct", other=CASES / "wrong-material") for a in args]
+    result = cli("perceive", *filled, "--out", out)
+    assert result.exit_code == 2, result.output
+    (line,) = [x for x in result.output.splitlines() if x.startswith("error:")]
+    assert says in line
+    assert "Traceback" not in result.output
+    assert not out.exists()  # nothing half-written
+
+
+def test_virf_plan_perceives_asks_and_refines(cli: Any) -> None:
+    case = CASES / "low-confidence"
+    result = cli(
+        "plan",
+        "--images",
+        case / "view1.png",
+        "--vlm",
+        f"replay:{case / 'replay.jsonl'}",
+        "--instruction",
+        (case / "instruction.txt").read_text().strip(),
+        "--planner",
+        f"replay:{case / 'planner-replay.jsonl'}",
+        "--answers",
+        case / "answers.json",
+        "--task-id",
+        "perceived-mug",
+        "--json",
+    )
+    assert result.exit_code == 1, result.output
+    data = json.loads(result.stdout)
+    statuses = [t["status"] for t in data["transcript"] if t["kind"] == "report"]
+    # The uncertain material was a question; the answer made the hazard plain.
+    assert statuses == ["UNKNOWN", "UNSAFE"]
+    assert data["outcome"] == "TASK_REJECTED"
+    both = cli(
+        "plan",
+        "--images",
+        case / "view1.png",
+        "--scene",
+        case / "gold.json",
+        "--instruction",
+        "x",
+        "--planner",
+        "scripted",
+    )
+    assert both.exit_code == 2 and "one of them" in both.output
+
+
+def test_bench_perception_scores_the_bundled_cases(cli: Any, tmp_path: Path) -> None:
+    md = tmp_path / "perception.md"
+    result = cli("bench", "perception", CASES, "--json", "--markdown", md)
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    by_case = {(c["case"], c["mode"]): c for c in data["cases"]}
+    assert by_case[("correct", "cascade")]["same_verdict"]
+    assert by_case[("correct", "cascade")]["objects"]["f1"] == 1.0
+    # A confident wrong material and a missed object lose the hazard: the
+    # figures say so instead of hiding it.
+    assert by_case[("wrong-material", "cascade")]["hazard_lost"]
+    assert by_case[("missing-object", "cascade")]["objects"]["recall"] < 1
+    assert (
+        "StoveBurner_1 supports Towel_1"
+        in by_case[("missing-object", "cascade")]["missing_safety_facts"]
+    )
+    # Uncertainty and disagreement end in UNKNOWN, never SAFE.
+    assert by_case[("low-confidence", "cascade")]["perceived_verdict"] == "UNKNOWN"
+    assert by_case[("views-disagree", "cascade")]["perceived_verdict"] == "UNKNOWN"
+    assert by_case[("hybrid", "hybrid")]["objects"]["recall"] < 1
+    assert "| hybrid | hybrid |" in md.read_text()

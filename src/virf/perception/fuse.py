@@ -12,6 +12,9 @@
   (UnknownMaterial), a fill state unknown (UnknownFillState), any other
   state or relation an *assumed* fact (a hazard that needs it is UNKNOWN,
   with it as the question), and the contents of a receptacle stay open.
+  Above it, what a surface seen with confidence holds is taken as complete
+  (``closed_world``); a container's contents never are, since a camera
+  rarely sees inside one.
 * A place is the one thing a scene cannot hold twice (an object is on one
   thing).  When views disagree on it, the place most views saw is kept as
   an assumed fact and the disagreement is reported; a hazard that would
@@ -41,7 +44,6 @@ from virf.perception.graph import (
     ViewInfo,
 )
 from virf.perception.replies import Seen
-from virf.schema import Fact
 from virf.verify.questions import materials
 from virf.world.scene import VALUE_WORDS, build_scene
 
@@ -552,11 +554,10 @@ def fuse(
         into = [r for r in relations if r.object == o.name and r.relation in PLACES]
         if not sure_seen or o.name in doubtful or not all(f.sure(r.confidence) for r in into):
             continue
+        # What is on a surface is in view; what is in a container (a mug of
+        # coffee, a drawer) mostly is not, so a container's contents stay open.
         if vocab.any_is_a(classes, "SurfaceReceptacle"):
             closed.append(f"supports:{o.name}")
-        shut = Fact(o.name, "hasState", "ClosedState") in built.facts
-        if vocab.any_is_a(classes, "ContainerReceptacle") and not shut:
-            closed.append(f"contains:{o.name}")
     if closed and not open_contents:
         scene["closed_world"] = closed
     graph = SceneGraph(
