@@ -22,6 +22,14 @@ demo: $(STAMP)
 	  --planner replay:examples/dialogue/replay.jsonl --task-id demo-fridge
 	$(BIN)/virf bench agents --method impulsive,virf --planner replay:examples/agents/replay.jsonl \
 	  --tasks examples/agents/tasks.jsonl --out runs/agents-demo
+	# Perception from recorded VLM replies: two views that disagree on a plate's
+	# material give a scene the tutor answers UNKNOWN on (exit 3 is the point);
+	# then the perception figures over the bundled cases.
+	$(BIN)/virf perceive examples/perception/views-disagree/view1.png \
+	  examples/perception/views-disagree/view2.png \
+	  --vlm replay:examples/perception/views-disagree/replay.jsonl --out runs/perceived-scene.json
+	$(BIN)/virf verify runs/perceived-scene.json examples/perception/views-disagree/plan.txt || test $$? -eq 3
+	$(BIN)/virf bench perception examples/perception
 	# Knowledge acquisition offline: a recorded LLM draft from the starter corpus,
 	# checked, accepted, and then used to verify a plan (UNSAFE, exit 1, is the point).
 	# The workspace builds on the hand-written rules alone (the household rules

@@ -240,9 +240,14 @@ def print_graph(graph: Any) -> None:
             "; ".join(f"{s.view} {conf(s.confidence)}" for s in o.seen),
         )
     console.print(objects)
-    relations = Table("subject", "relation", "object", "confidence", "view", title="Relations")
+    relations = Table("subject", "relation", "object", "confidence", title="Relations")
+    said: dict[tuple[str, str, str], list[str]] = {}
     for r in graph.relations:
-        relations.add_row(r.subject, r.relation, r.object, conf(r.confidence), r.view)
+        said.setdefault((r.subject, r.relation, r.object), []).append(
+            f"{conf(r.confidence)} ({r.view})" if several else conf(r.confidence)
+        )
+    for (subject, relation, obj), confidences in said.items():
+        relations.add_row(subject, relation, obj, ", ".join(confidences))
     console.print(relations)
     for title, lines in (("Disagreements", graph.disagreements), ("Notes", graph.notes)):
         if lines:
