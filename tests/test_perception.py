@@ -746,3 +746,13 @@ def test_bench_perception_scores_the_bundled_cases(cli: Any, tmp_path: Path) -> 
     assert by_case[("views-disagree", "cascade")]["perceived_verdict"] == "UNKNOWN"
     assert by_case[("hybrid", "hybrid")]["objects"]["recall"] < 1
     assert "| hybrid | hybrid |" in md.read_text()
+
+
+def test_a_runaway_object_list_is_refused_before_hundreds_of_requests(
+    tmp_path: Path, vocab: Vocabulary, catalogue: Catalogue
+) -> None:
+    many = json.dumps({"objects": [{"category": "Apple"}] * 301})
+    model = ScriptedApprentice([many])
+    with pytest.raises(UnreadableReply, match="301 objects were listed; at most 300"):
+        perceive([picture(tmp_path / "view1.png")], model, vocab, catalogue=catalogue)
+    assert len(model.requests) == 1

@@ -43,6 +43,8 @@ STATE_WORDS: Final = (
 )
 RELATIONSHIP_WORDS: Final = "isOn, isInside, isNear, isHeldBy"
 _T = TypeVar("_T")
+# Far more than a room shows, far fewer than would make stage 2 run for hours.
+MAX_OBJECTS: Final = 300
 
 
 @cache
@@ -113,6 +115,12 @@ class Cascade:
                 [view.image],
             )
             detections = self._read(view, "detect", read_detections, text)
+        if len(detections) > MAX_OBJECTS:
+            # Each object costs a request: a runaway list would cost thousands.
+            raise UnreadableReply(
+                f"{view.name}: {len(detections)} objects were listed; at most {MAX_OBJECTS} "
+                "per view are described"
+            )
         names = labels(detections)
         objects = []
         for k, (detection, label) in enumerate(zip(detections, names, strict=True), start=1):
