@@ -58,7 +58,7 @@ def scene(**extra: Any) -> dict[str, Any]:
         ),
         (
             scene(assertions=[rel("Pot_1", "isInside", "Fridge_1") | {"propery": "x"}]),
-            "assertions[0]: unknown key 'propery'; expected object, property, subject, type",
+            "assertions[0]: unknown key 'propery'; expected assumed, object, property, subject, type",
         ),
         # Several unknown keys: the first in sorted order, whatever the file's order.
         (
