@@ -756,3 +756,288 @@ def test_a_runaway_object_list_is_refused_before_hundreds_of_requests(
     with pytest.raises(UnreadableReply, match="301 objects were listed; at most 300"):
         perceive([picture(tmp_path / "view1.png")], model, vocab, catalogue=catalogue)
     assert len(model.requests) == 1
+
+
+# ---------------------------------------------------------------------------
+# What a careless reading would have made SAFE, and replies that must not crash
+
+
+def test_a_person_is_seen_and_a_child_near_a_lit_burner_is_not_safe(
+    tmp_path: Path, vocab: Vocabulary, catalogue: Catalogue, tutor: LogicTutor
+) -> None:
+    assert catalogue.match("Child").type == "Child"
+    burner = {"bbox": [300, 260, 400, 300], "category": "StoveBurner"}
+    knob = {"bbox": [420, 320, 450, 350], "category": "StoveKnob"}
+    child = {"bbox": [450, 100, 560, 300], "category": "child"}
+    result = run(
+        tmp_path,
+        vocab,
+        catalogue,
+        [
+            replies(
+                [COUNTER, burner, knob, child],
+                [
+                    STONE,
+                    {"state": ["lit"], "material": "metal"},
+                    {"state": ["on"], "material": "plastic"},
+                    {"state": [], "material": "fabric"},
+                ],
+                [
+                    on("StoveBurner_1", "CounterTop_1"),
+                    {"first": "child_1", "relationship": "next to", "second": "StoveBurner_1"},
+                ],
+            )
+        ],
+    )
+    scene = build_scene(result.scene, vocab)
+    assert scene.objects["Child_1"] == frozenset({"Child"})
+    # 'lit' is on; a person's material reading is left out, not a contradiction.
+    assert Fact("StoveBurner_1", "hasState", "OnState") in scene.facts
+    assert not any(f.subject == "Child_1" and f.predicate == "hasMaterial" for f in scene.facts)
+    assert tutor.verify(result.scene, ["find StoveKnob", "turn_off StoveKnob"]).status != "SAFE"
+
+
+def test_a_reply_without_a_material_asks_instead_of_taking_the_default(
+    tmp_path: Path, vocab: Vocabulary, catalogue: Catalogue, tutor: LogicTutor
+) -> None:
+    result = run(
+        tmp_path,
+        vocab,
+        catalogue,
+        [
+            replies(
+                [COUNTER, MICROWAVE, BOWL],
+                [STONE, CLOSED_METAL, {"state": ["empty"]}],
+                KITCHEN_PLACES,
+            )
+        ],
+    )
+    # A bowl is usually ceramic, but nobody saw that this one is.
+    assert {
+        "subject": "Bowl_1",
+        "property": "hasMaterial",
+        "object": "UnknownMaterial",
+    } in result.scene["assertions"]
+    assert tutor.verify(result.scene, PLAN_MICROWAVE_BOWL).status == "UNKNOWN"
+
+
+def test_two_unboxed_objects_of_one_kind_are_not_described_alike(
+    tmp_path: Path, vocab: Vocabulary, catalogue: Catalogue
+) -> None:
+    model = ScriptedApprentice(
+        [
+            json.dumps({"objects": [COUNTER, {"category": "Mug"}, {"category": "Mug"}]}),
+            json.dumps(STONE),
+            json.dumps({"locations": []}),
+        ]
+    )
+    result = perceive([picture(tmp_path / "view1.png")], model, vocab, catalogue=catalogue)
+    assert [r.method for r in model.requests] == ["detect", "attributes:1:CounterTop", "relations"]
+    for mug in ("Mug_1", "Mug_2"):
+        assert {
+            "subject": mug,
+            "property": "hasMaterial",
+            "object": "UnknownMaterial",
+        } in result.scene["assertions"]
+
+
+def test_partial_ids_fall_back_to_position_and_keep_the_disagreement(
+    tmp_path: Path, vocab: Vocabulary, catalogue: Catalogue
+) -> None:
+    result = run(
+        tmp_path,
+        vocab,
+        catalogue,
+        [
+            replies([COUNTER, {**BOWL, "id": "b"}], [STONE, bowl("metal")], []),
+            replies([COUNTER, BOWL], [STONE, bowl("ceramic")], []),
+        ],
+    )
+    assert [o.name for o in result.graph.objects if o.type == "Bowl"] == ["Bowl_1"]
+    assert any("material read as Ceramic and Metal" in d for d in result.graph.disagreements)
+
+
+def test_a_cycle_and_a_crowded_hand_are_resolved_not_crashed(
+    tmp_path: Path, vocab: Vocabulary, catalogue: Catalogue
+) -> None:
+    robot = {"bbox": [500, 50, 600, 300], "category": "Robot"}
+    knife = {"bbox": [200, 260, 260, 280], "category": "Knife"}
+    result = run(
+        tmp_path,
+        vocab,
+        catalogue,
+        [
+            replies(
+                [COUNTER, BOWL, knife, robot],
+                [STONE, bowl("metal"), bowl("metal"), {"state": [], "material": "metal"}],
+                [
+                    on("Bowl_1", "CounterTop_1", 0.9),
+                    on("CounterTop_1", "Bowl_1", 0.6),
+                    {
+                        "first": "Knife_1",
+                        "relationship": "held",
+                        "second": "Robot_1",
+                        "confidence": 0.9,
+                    },
+                    {
+                        "first": "Bowl_1",
+                        "relationship": "held",
+                        "second": "Robot_1",
+                        "confidence": 0.95,
+                    },
+                ],
+            )
+        ],
+    )
+    build_scene(result.scene, vocab)  # a world that can exist
+    said = " | ".join(result.graph.disagreements)
+    assert "would close a cycle" in said or "is read as holding" in said
+
+
+@pytest.mark.parametrize(
+    "reply",
+    [
+        '{"objects": [{"category": "Mug", "bbox": [' + "9" * 400 + ", 1, 2, 3]}]}",
+        '{"objects": [{"category": "Mug", "confidence": ' + "1" * 5000 + "}]}",
+        '{"objects": [{"category": 7}]}',
+        '{"objects": "many"}',
+    ],
+)
+def test_odd_detection_replies_are_one_line_errors(
+    reply: str, tmp_path: Path, vocab: Vocabulary, catalogue: Catalogue
+) -> None:
+    with pytest.raises(UnreadableReply):
+        perceive(
+            [picture(tmp_path / "view1.png")],
+            ScriptedApprentice([reply]),
+            vocab,
+            catalogue=catalogue,
+        )
+
+
+def test_boxes_in_other_units_are_cropped_where_they_say(
+    tmp_path: Path, vocab: Vocabulary, catalogue: Catalogue
+) -> None:
+    result = run(
+        tmp_path,
+        vocab,
+        catalogue,
+        [
+            replies(
+                [
+                    {"bbox": [0, 625, 1000, 1000], "category": "CounterTop"},
+                    {"bbox": [515, 500, 672, 625], "category": "Bowl"},
+                    {"bbox": [1e308, 0, 1e308, 1], "category": "Fork"},
+                ],
+                [STONE, bowl("metal"), bowl("metal")],
+                [on("Bowl_1", "CounterTop_1")],
+            )
+        ],
+        bbox_units="per-mille",
+    )
+    (bowl_seen,) = next(o for o in result.graph.objects if o.name == "Bowl_1").seen
+    assert bowl_seen.bbox == (515.0, 500.0, 672.0, 625.0)
+
+
+def test_broken_images_and_detector_files_are_refused_before_any_call(
+    tmp_path: Path, vocab: Vocabulary
+) -> None:
+    image = picture(tmp_path / "view1.png")
+    cut = tmp_path / "cut.png"
+    cut.write_bytes(image.read_bytes()[:400])
+    model = ScriptedApprentice([])
+    with pytest.raises(InputError, match=r"cut\.png is not an image"):
+        perceive([cut], model, vocab)
+    bad = tmp_path / "boxes.json"
+    for images, says in (
+        ([{"id": [1], "file_name": "view1.png"}], "needs a number or string 'id'"),
+        (
+            [{"id": 1, "file_name": "view1.png"}, {"id": 2, "file_name": "x/view1.png"}],
+            "repeats the file name",
+        ),
+    ):
+        bad.write_text(json.dumps({"images": images, "annotations": [], "categories": []}))
+        with pytest.raises(InputError, match=says):
+            perceive([image], model, vocab, detections=bad)
+    assert model.requests == []
+
+
+def test_model_labels_are_printed_as_text_not_markup(cli: Any, tmp_path: Path) -> None:
+    image = picture(tmp_path / "view1.png")
+    digest = hashlib.sha256(image.read_bytes()).hexdigest()[:16]
+    lines = [
+        {
+            "method": "detect",
+            "text": json.dumps(
+                {"objects": [{"category": "mug [/]", "bbox": [330, 240, 430, 300]}]}
+            ),
+        },
+        {"method": "attributes:1:mug [/]", "text": json.dumps(bowl("ceramic"))},
+        {"method": "relations", "text": json.dumps({"locations": []})},
+    ]
+    replay = tmp_path / "replay.jsonl"
+    replay.write_text(
+        "".join(
+            json.dumps({"task_id": f"perceive:{digest}", "iteration": 1, **x}) + "\n" for x in lines
+        )
+    )
+    result = cli("perceive", image, "--vlm", f"replay:{replay}")
+    assert result.exit_code == 0, result.output
+    assert "mug [/]" in result.output
+
+
+def test_outputs_are_checked_before_the_model_is_asked(cli: Any, tmp_path: Path) -> None:
+    case = CASES / "correct"
+    out = tmp_path / "scene.json"
+    result = cli(
+        "perceive",
+        case / "view1.png",
+        "--vlm",
+        f"replay:{case / 'replay.jsonl'}",
+        "--out",
+        out,
+        "--graph",
+        tmp_path / "missing" / "graph.json",
+    )
+    assert result.exit_code == 2 and "does not exist" in result.output
+    assert not out.exists()
+    empty = cli(
+        "plan",
+        "--images",
+        case / "view1.png",
+        "--vlm",
+        f"replay:{case / 'replay.jsonl'}",
+        "--instruction",
+        " ",
+        "--planner",
+        "scripted",
+        "--scene-out",
+        out,
+    )
+    assert empty.exit_code == 2 and "--instruction is empty" in empty.output
+    assert not out.exists()
+    stray = cli(
+        "plan",
+        "--scene",
+        case / "gold.json",
+        "--instruction",
+        "x",
+        "--planner",
+        "scripted",
+        "--detections",
+        case / "gold.json",
+    )
+    assert stray.exit_code == 2 and "--detections is for camera images" in stray.output
+
+
+def test_the_same_images_give_the_same_scene_byte_for_byte(cli: Any) -> None:
+    case = CASES / "views-disagree"
+    args = (
+        "perceive",
+        case / "view1.png",
+        case / "view2.png",
+        "--vlm",
+        f"replay:{case / 'replay.jsonl'}",
+        "--json",
+    )
+    assert cli(*args).stdout == cli(*args).stdout

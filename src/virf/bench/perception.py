@@ -146,7 +146,13 @@ def load_cases(folder: str | Path) -> list[Case]:
         )
         if not isinstance(meta, dict):
             raise InputError(f"{sub / 'case.json'} must be a JSON object")
-        images = tuple(sorted(p for p in sub.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES))
+        images = tuple(
+            sorted(
+                p
+                for p in sub.iterdir()
+                if p.name.startswith("view") and p.suffix.lower() in IMAGE_SUFFIXES
+            )
+        )
         if not images:
             raise InputError(f"case {sub.name} has no images (view1.png ...)")
         threshold = meta.get("threshold", 0.5)
@@ -177,6 +183,10 @@ def load_cases(folder: str | Path) -> list[Case]:
 
 
 def _compatible(a: frozenset[str], b: frozenset[str], vocab: Vocabulary) -> bool:
+    # An object no type fitted is a PhysicalObject, an ancestor of every
+    # type; it may stand only for a gold object typed no better.
+    if (a == {"PhysicalObject"}) != (b == {"PhysicalObject"}):
+        return False
     return any(vocab.is_a(x, y) or vocab.is_a(y, x) for x in a for y in b)
 
 

@@ -256,6 +256,16 @@ def write_output(path: Path, text: str) -> None:
         raise _fail(f"cannot write {printable(str(path))}: {exc.strerror}") from None
 
 
+def check_writable(path: Path, option: str) -> None:
+    """Fail before the work, not after it, when an output cannot be written."""
+    if path.is_dir():
+        raise VirfError(f"{option} {path} is a directory; give a file path")
+    if not path.parent.is_dir():
+        raise VirfError(f"{option} {path}: folder {path.parent} does not exist")
+    if not os.access(path.parent, os.W_OK):
+        raise VirfError(f"{option} {path}: folder {path.parent} is not writable")
+
+
 def progress_bar(console: Any) -> Any:
     """The progress bar of long runs, on stderr, only when it is a terminal."""
     from rich.progress import (

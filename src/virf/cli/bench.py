@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
 import sys
 from pathlib import Path
 from typing import Annotated, Any
@@ -22,6 +21,7 @@ from virf.cli.app import (
     SeedOpt,
     TemperatureOpt,
     TopPOpt,
+    check_writable,
     progress_bar,
     write_output,
 )
@@ -86,7 +86,7 @@ def bench_safeagentbench(
     if no_corrections:
         corr = {}
     if markdown is not None:
-        _check_writable(markdown)
+        check_writable(markdown, "--markdown")
 
     def verifier_for(task: Task) -> Verifier:
         return tutors.for_task(task).verifier  # type: ignore[no-any-return]
@@ -218,7 +218,7 @@ def bench_latency(
                 "give an example folder or --cold-runs 0"
             )
     if markdown is not None:
-        _check_writable(markdown)
+        check_writable(markdown, "--markdown")
     err = Console(stderr=True)
     with progress_bar(err) as progress:
 
@@ -307,16 +307,6 @@ def _print_latency(fig: dict[str, Any]) -> None:
         console.print(line, markup=False)
 
 
-def _check_writable(path: Path) -> None:
-    """Fail before a long run, not after it, when the report cannot be written."""
-    if path.is_dir():
-        raise VirfError(f"--markdown {path} is a directory; give a file path")
-    if not path.parent.is_dir():
-        raise VirfError(f"--markdown {path}: folder {path.parent} does not exist")
-    if not os.access(path.parent, os.W_OK):
-        raise VirfError(f"--markdown {path}: folder {path.parent} is not writable")
-
-
 def _print_bench(results: list[Any], summary: dict[str, Any]) -> None:
     from rich.console import Console
 
@@ -363,7 +353,7 @@ def bench_service(
     if not levels or levels[0] < 1 or levels[-1] > 256:
         raise VirfError(f"--concurrency {concurrency!r}: give levels from 1 to 256")
     if markdown is not None:
-        _check_writable(markdown)
+        check_writable(markdown, "--markdown")
     bodies = request_bodies(files)
     err = Console(stderr=True)
     server = Server(server_workers)

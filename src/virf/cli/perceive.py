@@ -16,6 +16,7 @@ from virf.cli.app import (
     ScenarioOpt,
     SeedOpt,
     TemperatureOpt,
+    check_writable,
     write_output,
 )
 
@@ -49,8 +50,8 @@ OpenContentsOpt = Annotated[
     bool,
     typer.Option(
         "--open-contents",
-        help="Never take a receptacle's seen contents as complete (by default they are, "
-        "for an open receptacle seen with confidence).",
+        help="Never take what a surface holds as complete (by default it is, for a surface "
+        "seen with confidence; a container's contents never are).",
     ),
 ]
 BboxUnitsOpt = Annotated[
@@ -75,7 +76,8 @@ def run_perception(
     vlm: str,
     vocab: Any,
     *,
-    log: str | None,
+    log: str | None = None,
+    run_log: Any = None,
     detections: Path | None,
     threshold: float,
     open_contents: bool,
@@ -84,14 +86,17 @@ def run_perception(
     **settings: Any,
 ) -> Any:
     """The cascade on ``images``, with a spinner on a terminal; shared by
-    ``virf perceive`` and ``virf plan --images``."""
+    ``virf perceive`` and ``virf plan --images``.  The calls go to ``run_log``
+    (left open) or to the log at ``log``."""
     from rich.console import Console
+    from rich.markup import escape
 
     from virf.perception import perceive
     from virf.planner import RunLog, make_apprentice
 
     console = Console(stderr=True)
-    run_log = RunLog(log) if log is not None else None
+    own_log = RunLog(log) if log is not None and run_log is None else None
+    run_log = run_log or own_log
     try:
         model = make_apprentice(vlm, run_log=run_log, **settings)
         with (
@@ -109,11 +114,11 @@ def run_perception(
                 open_contents=open_contents,
                 bbox_units=bbox_units,
                 deadline=deadline,
-                progress=lambda what: status.update(f"perceiving: {what}"),
+                progress=lambda what: status.update(f"perceiving: {escape(what)}"),
             )
     finally:
-        if run_log is not None:
-            run_log.close()
+        if own_log is not None:
+            own_log.close()
 
 
 class _Quiet:
@@ -162,6 +167,9 @@ def perceive(
     """
     from virf.ontology.tbox import load_tbox
 
+    for path, option in ((out, "--out"), (graph, "--graph")):
+        if path is not None:
+            check_writable(path, option)  # before any model call, so nothing is half-done
     vocab = load_tbox(scenario, kb=kb).vocabulary
     result = run_perception(
         images,
@@ -203,6 +211,11 @@ def perceive(
 def print_graph(graph: Any) -> None:
     from rich.console import Console
     from rich.table import Table
+    from rich.text import Text
+
+    def cells(*values: str) -> list[Text]:
+        # Plain text: a model's label such as "mug [/]" is not markup.
+        return [Text(v) for v in values]
 
     console = Console(highlight=False, width=120)
     views = ", ".join(f"{v.name} ({v.width}x{v.height}, boxes: {v.boxes})" for v in graph.views)
@@ -233,11 +246,13 @@ def print_graph(graph: Any) -> None:
         else:
             how = "no type fits"
         objects.add_row(
-            o.name,
-            f"{o.type} ('{o.label}', {how})",
-            readings(o.materials),
-            readings(o.states),
-            "; ".join(f"{s.view} {conf(s.confidence)}" for s in o.seen),
+            *cells(
+                o.name,
+                f"{o.type} ('{o.label}', {how})",
+                readings(o.materials),
+                readings(o.states),
+                "; ".join(f"{s.view} {conf(s.confidence)}" for s in o.seen),
+            )
         )
     console.print(objects)
     relations = Table("subject", "relation", "object", "confidence", title="Relations")
@@ -247,7 +262,7 @@ def print_graph(graph: Any) -> None:
             f"{conf(r.confidence)} ({r.view})" if several else conf(r.confidence)
         )
     for (subject, relation, obj), confidences in said.items():
-        relations.add_row(subject, relation, obj, ", ".join(confidences))
+        relations.add_row(*cells(subject, relation, obj, ", ".join(confidences)))
     console.print(relations)
     for title, lines in (("Disagreements", graph.disagreements), ("Notes", graph.notes)):
         if lines:

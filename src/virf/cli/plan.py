@@ -18,6 +18,7 @@ from virf.cli.app import (
     SeedOpt,
     TemperatureOpt,
     TopPOpt,
+    check_writable,
     write_output,
 )
 from virf.cli.perceive import (
@@ -143,8 +144,19 @@ def plan(
         raise VirfError("give the scene as --scene FILE or as --images IMAGE... (one of them)")
     if images and vlm is None:
         raise VirfError("--images needs a vision model: --vlm openai:MODEL or --vlm replay:FILE")
-    if vlm is not None and not images:
-        raise VirfError("--vlm reads camera images: give them with --images")
+    if not images:
+        for given, option in (
+            (vlm, "--vlm"),
+            (detections, "--detections"),
+            (scene_out, "--scene-out"),
+        ):
+            if given is not None:
+                raise VirfError(f"{option} is for camera images: give them with --images")
+    if not instruction.strip():
+        raise VirfError("--instruction is empty; say what the robot should do")
+    chosen = get_method(method)
+    if scene_out is not None:
+        check_writable(scene_out, "--scene-out")
     run_log: Any = None
     try:
         # Started first: the deadline bounds the whole run, loading included.
@@ -153,29 +165,7 @@ def plan(
         vocab = tutor.tbox.vocabulary
         if scene is not None:
             data = load_scene_data(scene)
-            name = scene.stem
-        else:
-            assert images is not None and vlm is not None
-            # Uncertain readings become the tutor's questions, asked below
-            # like any other (Algorithm 1), and the answers update this scene.
-            data = run_perception(
-                images,
-                vlm,
-                vocab,
-                log=log,
-                detections=detections,
-                threshold=threshold,
-                open_contents=open_contents,
-                bbox_units=bbox_units,
-                deadline=clock,
-                base_url=base_url,
-                api_key_env=api_key_env,
-                timeout_s=timeout,
-            ).scene
-            name = "perceived"
-            if scene_out is not None:
-                write_output(scene_out, json.dumps(data, indent=2, ensure_ascii=False) + "\n")
-        build_scene(data, vocab)  # bad scenes fail here, before any model call
+            build_scene(data, vocab)  # bad scenes fail here, before any model call
         policy = (
             answers_file(answers)
             if answers is not None
@@ -197,14 +187,33 @@ def plan(
             max_tokens=max_tokens,
             timeout_s=timeout,
         )
-        if not instruction.strip():
-            raise VirfError("--instruction is empty; say what the robot should do")
-        chosen = get_method(method)
         if chosen.knowledge != "all":
             tutor = tutor.restricted(
                 {u.name for u in vocab.uscs.values() if knowledge_filter(u, chosen.knowledge)}
             )
         with apprentice:
+            if images:
+                assert vlm is not None
+                # Every other input was checked first: a vision model's calls
+                # cost money.  Uncertain readings become the tutor's questions,
+                # asked like any other (Algorithm 1); the answers update this scene.
+                data = run_perception(
+                    images,
+                    vlm,
+                    vocab,
+                    run_log=run_log,
+                    detections=detections,
+                    threshold=threshold,
+                    open_contents=open_contents,
+                    bbox_units=bbox_units,
+                    deadline=clock,
+                    base_url=base_url,
+                    api_key_env=api_key_env,
+                    timeout_s=timeout,
+                ).scene
+                if scene_out is not None:
+                    write_output(scene_out, json.dumps(data, indent=2, ensure_ascii=False) + "\n")
+            name = scene.stem if scene is not None else "perceived"
             result = run_method(
                 chosen,
                 instruction,

@@ -122,10 +122,30 @@ class Cascade:
                 "per view are described"
             )
         names = labels(detections)
+        # A detector's boxes are COCO pixels whatever the model's convention.
+        units = self.bbox_units if boxes == "vlm" else "pixels"
+        regions = [pixel_box(d.bbox, view, units) for d in detections]
+        unboxed = [d.category for d, r in zip(detections, regions, strict=True) if r is None]
         objects = []
-        for k, (detection, label) in enumerate(zip(detections, names, strict=True), start=1):
+        for k, (detection, label, region) in enumerate(
+            zip(detections, names, regions, strict=True), start=1
+        ):
+            if region is None and unboxed.count(detection.category) > 1:
+                # Without boxes, two objects of one category get the same
+                # question and the same answer: neither reading is this one's.
+                objects.append(
+                    SeenObject(
+                        k,
+                        label,
+                        detection,
+                        None,
+                        f"no box tells it from the other {detection.category} objects of the "
+                        "view, so it was not described",
+                    )
+                )
+                continue
             self.progress(f"{view.name}: attributes of {label}")
-            objects.append(self._attributes(view, k, label, detection))
+            objects.append(self._attributes(view, k, label, detection, region))
         locations: tuple[Location, ...] = ()
         if objects:
             self.progress(f"{view.name}: relations")
@@ -140,10 +160,16 @@ class Cascade:
             locations = self._read(view, "relations", read_locations, text)
         return ViewReading(view, boxes, tuple(objects), locations)
 
-    def _attributes(self, view: View, k: int, label: str, detection: Detection) -> SeenObject:
-        box = pixel_box(detection.bbox, view, self.bbox_units)
-        # Without a usable box the model sees the whole view, and the prompt
-        # names the object it is to describe.
+    def _attributes(
+        self,
+        view: View,
+        k: int,
+        label: str,
+        detection: Detection,
+        box: tuple[int, int, int, int] | None,
+    ) -> SeenObject:
+        # Without a usable box the model sees the whole view; the prompt names
+        # the category, which is the only one of its kind without a box.
         image = crop(view, box, f"{view.name}#{label}") if box else view.image
         text = self._ask(
             view,

@@ -50,22 +50,29 @@ class Catalogue:
         self.vocab = vocab
         self._embedder = embedder
         excluded = set(vocab.uscs) | set(vocab.preconditions) | set(vocab.material_classes)
-        physical = {
+        # Things and people a camera can see; the robot is the one looking.
+        seeable = {
             c
             for c in vocab.classes
-            if vocab.is_a(c, "PhysicalObject") and c != "PhysicalObject" and c not in excluded
+            if c not in excluded
+            and c not in ("PhysicalObject", "Agent")
+            and (vocab.is_a(c, "PhysicalObject") or vocab.is_a(c, "Agent"))
+            and not vocab.is_a(c, "Robot")
         }
-        has_sub = {a for c in physical for a in vocab.ancestors.get(c, ()) if a != c}
-        # Object types one can point a camera at: the catalogue's, and the
-        # most specific classes of the scenarios (a Child, a CandleFlame).
+        has_sub = {a for c in seeable for a in vocab.ancestors.get(c, ()) if a != c}
+        # The catalogue's object types, and the most specific classes of the
+        # scenarios (a Child, an Adult).
         self.types: tuple[str, ...] = tuple(
-            sorted(vocab.catalogue_types | {c for c in physical if c not in has_sub})
+            sorted(vocab.catalogue_types | {c for c in seeable if c not in has_sub})
         )
-        self._by_key = {term_key(c): c for c in sorted(physical)}
+        self._by_key = {term_key(c): c for c in sorted(seeable)}
 
     def by_name(self, label: str) -> str | None:
         text = _TRAILING_NUMBER.sub("", label.strip())
-        for form in (text, text[:-1] if text.endswith("s") else "", text[:-2]):
+        # Plurals only ('mugs', 'boxes'): cutting letters off any word would
+        # make a 'panel' a Pan.
+        plural = [text[:-2]] if text.endswith("es") else []
+        for form in (text, text[:-1] if text.endswith("s") else "", *plural):
             if not form:
                 continue
             found = self._by_key.get(term_key(form))

@@ -23,7 +23,17 @@ from virf.perception.replies import Detection
 
 
 def _number(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return False
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:  # an integer of 400 digits
+        return False
+
+
+def _id(value: Any) -> bool:
+    """COCO ids are numbers or strings; ``true`` would equal 1 as a key."""
+    return isinstance(value, int | str) and not isinstance(value, bool)
 
 
 def load_detections(path: str | Path) -> dict[str, tuple[Detection, ...]]:
@@ -40,24 +50,38 @@ def load_detections(path: str | Path) -> dict[str, tuple[Detection, ...]]:
     for n, image in enumerate(data["images"], start=1):
         if (
             not isinstance(image, dict)
-            or "id" not in image
+            or not _id(image.get("id"))
             or not isinstance(image.get("file_name"), str)
         ):
-            raise InputError(f"{where}: images[{n}] needs 'id' and 'file_name'")
-        names[image["id"]] = Path(image["file_name"]).name
+            raise InputError(
+                f"{where}: images[{n}] needs a number or string 'id' and a 'file_name'"
+            )
+        name = Path(image["file_name"]).name
+        if image["id"] in names:
+            raise InputError(f"{where}: images[{n}] repeats the id {clip(repr(image['id']))}")
+        if name in names.values():
+            # Views are told apart by file name: two images of one name would merge.
+            raise InputError(f"{where}: images[{n}] repeats the file name {clip(name)}")
+        names[image["id"]] = name
     categories: dict[Any, str] = {}
     for n, cat in enumerate(data["categories"], start=1):
-        if not isinstance(cat, dict) or "id" not in cat or not isinstance(cat.get("name"), str):
-            raise InputError(f"{where}: categories[{n}] needs 'id' and 'name'")
+        if (
+            not isinstance(cat, dict)
+            or not _id(cat.get("id"))
+            or not isinstance(cat.get("name"), str)
+        ):
+            raise InputError(f"{where}: categories[{n}] needs a number or string 'id' and a 'name'")
+        if cat["id"] in categories:
+            raise InputError(f"{where}: categories[{n}] repeats the id {clip(repr(cat['id']))}")
         categories[cat["id"]] = " ".join(cat["name"].split())
     out: dict[str, list[Detection]] = {name: [] for name in names.values()}
     for n, ann in enumerate(data["annotations"], start=1):
         at = f"{where}: annotations[{n}]"
         if not isinstance(ann, dict):
             raise InputError(f"{at} is not a JSON object")
-        if ann.get("image_id") not in names:
+        if not _id(ann.get("image_id")) or ann.get("image_id") not in names:
             raise InputError(f"{at} names image_id {clip(repr(ann.get('image_id')))}, not listed")
-        if ann.get("category_id") not in categories:
+        if not _id(ann.get("category_id")) or ann.get("category_id") not in categories:
             raise InputError(
                 f"{at} names category_id {clip(repr(ann.get('category_id')))}, not listed"
             )

@@ -110,9 +110,26 @@ def material_term(word: str, vocab: Vocabulary) -> str | None:
     return MATERIAL_WORDS.get(key)
 
 
+STATE_SYNONYMS: Final = {
+    **dict.fromkeys(
+        ("lit", "burning", "running", "switchedon", "turnedon", "active", "operating", "powered"),
+        "OnState",
+    ),
+    **dict.fromkeys(("unlit", "switchedoff", "turnedoff", "inactive", "unpowered"), "OffState"),
+    **dict.fromkeys(("boiling", "steaming", "heated", "warm"), "HotState"),
+    **dict.fromkeys(("ajar",), "OpenState"),
+    **dict.fromkeys(("shut",), "ClosedState"),
+    **dict.fromkeys(("halffull", "partiallyfilled", "filledwithwater"), "FilledWithLiquidState"),
+    **dict.fromkeys(("cracked", "shattered"), "BrokenState"),
+}
+
+
 def state_term(word: str, vocab: Vocabulary) -> str | None:
-    """The state individual a word names (``closed`` -> ClosedState), else None."""
+    """The state individual a word names (``closed`` -> ClosedState, ``lit``
+    -> OnState), else None."""
     key = term_key(word)
+    if key in STATE_SYNONYMS:
+        return STATE_SYNONYMS[key]
     if key.startswith("is") and key[2:] in VALUE_WORDS:
         key = key[2:]
     if key in VALUE_WORDS:
@@ -202,43 +219,48 @@ class _Fusion:
         for key in sorted(groups):
             cls, label, m = first[key]
             made: list[_Object] = []
+            per_view = sorted(groups[key].items())
+            # Ids name one object across views only when every view gives
+            # one to every object of the kind, each id once per view; partial
+            # ids would split one object in two and hide a disagreement.
+            ids = [[s.detection.track for s in seen_list] for _, seen_list in per_view]
+            tracked = all(
+                None not in view_ids and len(set(view_ids)) == len(view_ids) for view_ids in ids
+            )
+            if not tracked and any(t is not None for view_ids in ids for t in view_ids):
+                self.notes.append(
+                    f"the ids given to {label} are missing or repeated in a view; "
+                    "its objects are matched across views by position instead"
+                )
             tracks: dict[str, _Object] = {}
-            for vi, seen_list in sorted(groups[key].items()):
-                untracked = []
-                for seen in seen_list:
-                    track = seen.detection.track
-                    if track is None:
-                        untracked.append(seen)
-                        continue
-                    if track not in tracks:
-                        tracks[track] = _Object(cls, label, m)
-                        made.append(tracks[track])
-                    tracks[track].sightings.append((vi, seen))
-                untracked.sort(
+            for vi, seen_list in per_view:
+                if tracked:
+                    for seen in seen_list:
+                        track = str(seen.detection.track)
+                        if track not in tracks:
+                            tracks[track] = _Object(cls, label, m)
+                            made.append(tracks[track])
+                        tracks[track].sightings.append((vi, seen))
+                    continue
+                ordered = sorted(
+                    seen_list,
                     key=lambda s: (
                         (s.detection.bbox[0] + s.detection.bbox[2]) / 2
                         if s.detection.bbox is not None
                         else float("inf"),
                         s.index,
-                    )
+                    ),
                 )
-                plain = [o for o in made if o not in tracks.values()]
-                for rank, seen in enumerate(untracked):
-                    if rank == len(plain):
-                        plain.append(_Object(cls, label, m))
-                        made.append(plain[-1])
-                    plain[rank].sightings.append((vi, seen))
+                for rank, seen in enumerate(ordered):
+                    if rank == len(made):
+                        made.append(_Object(cls, label, m))
+                    made[rank].sightings.append((vi, seen))
             made.sort(
                 key=lambda o: (o.x(self.readings), o.sightings[0][0], o.sightings[0][1].index)
             )
             base = cls or _base_name(label, self.vocab)
             for j, obj in enumerate(made, start=1):
                 obj.name = f"{base}_{j}"
-                counts = {vi for vi, _ in obj.sightings}
-                if len(counts) < len(obj.sightings):
-                    self.notes.append(
-                        f"{obj.name}: one view saw it twice under the same id; both kept as one"
-                    )
             out.extend(made)
         for obj in out:
             low = [
@@ -257,7 +279,7 @@ class _Fusion:
                 )
                 self.notes.append(
                     f"{obj.name}: no catalogue type fits '{obj.label}'{score}; "
-                    "it is a PhysicalObject, and its material is asked about"
+                    "it is a PhysicalObject, known by what was seen of it"
                 )
         return out
 
@@ -317,10 +339,33 @@ class _Fusion:
         if entry not in self.assertions:
             self.assertions.append(entry)
 
+    def needs_material(self, obj: _Object) -> bool:
+        """Whether the scene must say what ``obj`` is made of: a thing whose
+        type implies no material (food and liquids are their own matter)."""
+        classes = frozenset({obj.type or "PhysicalObject"})
+        return (
+            self.vocab.any_is_a(classes, "PhysicalObject")
+            and not self.vocab.any_is_a(classes, "FoodItem")
+            and not self.vocab.any_is_a(classes, "Liquid")
+            and not self.vocab.materials_of(classes)
+        )
+
     def attributes(self, obj: _Object, mats: list[Reading], states: list[Reading]) -> None:
+        if not self.vocab.any_is_a(frozenset({obj.type or "PhysicalObject"}), "PhysicalObject"):
+            if mats:  # a person has no material; a reading of one is noise
+                self.notes.append(f"{obj.name} is a {obj.type}: its material readings are left out")
+            mats = []
         sure_mats = sorted(
             {r.value for r in mats if self.sure(r.confidence) and r.value != "UnknownMaterial"}
         )
+        unsure = sorted(
+            {r.value for r in mats if not self.sure(r.confidence)} - {"UnknownMaterial"}
+        )
+        if sure_mats and set(unsure) - set(sure_mats):
+            self.notes.append(
+                f"{obj.name}: {' / '.join(sorted(set(unsure) - set(sure_mats)))} was read below the "
+                f"threshold against a sure {' / '.join(sure_mats)}; the sure reading stands"
+            )
         for m in sure_mats:
             self.state(obj.name, "hasMaterial", m)
         if len(sure_mats) > 1:
@@ -329,7 +374,9 @@ class _Fusion:
                 f"({self._who(mats, set(sure_mats))}); all are kept, so the tutor asks which "
                 "is wrong"
             )
-        elif not sure_mats and mats:
+        elif not sure_mats and (mats or self.needs_material(obj)):
+            # Nothing sure was said: not the catalogue's typical material
+            # (a mug is usually ceramic) but a question.
             self.state(obj.name, "hasMaterial", "UnknownMaterial")
         sure_states = sorted({r.value for r in states if self.sure(r.confidence)})
         for st in sure_states:
@@ -452,6 +499,8 @@ class _Fusion:
             chosen[child] = (prop, parent, assumed)
         # A cycle (A on B, B on A) cannot be; its least sure link goes.
         for child in sorted(chosen):
+            if child not in chosen:  # its link closed an earlier cycle and went
+                continue
             path = [child]
             node = chosen[child][1]
             while node in chosen and node not in path:
@@ -471,6 +520,31 @@ class _Fusion:
                 self.disagreements.append(
                     f"{weakest} {p} {o} would close a cycle ({' and '.join(cycle)}); left out"
                 )
+        held: dict[str, list[str]] = defaultdict(list)
+        for child, (prop, parent, _) in sorted(chosen.items()):
+            if prop == "isHeldBy":
+                held[parent].append(child)
+        for holder, things in sorted(held.items()):
+            if len(things) < 2:
+                continue
+            # A hand holds one thing: the surest reading stays, as an assumption.
+            surest = max(
+                things,
+                key=lambda c: max(
+                    1.0 if r.confidence is None else r.confidence
+                    for r in by_child[c][chosen[c][:2]]
+                ),
+            )
+            for other in things:
+                if other != surest:
+                    chosen.pop(other)
+                    doubtful.add(other)
+            chosen[surest] = (*chosen[surest][:2], True)
+            doubtful.add(holder)
+            self.disagreements.append(
+                f"{holder} is read as holding {' and '.join(things)}; one thing is held at a "
+                f"time, so {surest} is kept as an assumption and the others have no place"
+            )
         for child, (prop, parent, assumed) in sorted(chosen.items()):
             self.state(child, prop, parent, assumed)
         near: dict[tuple[str, str], list[GraphRelation]] = defaultdict(list)

@@ -55,7 +55,14 @@ def load_view(path: str | Path) -> View:
         with Image.open(io.BytesIO(data)) as img:
             kind = img.format or ""
             width, height = img.size
-            img.verify()
+            # Decoded in full: a truncated file must fail here, before any
+            # request, not when an object is cropped from it.
+            img.load()
+    except Image.DecompressionBombError:
+        raise InputError(
+            f"image {printable(str(p))} would decode to more than "
+            f"{Image.MAX_IMAGE_PIXELS or 0:,} pixels; scale it down"
+        ) from None
     except (UnidentifiedImageError, OSError, SyntaxError, ValueError):
         raise InputError(
             f"image {printable(str(p))} is not an image Pillow can read; "
@@ -79,8 +86,10 @@ def pixel_box(
     scale = {"pixels": (1.0, 1.0), "normalized": (view.width, view.height)}.get(
         units, (view.width / 1000, view.height / 1000)
     )
-    left, right = sorted((x1 * scale[0], x2 * scale[0]))
-    top, bottom = sorted((y1 * scale[1], y2 * scale[1]))
+    # Clamped before rounding: a box of 1e308 scaled up is infinite.
+    xs = sorted(min(max(v * scale[0], -1.0), view.width + 1.0) for v in (x1, x2))
+    ys = sorted(min(max(v * scale[1], -1.0), view.height + 1.0) for v in (y1, y2))
+    left, right, top, bottom = xs[0], xs[1], ys[0], ys[1]
     box = (
         max(0, round(left)),
         max(0, round(top)),

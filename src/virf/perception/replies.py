@@ -65,7 +65,7 @@ def json_object(text: str) -> dict[str, Any]:
     for candidate in candidates:
         try:
             found = json.loads(candidate)
-        except (json.JSONDecodeError, RecursionError):
+        except (ValueError, RecursionError):  # ValueError: also an integer of 4,300+ digits
             continue
         if isinstance(found, dict):
             return found
@@ -73,7 +73,7 @@ def json_object(text: str) -> dict[str, Any]:
     for match in re.finditer(r"\{", text):
         try:
             found, _ = decoder.raw_decode(text, match.start())
-        except (json.JSONDecodeError, RecursionError):
+        except (ValueError, RecursionError):
             continue
         if isinstance(found, dict):
             return found
@@ -84,16 +84,21 @@ def _shown(text: str) -> str:
     return clip(" ".join(text.split()), 80)
 
 
+def _finite(value: Any) -> bool:
+    """A JSON number a float can hold (an integer of 400 digits cannot)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return False
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:
+        return False
+
+
 def _confidence(item: Mapping[str, Any], where: str, *keys: str) -> float | None:
     for key in keys:
         if key in item and item[key] is not None:
             value = item[key]
-            if (
-                isinstance(value, bool)
-                or not isinstance(value, int | float)
-                or not math.isfinite(value)
-                or not 0 <= value <= 1
-            ):
+            if not _finite(value) or not 0 <= value <= 1:
                 raise UnreadableReply(
                     f"{where}: '{key}' must be a number from 0 to 1, not {value!r}"
                 )
@@ -131,14 +136,7 @@ def read_detections(text: str) -> tuple[Detection, ...]:
         box = next((item[k] for k in _BOX_KEYS if item.get(k) is not None), None)
         bbox: tuple[float, float, float, float] | None = None
         if box is not None:
-            if (
-                not isinstance(box, list)
-                or len(box) != 4
-                or not all(
-                    isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-                    for v in box
-                )
-            ):
+            if not isinstance(box, list) or len(box) != 4 or not all(_finite(v) for v in box):
                 raise UnreadableReply(f"{where}: bbox must be four numbers, not {_shown(str(box))}")
             bbox = (float(box[0]), float(box[1]), float(box[2]), float(box[3]))
         track = item.get("id")
