@@ -204,3 +204,13 @@ def test_the_drafting_client_against_llama_cpps_server(
         assert "reply was not usable" in drafted.output
     audit = cli("kb", "audit", "-w", ws, "--json")
     assert json.loads(audit.stdout)["draft_requests"] == 1
+
+
+@needs_model
+def test_llama_cpps_context_error_is_a_failed_proposal(llama_server: str) -> None:
+    # Its 400 names the limit in words the client knows: a prompt too long
+    # is a failed proposal, not a retry and not a crash.
+    long = [{"role": "user", "content": "find Apple_1 " * 3000}]
+    with make_apprentice("openai:smollm2", base_url=llama_server, max_tokens=8) as model:
+        proposal = model.propose(long, task_id="t", iteration=1, method="virf")
+    assert not proposal.ok and "too long" in proposal.reason
