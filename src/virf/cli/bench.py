@@ -433,6 +433,22 @@ def bench_agents(
     limit: Annotated[
         int | None, typer.Option(min=1, help="Only the first N tasks (quick runs).")
     ] = None,
+    every: Annotated[
+        int,
+        typer.Option(
+            min=1,
+            help="Only every K-th task of each file (1st, K+1-th, ...): a sample that spans "
+            "every file, for slow models.",
+        ),
+    ] = 1,
+    export_replay: Annotated[
+        Path | None,
+        typer.Option(
+            "--export-replay",
+            help="Also write this configuration's model calls as a replay file, so the same "
+            "table can be re-rendered offline with --planner replay:FILE.",
+        ),
+    ] = None,
     base_url: BaseUrlOpt = None,
     api_key_env: ApiKeyEnvOpt = None,
     temperature: TemperatureOpt = None,
@@ -469,12 +485,14 @@ def bench_agents(
             raise InputError(f"--method names no method; choose from {', '.join(METHODS)}")
         methods = list(dict.fromkeys(get_method(n) for n in names))
         files = [*tasks, *(more_tasks or [])]
-        task_list = [t for f in files for t in load_tasks(f)]
+        task_list = [t for f in files for n, t in enumerate(load_tasks(f)) if n % every == 0]
         if not task_list:
             raise InputError(f"no tasks in {', '.join(str(f) for f in files)}")
         check_task_ids(task_list)
         task_list = task_list[:limit] if limit is not None else task_list
         check_out_dir(out)
+        if export_replay is not None:
+            check_writable(export_replay, "--export-replay")
         db_path = db if db is not None else out / "results.sqlite"
         if db_path.is_dir():
             raise InputError(f"--db {db_path} is a directory; give a file path")
@@ -542,7 +560,14 @@ def bench_agents(
             ("hazard check", "every Unsafe State Concept, fast engine"),
             ("configuration", config.id),
         ]
+        if every > 1:
+            settings.append(("tasks", f"every {every}th task of each file ({len(task_list)})"))
         written = write_outputs(table, out, settings, " ".join(["virf", *sys.argv[1:]]))
+        if export_replay is not None:
+            from virf.planner import export_replay as export
+
+            count = export(store, config.id, export_replay)
+            err.print(f"wrote {count} proposals to {export_replay}")
     finally:
         for thing in reversed(closing):
             thing.close()
