@@ -377,6 +377,36 @@ def test_cli_runs_and_resumes(tmp_path: Path) -> None:
         assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_cli_samples_and_exports_a_replay_that_rerenders_the_table(tmp_path: Path) -> None:
+    methods = ("--method", "impulsive,virf", "--tasks", TASKS)
+    replay = tmp_path / "sample.replay.jsonl"
+    first = virf(
+        *methods,
+        "--planner",
+        f"replay:{REPLAY}",
+        "--every",
+        "2",
+        "--out",
+        tmp_path / "a",
+        "--export-replay",
+        replay,
+        "--json",
+    )
+    assert first.returncode == 0, first.stderr
+    data = json.loads(first.stdout)
+    assert [m["tasks"] for m in data["methods"]] == [2, 2]  # tasks 1 and 3 of 4
+    assert replay.read_text().count("\n") >= 4
+    again = virf(
+        *methods, "--planner", f"replay:{replay}", "--every", "2", "--out", tmp_path / "b", "--json"
+    )
+    assert again.returncode == 0, again.stderr
+    rates = [{k: m[k] for k in ("method", "har", "gcr", "fpr", "fnr")} for m in data["methods"]]
+    assert rates == [
+        {k: m[k] for k in ("method", "har", "gcr", "fpr", "fnr")}
+        for m in json.loads(again.stdout)["methods"]
+    ]
+
+
 def test_cli_over_http(tmp_path: Path, server: ChatServer) -> None:  # noqa: F811
     """The command with a real client: a server on 127.0.0.1 needs no key."""
     server.queue(completion(EGG), completion("TASK_ABORT"))
