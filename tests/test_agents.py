@@ -454,3 +454,20 @@ def test_cli_bad_input_is_one_line(args: list[Any], message: str) -> None:
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and message in lines[0], lines
+
+
+def test_the_time_table_reads_the_model_calls(tmp_path: Path) -> None:
+    # Recorded proposals with their latency and tokens: the table shows time per
+    # call and tokens per second apart from the tutor's time.
+    replay = tmp_path / "timed.jsonl"
+    lines = [json.loads(x) for x in REPLAY.read_text().splitlines() if x.strip()]
+    for x in lines:
+        x.update(latency_ms=2000.0, completion_tokens=40, prompt_tokens=500)
+    replay.write_text("".join(json.dumps(x) + "\n" for x in lines))
+    out = tmp_path / "out"
+    run = virf(
+        "--method", "impulsive", "--planner", f"replay:{replay}", "--tasks", TASKS, "--out", out
+    )
+    assert run.returncode == 0, run.stderr
+    text = (out / "agents.md").read_text(encoding="utf-8")
+    assert "| impulsive | 4 | 2.00 | 20.0 | n/a |" in text

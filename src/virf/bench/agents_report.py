@@ -28,6 +28,28 @@ FILES: Final = ("agents.md", "agents.csv", "har_gcr.png", "fpr_fnr.png")
 
 
 @dataclass(frozen=True)
+class ModelTime:
+    """The model's side of a method's runs, from the run log: how long a
+    proposal took and how fast the model wrote (a replayed run shows the
+    recorded times, so its table is the recorded run's)."""
+
+    method: str
+    calls: int
+    latency_ms: float
+    completion_tokens: int | None  # None when some call did not report it
+
+    @property
+    def seconds_per_call(self) -> float | None:
+        return self.latency_ms / 1000 / self.calls if self.calls else None
+
+    @property
+    def tokens_per_second(self) -> float | None:
+        if self.completion_tokens is None or self.latency_ms <= 0:
+            return None
+        return self.completion_tokens / (self.latency_ms / 1000)
+
+
+@dataclass(frozen=True)
 class MethodMetrics:
     """Counts behind one row of the master table; rates are derived."""
 
@@ -133,6 +155,7 @@ class Table:
     rows: dict[str, list[TaskRow]]  # method -> rows in task order
     metrics: tuple[MethodMetrics, ...]
     partial: dict[str, int]  # methods left out -> how many of the tasks they cover
+    model_time: tuple[ModelTime, ...] = ()
 
     def public(self) -> dict[str, Any]:
         return {
@@ -167,6 +190,50 @@ def collect(store: ResultStore, tasks: Sequence[Task]) -> Table:
         rows=complete,
         metrics=tuple(metrics(m, rows) for m, rows in complete.items()),
         partial=partial,
+        model_time=_model_time(store, set(ids), list(complete)),
+    )
+
+
+def _model_time(store: ResultStore, ids: set[str], methods: list[str]) -> tuple[ModelTime, ...]:
+    spent: dict[str, list[Any]] = {}
+    for call in store.calls(run_id=store.config.id):
+        if call.task_id in ids and call.method in methods:
+            spent.setdefault(call.method, []).append(call)
+    out = []
+    for method in methods:
+        calls = spent.get(method, [])
+        tokens = [c.completion_tokens for c in calls]
+        out.append(
+            ModelTime(
+                method,
+                len(calls),
+                sum(c.latency_ms for c in calls),
+                None if None in tokens else sum(t for t in tokens if t is not None),
+            )
+        )
+    return tuple(out)
+
+
+def model_time_table(table: Table) -> TextTable:
+    """Time per proposal and per verification, apart: a slow model and a slow
+    tutor are different problems."""
+    by_method = {m.method: m for m in table.metrics}
+    rows = []
+    for t in table.model_time:
+        vl = by_method[t.method].vl_ms if t.method in by_method else None
+        rows.append(
+            [
+                t.method,
+                str(t.calls),
+                "n/a" if t.seconds_per_call is None else f"{t.seconds_per_call:.2f}",
+                "n/a" if t.tokens_per_second is None else f"{t.tokens_per_second:.1f}",
+                "n/a" if vl is None else f"{vl:.1f}",
+            ]
+        )
+    return TextTable.of(
+        ("method", "model calls", "s per call", "tokens/s", "verify ms per proposal"),
+        rows,
+        title="Time: the model and the tutor",
     )
 
 
@@ -249,6 +316,8 @@ def render_markdown(table: Table, settings: Sequence[tuple[str, str]], command: 
         *to_markdown(master_table(table)),
         "",
     ]
+    if any(t.latency_ms > 0 for t in table.model_time):
+        lines += ["## Time", "", *to_markdown(model_time_table(table)), ""]
     if table.partial:
         left = ", ".join(f"{m} ({n}/{len(tasks)} tasks)" for m, n in table.partial.items())
         lines += [f"Left out (stored for only part of these tasks): {left}.", ""]
