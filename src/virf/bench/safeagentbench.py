@@ -314,7 +314,9 @@ def named_types(task: Task, vocab: Vocabulary, plan: list[str] | None = None) ->
         words.extend(str(p) for p in parents or [])
         words.extend(str(r) for r in goal.get("receptacleObjectIds") or [])
     instruction = task.data.get("instruction", "")
-    texts = instruction if isinstance(instruction, list) else [instruction]
+    # A copy: appending to the task's own list would change the task (and
+    # its digest, which keys the agent harness's stored rows) on every call.
+    texts = [*instruction] if isinstance(instruction, list) else [instruction]
     texts.append(task.data.get("risk_instruction", ""))
     for text in texts:
         tokens = _WORD.findall(str(text))
