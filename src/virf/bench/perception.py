@@ -270,13 +270,9 @@ def score_case(
     gold_report = verifier.verify(gold, plan)
     score.gold_verdict = gold_report.status
     score.perceived_verdict = verifier.verify(perceived, plan).status
-    needed = {
-        Fact.from_triple(t)
-        for v in gold_report.violations
-        for t in v.triggering_facts
-        if Fact.from_triple(t) in gold.facts
-        and gold.facts[Fact.from_triple(t)] is not Provenance.PLAN
-    }
+    used = {Fact.from_triple(t) for v in gold_report.violations for t in v.triggering_facts}
+    # The scene's own facts, not the ones the plan's simulation produced.
+    needed = {f for f in used if gold.facts.get(f, Provenance.PLAN) is not Provenance.PLAN}
     inverse = {g: p for p, g in rename.items()}
     have = set(perceived.facts)
     missing = []

@@ -43,7 +43,7 @@ from virf.perception.graph import (
     TypeMatch,
     ViewInfo,
 )
-from virf.perception.replies import Seen
+from virf.perception.replies import Detection
 from virf.verify.questions import materials
 from virf.world.scene import VALUE_WORDS, build_scene
 
@@ -172,13 +172,22 @@ class _Object:
     sightings: list[tuple[int, Any]] = field(default_factory=list)  # (view index, SeenObject)
     name: str = ""
 
-    def x(self, readings: Sequence[ViewReading]) -> float:
-        centres = [
-            (o.detection.bbox[0] + o.detection.bbox[2]) / 2
-            for _, o in self.sightings
-            if o.detection.bbox is not None
-        ]
-        return sum(centres) / len(centres) if centres else float("inf")
+    @property
+    def centre(self) -> float:
+        """Mean x-centre over the views that boxed it (unboxed: rightmost)."""
+        centres = [_centre(o.detection) for _, o in self.sightings]
+        boxed = [c for c in centres if c != float("inf")]
+        return sum(boxed) / len(boxed) if boxed else float("inf")
+
+
+def _centre(detection: Detection) -> float:
+    box = detection.bbox
+    return (box[0] + box[2]) / 2 if box is not None else float("inf")
+
+
+def _weight(relation: GraphRelation) -> float:
+    """A relation's confidence, a reading without one counting as sure."""
+    return 1.0 if relation.confidence is None else relation.confidence
 
 
 class _Fusion:
@@ -242,22 +251,12 @@ class _Fusion:
                             made.append(tracks[track])
                         tracks[track].sightings.append((vi, seen))
                     continue
-                ordered = sorted(
-                    seen_list,
-                    key=lambda s: (
-                        (s.detection.bbox[0] + s.detection.bbox[2]) / 2
-                        if s.detection.bbox is not None
-                        else float("inf"),
-                        s.index,
-                    ),
-                )
+                ordered = sorted(seen_list, key=lambda s: (_centre(s.detection), s.index))
                 for rank, seen in enumerate(ordered):
                     if rank == len(made):
                         made.append(_Object(cls, label, m))
                     made[rank].sightings.append((vi, seen))
-            made.sort(
-                key=lambda o: (o.x(self.readings), o.sightings[0][0], o.sightings[0][1].index)
-            )
+            made.sort(key=lambda o: (o.centre, o.sightings[0][0], o.sightings[0][1].index))
             base = cls or _base_name(label, self.vocab)
             for j, obj in enumerate(made, start=1):
                 obj.name = f"{base}_{j}"
@@ -295,7 +294,6 @@ class _Fusion:
                 self.notes.append(f"{obj.name} in {view}: {seen.problem}; its material is unknown")
                 mats.append(Reading(value="UnknownMaterial", said="", confidence=None, view=view))
                 continue
-            said_states: list[Seen] = list(attrs.states)
             if attrs.material is not None:
                 m = material_term(attrs.material.value, self.vocab)
                 if m is None:
@@ -312,16 +310,15 @@ class _Fusion:
                         view=view,
                     )
                 )
-            for s in said_states:
+            for s in attrs.states:
                 st = state_term(s.value, self.vocab)
-                if st is None and material_term(s.value, self.vocab) not in (
-                    None,
-                    "UnknownMaterial",
-                ):
+                as_material = material_term(s.value, self.vocab) if st is None else None
+                if as_material not in (None, "UnknownMaterial"):
                     # 'metallic' said as a state is a material (the paper's noise test).
-                    m = material_term(s.value, self.vocab)
-                    assert m is not None
-                    mats.append(Reading(value=m, said=s.value, confidence=s.confidence, view=view))
+                    assert as_material is not None
+                    mats.append(
+                        Reading(value=as_material, said=s.value, confidence=s.confidence, view=view)
+                    )
                     continue
                 if st is None:
                     self.notes.append(
@@ -478,7 +475,7 @@ class _Fusion:
                 by_child[child].items(),
                 key=lambda kv: (
                     -len({r.view for r in kv[1]}),
-                    -max(1.0 if r.confidence is None else r.confidence for r in kv[1]),
+                    -max(_weight(r) for r in kv[1]),
                     min(view_rank[r.view] for r in kv[1]),
                     kv[0],
                 ),
@@ -510,10 +507,7 @@ class _Fusion:
                 cycle = path[path.index(node) :]
                 weakest = min(
                     cycle,
-                    key=lambda c: max(
-                        (1.0 if r.confidence is None else r.confidence)
-                        for r in by_child[c][chosen[c][:2]]
-                    ),
+                    key=lambda c: max(_weight(r) for r in by_child[c][chosen[c][:2]]),
                 )
                 p, o, _ = chosen.pop(weakest)
                 doubtful.add(weakest)
@@ -530,10 +524,7 @@ class _Fusion:
             # A hand holds one thing: the surest reading stays, as an assumption.
             surest = max(
                 things,
-                key=lambda c: max(
-                    1.0 if r.confidence is None else r.confidence
-                    for r in by_child[c][chosen[c][:2]]
-                ),
+                key=lambda c: max(_weight(r) for r in by_child[c][chosen[c][:2]]),
             )
             for other in things:
                 if other != surest:
@@ -568,9 +559,8 @@ def fuse(
     open_contents: bool = False,
     source: str = "",
 ) -> Perception:
-    """One scene graph and one scene from every view's readings."""
-    if not 0 <= threshold <= 1:
-        raise InputError(f"confidence threshold {threshold!r} must be from 0 to 1")
+    """One scene graph and one scene from every view's readings (the
+    threshold is checked by ``perceive``, before any model call)."""
     if not any(r.objects for r in readings):
         raise InputError(
             "the vision model saw no objects in "
