@@ -85,6 +85,13 @@ def test_the_local_model_answers_the_same_twice() -> None:
     messages = [{"role": "user", "content": "Put the mug in the sink. Objects: Mug_1, Sink_1."}]
     with make_apprentice(f"local:{MODEL}") as model:
         first = model.propose(messages, task_id="t", iteration=1, method="virf")
+        # Another prompt in between: the second answer resumes from a stored state.
+        model.propose(
+            [{"role": "user", "content": "Open the fridge."}],
+            task_id="u",
+            iteration=1,
+            method="virf",
+        )
         second = model.propose(messages, task_id="t", iteration=1, method="virf")
     assert first.ok and first.text == second.text
     assert first.completion_tokens and first.prompt_tokens

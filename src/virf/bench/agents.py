@@ -501,12 +501,17 @@ class Harness:
         tasks: Sequence[Task],
         on_row: Callable[[TaskRow, bool], None] | None = None,
     ) -> list[TaskRow]:
-        """Every method on every task, methods outermost; rows already stored
-        are reused (``on_row`` gets ``resumed=True`` for them)."""
+        """Every method on every task, tasks outermost; rows already stored
+        are reused (``on_row`` gets ``resumed=True`` for them).
+
+        Tasks outermost because a local model resumes from the longest prompt
+        prefix it has evaluated, and one task's methods share theirs (several
+        open with the very same request); an interrupted run also leaves every
+        method with the same tasks done."""
         check_task_ids(tasks)
         out = []
-        for method in methods:
-            for task in tasks:
+        for task in tasks:
+            for method in methods:
                 stored = self.store.get(method.name, task_id(task))
                 if stored is not None:
                     if stored.task_sha256 != task_digest(task):

@@ -213,9 +213,7 @@ class Apprentice(ABC):
 
         A request still running when ``deadline`` passes is abandoned and
         comes back as a failed proposal; offline apprentices answer at once."""
-        return self._propose(
-            check_request(messages, task_id, iteration, method, deadline, images)
-        )
+        return self._propose(check_request(messages, task_id, iteration, method, deadline, images))
 
     @abstractmethod
     def _propose(self, request: ProposalRequest) -> Proposal: ...
