@@ -365,6 +365,36 @@ def test_files_that_are_not_images_are_refused_before_any_call(
     assert model.requests == []
 
 
+def test_a_photo_stored_rotated_is_sent_upright(tmp_path: Path) -> None:
+    from virf.perception.images import crop, load_view
+
+    # Stored 40 wide and 20 high, with a red left half; EXIF 6 means "turn
+    # 90 degrees clockwise to view", so upright it is 20 wide and 40 high,
+    # red on top.
+    stored = Image.new("RGB", (40, 20), "white")
+    ImageDraw.Draw(stored).rectangle((0, 0, 19, 19), fill="red")
+    exif = Image.Exif()
+    exif[0x0112] = 6
+    photo = tmp_path / "phone.jpg"
+    stored.save(photo, format="JPEG", exif=exif, quality=95)
+    view = load_view(photo)
+    assert (view.width, view.height) == (20, 40)
+    assert view.image.media_type == "image/png"
+    with Image.open(io.BytesIO(view.image.data)) as sent:
+        assert sent.size == (20, 40)
+        top, bottom = sent.convert("RGB").getpixel((10, 5)), sent.convert("RGB").getpixel((10, 35))
+    assert top[0] > 200 > top[1] and min(bottom) > 200
+    top_half = crop(view, (0, 0, 20, 20), "top")
+    with Image.open(io.BytesIO(top_half.data)) as part:
+        assert part.convert("RGB").getpixel((10, 10))[1] < 60  # red, not white
+    # The same file gives the same view, so its replay key is stable.
+    assert load_view(photo).key == view.key
+    # A photo without the tag is sent as it is.
+    plain = tmp_path / "plain.jpg"
+    stored.save(plain, format="JPEG", quality=95)
+    assert load_view(plain).image.data == plain.read_bytes()
+
+
 def test_receptacles_seen_surely_have_closed_contents_unless_asked_not_to(
     tmp_path: Path, vocab: Vocabulary, catalogue: Catalogue
 ) -> None:

@@ -1,8 +1,11 @@
 """Camera images as the vision model receives them: whole views, and crops.
 
 Pillow reads the file, so a file that is not an image fails here with one
-line, before any model call; the bytes sent are the file's own (a crop is
-re-encoded as PNG, losslessly).
+line, before any model call.  The bytes sent are the file's own, except for
+a photo whose EXIF tag says it is stored rotated or mirrored (phones do
+this): it is turned upright and sent as a PNG, so the model and the crops
+see the same pixels whether or not the model honours the tag.  A crop is
+re-encoded as PNG, losslessly.
 """
 
 from __future__ import annotations
@@ -12,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Final
 
-from PIL import Image, UnidentifiedImageError
+from PIL import Image, ImageOps, UnidentifiedImageError
 
 from virf.errors import InputError, printable, read_input_bytes
 from virf.planner import Attachment
@@ -26,6 +29,8 @@ MEDIA_TYPES: Final = {
     "WEBP": "image/webp",
     "GIF": "image/gif",
 }
+# EXIF's orientation tag; 1 is upright.
+ORIENTATION_TAG: Final = 0x0112
 # A crop keeps some surroundings: the material of a rim or handle is often
 # read from what is around it.
 CROP_MARGIN: Final = 0.1
@@ -58,6 +63,12 @@ def load_view(path: str | Path) -> View:
             # Decoded in full: a truncated file must fail here, before any
             # request, not when an object is cropped from it.
             img.load()
+            if img.getexif().get(ORIENTATION_TAG, 1) != 1:
+                upright = ImageOps.exif_transpose(img)
+                out = io.BytesIO()
+                upright.save(out, format="PNG")
+                kind, data = "PNG", out.getvalue()
+                width, height = upright.size
     except Image.DecompressionBombError:
         raise InputError(
             f"image {printable(str(p))} would decode to more than "
