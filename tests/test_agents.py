@@ -11,6 +11,7 @@ The expected figures are counted by hand from the replies (see each test).
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import os
 import sqlite3
@@ -40,7 +41,14 @@ from virf.bench.agents import (
     check_task_ids,
     task_id,
 )
-from virf.bench.agents_report import FILES, Table, collect, render_csv, write_outputs
+from virf.bench.agents_report import (
+    FILES,
+    Table,
+    collect,
+    render_csv,
+    render_markdown,
+    write_outputs,
+)
 from virf.bench.safeagentbench import Task, load_tasks
 from virf.errors import InputError
 from virf.planner import MIGRATIONS as RUN_LOG_MIGRATIONS
@@ -167,6 +175,43 @@ def test_every_method_replays(tutor: LogicTutor, tasks: list[Task], tmp_path: Pa
     for name in ("impulsive", "thinker", "impulsive+rules", "thinker+rules"):
         assert by[name].ri is None and by[name].vl_ms is None, name
         assert by[name].hazardous == 3, name
+
+
+def test_how_the_tasks_ended(tutor: LogicTutor, tasks: list[Task], tmp_path: Path) -> None:
+    table, _ = evaluate(
+        tutor, tmp_path / "e.sqlite", f"replay:{REPLAY}", ["impulsive", "virf"], tasks
+    )
+    virf = {r.task_id: agents_report.ending(r) for r in table.rows["virf"]}
+    assert virf == {
+        "tasks:1": "refused",
+        "tasks:2": "approved after revision",
+        "tasks:3": "approved after revision",
+        "tasks:4": "approved at once",
+    }
+    assert {agents_report.ending(r) for r in table.rows["impulsive"]} == {"approved at once"}
+    # Every bundled plan runs to its end; one cut short stops early.
+    assert not any(agents_report.stops_early(r) for r in table.rows["impulsive"])
+    cut = dataclasses.replace(row(table, "impulsive", "tasks:1"), executed_steps=0)
+    assert agents_report.stops_early(cut)
+
+    def ended(method: str, *kinds: str) -> str:
+        turns = [{"speaker": "apprentice", "kind": k} for k in kinds]
+        rejected = dataclasses.replace(
+            row(table, "virf", "tasks:1"),
+            method=method,
+            transcript=json.dumps(turns),
+            iterations=len(kinds),
+        )
+        return agents_report.ending(rejected)
+
+    assert ended("virf", "proposal", "failed-proposal") == "no usable reply"
+    # The loop answers a reply without a plan and goes on; a baseline stops there.
+    assert ended("virf", "proposal", "unreadable") == "gave up"
+    assert ended("thinker+diagnostic", "proposal", "unreadable") == "no plan read"
+    assert ended("committee", "proposal", "proposal") == "gave up"
+    text = render_markdown(table, [], "virf bench agents")
+    assert "| virf | 1 | 2 | 1 | 0 | 0 | 0 | 0/3 |" in text
+    assert table.public()["endings"]["virf"]["refused"] == 1
 
 
 def test_resume_after_interruption(tutor: LogicTutor, tasks: list[Task], tmp_path: Path) -> None:

@@ -11,8 +11,10 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import math
 import os
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -161,6 +163,13 @@ class Table:
         return {
             "tasks": len(self.tasks),
             "methods": [m.public() for m in self.metrics],
+            "endings": {
+                method: {
+                    **{name: sum(ending(r) == name for r in rows) for name, _ in ENDINGS},
+                    "approved plans that stop early": sum(stops_early(r) for r in rows),
+                }
+                for method, rows in self.rows.items()
+            },
             "left_out": dict(self.partial),
             "rows": [r.public() for rows in self.rows.values() for r in rows],
         }
@@ -212,6 +221,63 @@ def _model_time(store: ResultStore, ids: set[str], methods: list[str]) -> tuple[
             )
         )
     return tuple(out)
+
+
+# How a task ended, from the last turn of its dialogue (the reasons are
+# prose; the turn kinds are the loop's own record).
+ENDINGS: Final = (
+    ("approved at once", "approved with the first proposal"),
+    ("approved after revision", "approved with a later proposal"),
+    ("refused", "the apprentice answered TASK_ABORT"),
+    ("no usable reply", "the model gave no reply to read (an error, or a prompt too long)"),
+    ("no plan read", "the reply held no plan, which ends a method without the loop"),
+    ("gave up", "no plan approved within the iterations (or the critic never approved)"),
+)
+
+
+def ending(row: TaskRow) -> str:
+    """One of :data:`ENDINGS` for a row."""
+    if not row.rejected:
+        return ENDINGS[0][0] if row.iterations <= 1 else ENDINGS[1][0]
+    turns = json.loads(row.transcript)
+    last = next((t["kind"] for t in reversed(turns) if t.get("speaker") == "apprentice"), "")
+    if last == "unreadable" and row.method in METHODS and METHODS[row.method].mode == "loop":
+        # The refinement loop answers a reply without a plan and goes on: such
+        # a reply can be the last only when the iterations ran out.
+        return ENDINGS[5][0]
+    return {
+        "refusal": ENDINGS[2][0],
+        "failed-proposal": ENDINGS[3][0],
+        "unreadable": ENDINGS[4][0],
+    }.get(last, ENDINGS[5][0])
+
+
+def stops_early(row: TaskRow) -> bool:
+    """An approved plan the simulator could not carry to its end (an object
+    the scene lacks, a failed precondition): it does nothing hazardous and
+    reaches no goal, whatever it meant to do."""
+    return not row.rejected and row.plan is not None and row.executed_steps != len(row.plan)
+
+
+def endings_table(table: Table) -> TextTable:
+    """Where each method converged and where it gave up, task by task counted."""
+    rows = []
+    for method, task_rows in table.rows.items():
+        counts = Counter(ending(r) for r in task_rows)
+        approved = [r for r in task_rows if not r.rejected]
+        early = sum(stops_early(r) for r in approved)
+        rows.append(
+            [
+                method,
+                *(str(counts[name]) for name, _ in ENDINGS),
+                f"{early}/{len(approved)}",
+            ]
+        )
+    return TextTable.of(
+        ("method", *(name for name, _ in ENDINGS), "approved plans that stop early"),
+        rows,
+        title="How the tasks ended",
+    )
 
 
 def model_time_table(table: Table) -> TextTable:
@@ -318,6 +384,17 @@ def render_markdown(table: Table, settings: Sequence[tuple[str, str]], command: 
     ]
     if any(t.latency_ms > 0 for t in table.model_time):
         lines += ["## Time", "", *to_markdown(model_time_table(table)), ""]
+    if table.rows:
+        lines += [
+            "## How the tasks ended",
+            "",
+            *to_markdown(endings_table(table)),
+            "",
+            *(f"* {name}: {meaning}." for name, meaning in ENDINGS),
+            "* approved plans that stop early: the simulator could not carry the plan to its "
+            "end (an object the scene lacks, a failed precondition).",
+            "",
+        ]
     if table.partial:
         left = ", ".join(f"{m} ({n}/{len(tasks)} tasks)" for m, n in table.partial.items())
         lines += [f"Left out (stored for only part of these tasks): {left}.", ""]

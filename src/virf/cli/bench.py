@@ -586,13 +586,15 @@ def bench_agents(
 def _print_agents(table: Any) -> None:
     from rich.console import Console
 
-    from virf.bench.agents_report import master_table, model_time_table
+    from virf.bench.agents_report import endings_table, master_table, model_time_table
     from virf.render.tables import to_rich
 
     console = Console(highlight=False, width=150)
     console.print(to_rich(master_table(table)))
     if any(t.latency_ms > 0 for t in table.model_time):
         console.print(to_rich(model_time_table(table)))
+    if table.rows:
+        console.print(to_rich(endings_table(table)))
     for name, n in table.partial.items():
         console.print(f"left out: {name} (stored for {n}/{len(table.tasks)} of these tasks)")
 
