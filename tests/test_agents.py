@@ -44,6 +44,7 @@ from virf.bench.agents import (
 from virf.bench.agents_report import (
     FILES,
     Table,
+    calls_behind,
     collect,
     render_csv,
     render_markdown,
@@ -52,7 +53,7 @@ from virf.bench.agents_report import (
 from virf.bench.safeagentbench import Task, load_tasks
 from virf.errors import InputError
 from virf.planner import MIGRATIONS as RUN_LOG_MIGRATIONS
-from virf.planner import Apprentice, make_apprentice
+from virf.planner import Apprentice, export_replay, make_apprentice
 from virf.planner.methods import METHODS, get_method
 
 TASKS = EXAMPLES_DIR / "agents" / "tasks.jsonl"
@@ -212,6 +213,47 @@ def test_how_the_tasks_ended(tutor: LogicTutor, tasks: list[Task], tmp_path: Pat
     text = render_markdown(table, [], "virf bench agents")
     assert "| virf | 1 | 2 | 1 | 0 | 0 | 0 | 0/3 |" in text
     assert table.public()["endings"]["virf"]["refused"] == 1
+
+
+def test_an_attempt_run_again_counts_once(
+    tutor: LogicTutor, tasks: list[Task], tmp_path: Path
+) -> None:
+    """A task interrupted after its model calls were logged is run again on
+    resume: the export and the time table keep the last attempt only."""
+    db = tmp_path / "again.sqlite"
+    planner = f"replay:{REPLAY}"
+    evaluate(tutor, db, planner, ["virf"], tasks)
+    cfg = AgentConfig.build(planner)
+    with ResultStore(db, cfg) as store:
+        calls_before = len(store.calls(run_id=cfg.id))
+        store._conn.execute("DELETE FROM agent_results WHERE task_id = 'tasks:3'")
+        store._conn.commit()
+    table, calls_after = evaluate(tutor, db, planner, ["virf"], tasks)
+    assert calls_after > calls_before  # tasks:3 asked twice in the log
+    out = tmp_path / "again.jsonl"
+    with ResultStore(db, cfg) as store:
+        count = export_replay(store, cfg.id, out)
+        only_egg = export_replay(
+            store, cfg.id, tmp_path / "egg.jsonl", keep=calls_behind({"tasks:1"}, {"virf"})
+        )
+    assert count == calls_before and only_egg == 2  # the egg: a plan, then a refusal
+    (timed,) = table.model_time
+    assert timed.calls == calls_before
+    # The export re-renders the same table.
+    again, _ = evaluate(tutor, tmp_path / "r.sqlite", f"replay:{out}", ["virf"], tasks)
+    assert figures(again, "virf") | {"vl_ms": 0} == figures(table, "virf") | {"vl_ms": 0}
+
+
+def test_local_settings_enter_the_configuration(tmp_path: Path) -> None:
+    plain = AgentConfig.build("local:smollm2-135m", environ={})
+    short = AgentConfig.build("local:smollm2-135m", environ={}, sampling={"max_tokens": 64})
+    assert plain.id != short.id and plain.sampling is None
+    model = tmp_path / "m.gguf"
+    model.write_bytes(b"GGUF one")
+    first = AgentConfig.build(f"local:{model}", environ={})
+    model.write_bytes(b"GGUF two")
+    assert first.planner.startswith("local:sha256=")
+    assert AgentConfig.build(f"local:{model}", environ={}).id != first.id
 
 
 def test_resume_after_interruption(tutor: LogicTutor, tasks: list[Task], tmp_path: Path) -> None:

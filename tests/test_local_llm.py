@@ -54,6 +54,41 @@ def test_local_planner_settings_are_checked() -> None:
         make_apprentice("local:gpt-4")
     with pytest.raises(InputError, match="'base_url' is not a setting of a local planner"):
         make_apprentice(f"local:{MODEL}", base_url="http://127.0.0.1:1/v1")
+    # Checked before any model loads; 0 tokens would mean "until the context is full".
+    with pytest.raises(InputError, match="max_tokens 0 must be an integer >= 1"):
+        make_apprentice(f"local:{MODEL}", max_tokens=0)
+    with pytest.raises(InputError, match=r"temperature 3\.0 is out of range"):
+        make_apprentice(f"local:{MODEL}", temperature=3.0)
+
+
+def test_a_missing_binding_names_the_make_target(monkeypatch: pytest.MonkeyPatch) -> None:
+    # The weights may be there; without the binding the message still says what to run.
+    from virf.planner import local
+
+    monkeypatch.setitem(sys.modules, "llama_cpp", None)
+    with pytest.raises(EnvironmentProblem, match=r"llama-cpp-python; run 'make local-llm'"):
+        local._llama()
+
+
+def test_worked_examples_go_only_before_a_planning_prompt() -> None:
+    from types import SimpleNamespace
+
+    from virf.planner.apprentices import ProposalRequest
+    from virf.planner.local import LocalApprentice, LocalSettings, few_shot
+    from virf.planner.prompting import template
+
+    model = SimpleNamespace(settings=LocalSettings(MODEL))
+    planning = template("apprentice").format(
+        instruction="Heat the mug.", objects="- Mug_1", actions="find X", rules=""
+    )
+    for text, examples in (
+        (planning, few_shot(False)),
+        (planning + "\n" + template("thinker"), few_shot(True)),
+        ("You review robot plans for safety. PLAN: find Mug_1", ()),
+    ):
+        request = ProposalRequest((("system", "s"), ("user", text)), "t", 0, "virf")
+        sent = LocalApprentice._sent(model, request)  # type: ignore[arg-type]
+        assert sent.messages == (("system", "s"), *examples, ("user", text))
 
 
 @needs_model
@@ -76,6 +111,8 @@ def test_virf_plan_with_the_local_model(cli: Any) -> None:
     assert data["outcome"] in ("APPROVED", "TASK_REJECTED")
     proposals = [t for t in data["transcript"] if t["speaker"] == "apprentice"]
     assert proposals and all(t["text"].strip() for t in proposals)
+    # The model answered: a failed call's turn carries its reason as text.
+    assert any(t["kind"] != "failed-proposal" for t in proposals)
     if data["outcome"] == "APPROVED":
         assert [t for t in data["transcript"] if t["kind"] == "report"][-1]["status"] == "SAFE"
 

@@ -160,7 +160,8 @@ def check_task_ids(tasks: Iterable[Task]) -> None:
 
 def source_digest(path: str | Path) -> str:
     try:
-        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+        with Path(path).open("rb") as f:  # streamed: a model file may be gigabytes
+            return hashlib.file_digest(f, "sha256").hexdigest()
     except OSError as exc:
         raise InputError(f"cannot read {path}: {exc.strerror}") from None
 
@@ -174,6 +175,10 @@ def canonical_planner(spec: str | None) -> str | None:
     kind, sep, rest = spec.strip().partition(":")
     if kind == "replay" and sep and rest.strip():
         return f"replay:sha256={source_digest(rest.strip())}"
+    if kind == "local" and sep and rest.strip().lower().endswith(".gguf"):
+        # A model file by its content, as a recording: another file under the
+        # same path is another model.
+        return f"local:sha256={source_digest(Path(rest.strip()).expanduser())}"
     return spec.strip()
 
 
@@ -213,7 +218,10 @@ class AgentConfig:
         url = (base_url or env.get("OPENAI_BASE_URL") or user.get("base_url")) if online else None
         # The sampling settings the client will use: the command line's over the file's.
         chosen = {k: v for k, v in user.items() if k not in ("api_key", "base_url")}
-        if online:
+        # A local model takes the command line's sampling too (not the user
+        # config's, which is the HTTP client's).
+        local = any(s is not None and s.strip().startswith("local:") for s in (planner, critic))
+        if online or local:
             chosen.update(sampling or {})
         planner_key = canonical_planner(planner)
         assert planner_key is not None

@@ -15,7 +15,7 @@ import json
 import math
 import os
 from collections import Counter
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
@@ -24,6 +24,7 @@ from virf.bench.agents import ResultStore, TaskRow, task_digest, task_id
 from virf.bench.safeagentbench import Task
 from virf.errors import InputError
 from virf.planner.methods import METHODS
+from virf.planner.runlog import CallRecord, last_attempts
 from virf.render.tables import TextTable, to_markdown
 
 FILES: Final = ("agents.md", "agents.csv", "har_gcr.png", "fpr_fnr.png")
@@ -32,7 +33,7 @@ FILES: Final = ("agents.md", "agents.csv", "har_gcr.png", "fpr_fnr.png")
 @dataclass(frozen=True)
 class ModelTime:
     """The model's side of a method's runs, from the run log: how long a
-    proposal took and how fast the model wrote (a replayed run shows the
+    proposal took and how many reply tokens came per second of it (a replayed run shows the
     recorded times, so its table is the recorded run's)."""
 
     method: str
@@ -203,10 +204,20 @@ def collect(store: ResultStore, tasks: Sequence[Task]) -> Table:
     )
 
 
+def calls_behind(ids: Collection[str], methods: Collection[str]) -> Callable[[CallRecord], bool]:
+    """Which logged calls stand behind rows of these tasks and methods: the
+    methods' own calls and their committee critics' (``METHOD-critic``)."""
+    return lambda c: c.task_id in ids and c.method.removesuffix("-critic") in methods
+
+
 def _model_time(store: ResultStore, ids: set[str], methods: list[str]) -> tuple[ModelTime, ...]:
-    spent: dict[str, list[Any]] = {}
-    for call in store.calls(run_id=store.config.id):
-        if call.task_id in ids and call.method in methods:
+    spent: dict[str, list[CallRecord]] = {}
+    behind = calls_behind(ids, methods)
+    # Each task's last attempt only: an interrupted one was run again, and its
+    # calls are not behind the stored row.
+    for call in last_attempts(c for c in store.calls(run_id=store.config.id) if behind(c)):
+        # The critic's time is the committee's verification, not its planning.
+        if call.method in methods:
             spent.setdefault(call.method, []).append(call)
     out = []
     for method in methods:
@@ -215,7 +226,9 @@ def _model_time(store: ResultStore, ids: set[str], methods: list[str]) -> tuple[
         out.append(
             ModelTime(
                 method,
-                len(calls),
+                # Requests, re-asks included: a replay file keeps a re-asked
+                # proposal as one entry with its attempts, the live log as two.
+                sum(c.attempts for c in calls),
                 sum(c.latency_ms for c in calls),
                 None if None in tokens else sum(t for t in tokens if t is not None),
             )
@@ -297,7 +310,9 @@ def model_time_table(table: Table) -> TextTable:
             ]
         )
     return TextTable.of(
-        ("method", "model calls", "s per call", "tokens/s", "verify ms per proposal"),
+        # Reply tokens over the whole call, prompt reading included: what a
+        # user waits per token, not the model's writing speed alone.
+        ("method", "model calls", "s per call", "reply tokens/s", "verify ms per proposal"),
         rows,
         title="Time: the model and the tutor",
     )

@@ -402,7 +402,10 @@ def bench_agents(
     planner: Annotated[
         str,
         typer.Option(
-            "--planner", "-p", help="openai:MODEL (any OpenAI-compatible server) or replay:FILE."
+            "--planner",
+            "-p",
+            help="openai:MODEL (any OpenAI-compatible server), local:smollm2-135m or "
+            "local:PATH.gguf (in-process, after make local-llm) or replay:FILE.",
         ),
     ],
     tasks: Annotated[
@@ -469,7 +472,7 @@ def bench_agents(
     from rich.console import Console
 
     from virf.api import LogicTutor
-    from virf.bench.agents import AgentConfig, Harness, ResultStore, check_task_ids
+    from virf.bench.agents import AgentConfig, Harness, ResultStore, check_task_ids, task_id
     from virf.bench.agents_report import check_out_dir, collect, write_outputs
     from virf.bench.safeagentbench import load_tasks
     from virf.errors import InputError
@@ -493,6 +496,15 @@ def bench_agents(
         check_out_dir(out)
         if export_replay is not None:
             check_writable(export_replay, "--export-replay")
+            source = planner.strip().partition(":")
+            if (
+                source[0] == "replay"
+                and Path(source[2].strip()).resolve() == export_replay.resolve()
+            ):
+                raise InputError(
+                    f"--export-replay {export_replay} is the recording being replayed; "
+                    "write to another file"
+                )
         db_path = db if db is not None else out / "results.sqlite"
         if db_path.is_dir():
             raise InputError(f"--db {db_path} is a directory; give a file path")
@@ -560,14 +572,20 @@ def bench_agents(
             ("hazard check", "every Unsafe State Concept, fast engine"),
             ("configuration", config.id),
         ]
-        if every > 1:
-            settings.append(("tasks", f"every {every}th task of each file ({len(task_list)})"))
-        written = write_outputs(table, out, settings, " ".join(["virf", *sys.argv[1:]]))
+        if every > 1 or limit is not None:
+            sample = f"every {every}-th task of each file" if every > 1 else "every task"
+            if limit is not None:
+                sample += f", the first {limit} of them"
+            settings.append(("sample", sample))
         if export_replay is not None:
+            from virf.bench.agents_report import calls_behind
             from virf.planner import export_replay as export
 
-            count = export(store, config.id, export_replay)
+            # First, so that a log that cannot be exported leaves no table.
+            behind = calls_behind({task_id(t) for t in task_list}, set(table.rows))
+            count = export(store, config.id, export_replay, keep=behind)
             err.print(f"wrote {count} proposals to {export_replay}")
+        written = write_outputs(table, out, settings, " ".join(["virf", *sys.argv[1:]]))
     finally:
         for thing in reversed(closing):
             thing.close()

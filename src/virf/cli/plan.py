@@ -38,7 +38,8 @@ def plan(
         typer.Option(
             "--planner",
             "-p",
-            help="openai:MODEL (any OpenAI-compatible server) or replay:FILE (a recorded run).",
+            help="openai:MODEL (any OpenAI-compatible server), local:smollm2-135m or "
+            "local:PATH.gguf (in-process, after make local-llm) or replay:FILE (a recorded run).",
         ),
     ],
     scene: Annotated[

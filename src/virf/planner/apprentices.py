@@ -27,7 +27,7 @@ import base64
 import hashlib
 import json
 from abc import ABC, abstractmethod
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
@@ -37,7 +37,7 @@ from pydantic import Field
 
 from virf.errors import InputError, Record, Says, read_input_file
 from virf.planner.deadline import Deadline
-from virf.planner.runlog import CallRecord, RunLog
+from virf.planner.runlog import CallRecord, RunLog, last_attempts
 
 ROLES: Final = ("system", "user", "assistant")
 
@@ -382,15 +382,24 @@ class ReplayApprentice(Apprentice):
         return found
 
 
-def export_replay(run_log: RunLog, run_id: str, path: str | Path) -> int:
+def export_replay(
+    run_log: RunLog,
+    run_id: str,
+    path: str | Path,
+    keep: Callable[[CallRecord], bool] | None = None,
+) -> int:
     """Write the proposals of one logged run as a replay file; returns how many.
 
     A re-asked proposal spans several logged calls; the last call carries the
     outcome, and the usage of all of them is summed, as ``propose`` reported it.
+    Only each task's last attempt is written (:func:`last_attempts`), and only
+    the calls ``keep`` accepts.  Nothing is written when the log cannot be
+    exported.
     """
     grouped: dict[tuple[str, int, str], list[CallRecord]] = {}
     order: list[tuple[str, int, str]] = []
-    for call in run_log.calls(run_id=run_id):
+    chosen = [c for c in run_log.calls(run_id=run_id) if keep is None or keep(c)]
+    for call in last_attempts(chosen):
         key = (call.task_id, call.iteration, call.method)
         if call.ask == 1:
             if key in grouped:

@@ -129,24 +129,24 @@ class ClientSettings:
                 f"API key variable name '{clip(self.api_key_env)}' is not a valid environment "
                 "variable name; pass e.g. --api-key-env GEMINI_API_KEY"
             )
-        if self.temperature is not None and not _number_in(self.temperature, 0.0, 2.0):
+        if self.temperature is not None and not number_in(self.temperature, 0.0, 2.0):
             raise InputError(f"temperature {self.temperature!r} is out of range; choose 0 to 2")
-        if self.top_p is not None and not (_number_in(self.top_p, 0.0, 1.0) and self.top_p > 0):
+        if self.top_p is not None and not (number_in(self.top_p, 0.0, 1.0) and self.top_p > 0):
             raise InputError(f"top_p {self.top_p!r} is out of range; choose a value in (0, 1]")
-        if self.max_tokens is not None and not _int_at_least(self.max_tokens, 1):
+        if self.max_tokens is not None and not int_at_least(self.max_tokens, 1):
             raise InputError(f"max_tokens {self.max_tokens!r} must be an integer >= 1")
         if self.max_tokens_field not in ("max_tokens", "max_completion_tokens"):
             raise InputError(
                 f"max_tokens_field '{clip(str(self.max_tokens_field))}' is unknown; "
                 "choose max_tokens or max_completion_tokens"
             )
-        if not _number_in(self.timeout_s, 0.0, 86_400.0) or self.timeout_s <= 0:
+        if not number_in(self.timeout_s, 0.0, 86_400.0) or self.timeout_s <= 0:
             raise InputError(
                 f"timeout {self.timeout_s!r} must be a number of seconds in (0, 86400]"
             )
-        if self.seed is not None and not _int_at_least(self.seed, 0):
+        if self.seed is not None and not int_at_least(self.seed, 0):
             raise InputError(f"seed {self.seed!r} must be an integer >= 0")
-        if not _int_at_least(self.max_retries, 0):
+        if not int_at_least(self.max_retries, 0):
             raise InputError(f"max_retries {self.max_retries!r} must be an integer >= 0")
         if self.base_url is not None:
             _check_base_url(self.base_url, "base URL")
@@ -193,11 +193,11 @@ class Endpoint:
     key_source: str
 
 
-def _number_in(value: object, low: float, high: float) -> bool:
+def number_in(value: object, low: float, high: float) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool) and low <= value <= high
 
 
-def _int_at_least(value: object, low: int) -> bool:
+def int_at_least(value: object, low: int) -> bool:
     return isinstance(value, int) and not isinstance(value, bool) and value >= low
 
 
@@ -271,7 +271,7 @@ def _usage(data: Mapping[str, Any], name: str) -> int | None:
     if not isinstance(usage, dict):
         return None
     value = usage.get(name)
-    return value if _int_at_least(value, 0) else None
+    return value if int_at_least(value, 0) else None
 
 
 def _content(message: Mapping[str, Any]) -> str | None:

