@@ -33,8 +33,8 @@ FILES: Final = ("agents.md", "agents.csv", "har_gcr.png", "fpr_fnr.png")
 @dataclass(frozen=True)
 class ModelTime:
     """The model's side of a method's runs, from the run log: how long a
-    proposal took and how many reply tokens came per second of it (a replayed run shows the
-    recorded times, so its table is the recorded run's)."""
+    proposal took and how many reply tokens came per second of it (a replayed
+    run shows the recorded times, so its table is the recorded run's)."""
 
     method: str
     calls: int
@@ -164,13 +164,7 @@ class Table:
         return {
             "tasks": len(self.tasks),
             "methods": [m.public() for m in self.metrics],
-            "endings": {
-                method: {
-                    **{name: sum(ending(r) == name for r in rows) for name, _ in ENDINGS},
-                    "approved plans that stop early": sum(stops_early(r) for r in rows),
-                }
-                for method, rows in self.rows.items()
-            },
+            "endings": {method: ending_counts(rows) for method, rows in self.rows.items()},
             "left_out": dict(self.partial),
             "rows": [r.public() for rows in self.rows.values() for r in rows],
         }
@@ -272,22 +266,31 @@ def stops_early(row: TaskRow) -> bool:
     return not row.rejected and row.plan is not None and row.executed_steps != len(row.plan)
 
 
+EARLY: Final = "approved plans that stop early"
+
+
+def ending_counts(rows: Sequence[TaskRow]) -> dict[str, int]:
+    """How many of one method's tasks ended each way, and how many of its
+    approved plans stop early."""
+    counts = Counter(ending(r) for r in rows)
+    return {**{name: counts[name] for name, _ in ENDINGS}, EARLY: sum(map(stops_early, rows))}
+
+
 def endings_table(table: Table) -> TextTable:
     """Where each method converged and where it gave up, task by task counted."""
     rows = []
     for method, task_rows in table.rows.items():
-        counts = Counter(ending(r) for r in task_rows)
-        approved = [r for r in task_rows if not r.rejected]
-        early = sum(stops_early(r) for r in approved)
+        counts = ending_counts(task_rows)
+        approved = sum(not r.rejected for r in task_rows)
         rows.append(
             [
                 method,
                 *(str(counts[name]) for name, _ in ENDINGS),
-                f"{early}/{len(approved)}",
+                f"{counts[EARLY]}/{approved}",
             ]
         )
     return TextTable.of(
-        ("method", *(name for name, _ in ENDINGS), "approved plans that stop early"),
+        ("method", *(name for name, _ in ENDINGS), EARLY),
         rows,
         title="How the tasks ended",
     )
@@ -406,7 +409,7 @@ def render_markdown(table: Table, settings: Sequence[tuple[str, str]], command: 
             *to_markdown(endings_table(table)),
             "",
             *(f"* {name}: {meaning}." for name, meaning in ENDINGS),
-            "* approved plans that stop early: the simulator could not carry the plan to its "
+            f"* {EARLY}: the simulator could not carry the plan to its "
             "end (an object the scene lacks, a failed precondition).",
             "",
         ]

@@ -166,7 +166,6 @@ class LocalApprentice(Apprentice):
         llama_cpp = _llama()
         self.path = path
         self.threads = settings.thread_count(environ)
-        started = time.perf_counter()
         try:
             self._llm = llama_cpp.Llama(
                 model_path=str(path),
@@ -184,7 +183,6 @@ class LocalApprentice(Apprentice):
             ) from None
         if settings.state_cache_bytes > 0:
             self._llm.set_cache(llama_cpp.LlamaRAMCache(capacity_bytes=settings.state_cache_bytes))
-        self.load_s = time.perf_counter() - started
 
     @property
     def label(self) -> str:
