@@ -43,6 +43,7 @@ from virf.bench.agents import (
 )
 from virf.bench.agents_report import (
     FILES,
+    ModelTime,
     Table,
     calls_behind,
     collect,
@@ -558,6 +559,14 @@ def test_the_time_table_reads_the_model_calls(tmp_path: Path) -> None:
     assert run.returncode == 0, run.stderr
     text = (out / "agents.md").read_text(encoding="utf-8")
     assert "| impulsive | 4 | 2.00 | 20.0 | n/a |" in text
+
+
+def test_no_reply_token_has_no_rate() -> None:
+    # Every prompt too long: the calls took time but wrote nothing, which is
+    # no rate at all rather than a model writing 0 tokens a second.
+    assert ModelTime("impulsive+rules", 3, 210.0, 0).tokens_per_second is None
+    assert ModelTime("virf", 2, 4000.0, None).tokens_per_second is None
+    assert ModelTime("virf", 2, 4000.0, 100).tokens_per_second == 25.0
 
 
 def test_reading_a_task_does_not_change_it(vocab: Any, tmp_path: Path) -> None:

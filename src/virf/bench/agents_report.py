@@ -47,7 +47,9 @@ class ModelTime:
 
     @property
     def tokens_per_second(self) -> float | None:
-        if self.completion_tokens is None or self.latency_ms <= 0:
+        # No reply token at all (every prompt too long, say) has no rate to
+        # report: 0.0 would read as a model that writes nothing per second.
+        if not self.completion_tokens or self.latency_ms <= 0:
             return None
         return self.completion_tokens / (self.latency_ms / 1000)
 
