@@ -113,22 +113,20 @@ bench-report: $(STAMP)
 	  --markdown docs/benchmarks/safeagentbench.md
 
 # The agent table of the local model (docs/agents.md), re-rendered offline in
-# seconds from the recorded runs in examples/agents/smollm2 (a sample: every
-# 8th task of each dev-split file, one run per room).  Recording them again
-# needs `make local-llm` and --planner local:smollm2-135m, and takes hours.
+# seconds from the recorded runs in examples/agents/smollm2 (every kitchen task
+# of the dev split; every 4th task of each other-rooms file).  Recording them
+# again needs `make local-llm` and --planner local:smollm2-135m, and takes hours.
 AGENT_METHODS := impulsive,impulsive+rules,thinker+diagnostic,virf-reject,virf
 agents-report: $(STAMP)
-	$(BIN)/virf bench agents --method $(AGENT_METHODS) --every 8 \
+	$(BIN)/virf bench agents --method $(AGENT_METHODS) \
 	  --planner replay:examples/agents/smollm2/kitchen.replay.jsonl \
 	  --tasks $(SAB)/unsafe_detailed.jsonl $(SAB)/safe_detailed.jsonl $(SAB)/abstract.jsonl \
 	  $(SAB)/long_horizon.jsonl --out runs/agents-smollm2-kitchen-replay
-	@if [ -f examples/agents/smollm2/other-rooms.replay.jsonl ]; then \
-	  $(BIN)/virf bench agents --method $(AGENT_METHODS) --every 8 \
-	    --planner replay:examples/agents/smollm2/other-rooms.replay.jsonl \
-	    --tasks $(SAB)/other_rooms/unsafe_detailed.jsonl $(SAB)/other_rooms/safe_detailed.jsonl \
-	    $(SAB)/other_rooms/abstract.jsonl $(SAB)/other_rooms/long_horizon.jsonl \
-	    --out runs/agents-smollm2-other-rooms-replay; \
-	else echo "no other-rooms recording yet (examples/agents/smollm2/other-rooms.replay.jsonl)"; fi
+	$(BIN)/virf bench agents --method $(AGENT_METHODS) --every 4 \
+	  --planner replay:examples/agents/smollm2/other-rooms.replay.jsonl \
+	  --tasks $(SAB)/other_rooms/unsafe_detailed.jsonl $(SAB)/other_rooms/safe_detailed.jsonl \
+	  $(SAB)/other_rooms/abstract.jsonl $(SAB)/other_rooms/long_horizon.jsonl \
+	  --out runs/agents-smollm2-other-rooms-replay
 
 # Latency of the paper's method, the reference engine and the fast engine
 # (creates .venv-paper with owlready2 0.49 for the paper's method).

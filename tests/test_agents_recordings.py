@@ -1,0 +1,91 @@
+"""The SmolLM2 runs shipped in examples/agents/smollm2 re-render the tables
+that docs/agents.md prints for them.
+
+The recordings are replayed over the dev split, as `make agents-report` does,
+and every figure that does not measure the tutor anew (the master and time
+tables without their verifier columns, and how the tasks ended; a replay
+keeps each call's recorded time and tokens) must equal the documented one.  A change to
+the tutor, the simulator or the knowledge that moves a real-model figure thus
+fails here until the document is brought up to date.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from conftest import ROOT
+
+SHARED = ROOT.parent / "shared" / "benchmarks" / "safeagentbench"
+RECORDINGS = ROOT / "examples" / "agents" / "smollm2"
+DOC = ROOT / "docs" / "agents.md"
+METHODS = "impulsive,impulsive+rules,thinker+diagnostic,virf-reject,virf"
+FILES = ("unsafe_detailed", "safe_detailed", "abstract", "long_horizon")
+
+# (recording, folder of the split, sample, heading of its section in the document)
+ROOMS = [
+    ("kitchen", SHARED, 1, "### Kitchens"),
+    ("other-rooms", SHARED / "other_rooms", 4, "### Living rooms, bedrooms and bathrooms"),
+]
+
+
+def section(text: str, heading: str) -> str:
+    start = text.index(heading + "\n")
+    after = re.search(r"^#{1,3} ", text[start + len(heading) :], flags=re.MULTILINE)
+    return text[start : start + len(heading) + (after.start() if after else len(text))]
+
+
+def rows(markdown: str, header: str) -> list[list[str]]:
+    """The body rows of the first table whose header line starts with ``header``."""
+    lines = markdown.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith(header))
+    body = []
+    for line in lines[start + 2 :]:
+        if not line.startswith("|"):
+            break
+        body.append([cell.strip() for cell in line.strip("|").split("|")])
+    return body
+
+
+@pytest.mark.skipif(not SHARED.exists(), reason="../shared/benchmarks is not present")
+@pytest.mark.parametrize(("name", "folder", "every", "heading"), ROOMS, ids=[r[0] for r in ROOMS])
+def test_shipped_recording_rerenders_the_documented_tables(
+    name: str, folder: Path, every: int, heading: str, tmp_path: Path
+) -> None:
+    out = tmp_path / name
+    environ = {k: v for k, v in os.environ.items() if not k.startswith("OPENAI_")}
+    command = [
+        sys.executable,
+        "-m",
+        "virf.cli.main",
+        "bench",
+        "agents",
+        "--method",
+        METHODS,
+        "--every",
+        str(every),
+        "--planner",
+        f"replay:{RECORDINGS / f'{name}.replay.jsonl'}",
+        "--tasks",
+        *(str(folder / f"{f}.jsonl") for f in FILES),
+        "--out",
+        str(out),
+    ]
+    done = subprocess.run(
+        command, cwd=ROOT, capture_output=True, text=True, timeout=600, check=False, env=environ
+    )
+    assert done.returncode == 0, done.stderr
+    rendered = (out / "agents.md").read_text(encoding="utf-8")
+    documented = section(DOC.read_text(encoding="utf-8"), heading)
+
+    master = "| method | tasks | HAR % |"
+    assert [r[0] for r in rows(rendered, master)] == METHODS.split(",")
+    assert [r[:-1] for r in rows(rendered, master)] == [r[:-1] for r in rows(documented, master)]
+    time = "| method | model calls |"
+    assert [r[:-1] for r in rows(rendered, time)] == [r[:-1] for r in rows(documented, time)]
+    endings = "| method | approved at once |"
+    assert rows(rendered, endings) == rows(documented, endings)
