@@ -33,6 +33,14 @@ ROOMS = [
 ]
 
 
+def makefile_every(recording: str) -> int:
+    """The --every of `make agents-report`'s command for ``recording`` (1 if none)."""
+    recipe = (ROOT / "Makefile").read_text(encoding="utf-8").split("agents-report:", 1)[1]
+    command = next(c for c in recipe.split("--out") if f"{recording}.replay.jsonl" in c)
+    found = re.search(r"--every (\d+)", command)
+    return int(found.group(1)) if found else 1
+
+
 def section(text: str, heading: str) -> str:
     start = text.index(heading + "\n")
     after = re.search(r"^#{1,3} ", text[start + len(heading) :], flags=re.MULTILINE)
@@ -42,7 +50,8 @@ def section(text: str, heading: str) -> str:
 def rows(markdown: str, header: str) -> list[list[str]]:
     """The body rows of the first table whose header line starts with ``header``."""
     lines = markdown.splitlines()
-    start = next(i for i, line in enumerate(lines) if line.startswith(header))
+    start = next((i for i, line in enumerate(lines) if line.startswith(header)), None)
+    assert start is not None, f"no table whose header starts with {header!r}"
     body = []
     for line in lines[start + 2 :]:
         if not line.startswith("|"):
@@ -56,6 +65,7 @@ def rows(markdown: str, header: str) -> list[list[str]]:
 def test_shipped_recording_rerenders_the_documented_tables(
     name: str, folder: Path, every: int, heading: str, tmp_path: Path
 ) -> None:
+    assert makefile_every(name) == every, "the Makefile samples another set of tasks"
     out = tmp_path / name
     environ = {k: v for k, v in os.environ.items() if not k.startswith("OPENAI_")}
     command = [
