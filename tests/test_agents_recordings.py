@@ -1,26 +1,24 @@
 """The SmolLM2 runs shipped in examples/agents/smollm2 re-render the tables
 that docs/agents.md prints for them.
 
-The recordings are replayed over the dev split, as `make agents-report` does,
-and every figure that does not measure the tutor anew (the master and time
-tables without their verifier columns, and how the tasks ended; a replay
-keeps each call's recorded time and tokens) must equal the documented one.  A change to
-the tutor, the simulator or the knowledge that moves a real-model figure thus
-fails here until the document is brought up to date.
+The recordings are replayed over the dev split, as `make agents-report` does.
+Every figure that does not measure the tutor anew must equal the documented
+one: the master and time tables without their verifier columns (a replay
+keeps each call's recorded time and tokens), and how the tasks ended.  A
+change to the tutor, the simulator or the knowledge that moves a real-model
+figure thus fails here until the document is brought up to date.
 """
 
 from __future__ import annotations
 
-import os
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 from conftest import ROOT
+from test_agents import virf
+from test_bench import SHARED, needs_shared
 
-SHARED = ROOT.parent / "shared" / "benchmarks" / "safeagentbench"
 RECORDINGS = ROOT / "examples" / "agents" / "smollm2"
 DOC = ROOT / "docs" / "agents.md"
 METHODS = "impulsive,impulsive+rules,thinker+diagnostic,virf-reject,virf"
@@ -60,33 +58,26 @@ def rows(markdown: str, header: str) -> list[list[str]]:
     return body
 
 
-@pytest.mark.skipif(not SHARED.exists(), reason="../shared/benchmarks is not present")
+@needs_shared
 @pytest.mark.parametrize(("name", "folder", "every", "heading"), ROOMS, ids=[r[0] for r in ROOMS])
 def test_shipped_recording_rerenders_the_documented_tables(
     name: str, folder: Path, every: int, heading: str, tmp_path: Path
 ) -> None:
     assert makefile_every(name) == every, "the Makefile samples another set of tasks"
     out = tmp_path / name
-    environ = {k: v for k, v in os.environ.items() if not k.startswith("OPENAI_")}
-    command = [
-        sys.executable,
-        "-m",
-        "virf.cli.main",
-        "bench",
-        "agents",
+    recording = RECORDINGS / f"{name}.replay.jsonl"
+    files = [folder / f"{f}.jsonl" for f in FILES]
+    done = virf(
         "--method",
         METHODS,
         "--every",
         str(every),
         "--planner",
-        f"replay:{RECORDINGS / f'{name}.replay.jsonl'}",
+        f"replay:{recording}",
         "--tasks",
-        *(str(folder / f"{f}.jsonl") for f in FILES),
+        *files,
         "--out",
-        str(out),
-    ]
-    done = subprocess.run(
-        command, cwd=ROOT, capture_output=True, text=True, timeout=600, check=False, env=environ
+        out,
     )
     assert done.returncode == 0, done.stderr
     rendered = (out / "agents.md").read_text(encoding="utf-8")
