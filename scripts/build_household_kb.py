@@ -6,8 +6,8 @@ starter-corpus passages) and the arbitration (``decisions.jsonl``, one line
 per rule: accept or reject, who decided, why, and an edited axiom if the
 reviewer changed it).  This script runs the real workflow on them:
 
-1. ``virf kb init`` a workspace layered on the ``paper`` scenario (the
-   hand-written rules) with the starter corpus;
+1. ``virf kb init`` a workspace layered on the ``base`` scenario (the
+   vocabulary and hazard mechanisms, no hazard rules) with the starter corpus;
 2. propose every draft (normalisation, HermiT consistency, satisfiability,
    novelty against the rules accepted before it);
 3. decide every candidate as recorded (an accepted candidate is checked once
@@ -71,7 +71,7 @@ def build(workspace: Path, record: Path = RECORD) -> str:
         if any(workspace.iterdir()) and not (workspace / "virf-kb.json").is_file():
             raise SystemExit(f"{workspace} is not a knowledge workspace; give a new folder")
         shutil.rmtree(workspace)
-    ws = Workspace.init(workspace, scenario="paper")
+    ws = Workspace.init(workspace, scenario="base")
     decisions = load_decisions(record / "decisions.jsonl")
     drafts = sorted((record / "drafts").glob("*.json"))
     seen: set[str] = set()

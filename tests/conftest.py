@@ -96,14 +96,36 @@ def examples_dir() -> Path:
 
 
 @pytest.fixture(scope="session")
-def example_report(tutor: LogicTutor) -> Callable[[str], Report]:
+def paper_tutor() -> LogicTutor:
+    """The paper's hand-written rules (scenario ``paper``, fast engine)."""
+    return LogicTutor(scenario="paper")
+
+
+@pytest.fixture(scope="session")
+def example_tutor(tutor: LogicTutor, paper_tutor: LogicTutor) -> Callable[[str], LogicTutor]:
+    """The tutor an example folder is verified with: the scenario its
+    expected.json names (the paper's examples reproduce the paper's rules),
+    else the default."""
+
+    def get(name: str) -> LogicTutor:
+        scenario = load_expected(EXAMPLES_DIR / name).get("scenario")
+        if scenario is None:
+            return tutor
+        assert scenario == "paper", f"{name}: add a session tutor for scenario {scenario}"
+        return paper_tutor
+
+    return get
+
+
+@pytest.fixture(scope="session")
+def example_report(example_tutor: Callable[[str], LogicTutor]) -> Callable[[str], Report]:
     """The report for an example folder by name, verified once per session."""
     cache: dict[str, Report] = {}
 
     def get(name: str) -> Report:
         if name not in cache:
             case = EXAMPLES_DIR / name
-            cache[name] = tutor.verify_files(case / "scene.json", case / "plan.txt")
+            cache[name] = example_tutor(name).verify_files(case / "scene.json", case / "plan.txt")
         return cache[name]
 
     return get

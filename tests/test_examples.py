@@ -35,8 +35,8 @@ def test_verdict_matches_expected(case: Path, example_report) -> None:
 
 
 @pytest.mark.parametrize("case", CASES)
-def test_verification_is_deterministic(case: Path, tutor, example_report) -> None:
-    again = tutor.verify_files(case / "scene.json", case / "plan.txt")
+def test_verification_is_deterministic(case: Path, example_tutor, example_report) -> None:
+    again = example_tutor(case.name).verify_files(case / "scene.json", case / "plan.txt")
     assert again.to_json() == example_report(case.name).to_json()
 
 

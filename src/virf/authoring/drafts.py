@@ -50,6 +50,24 @@ class DraftRule(_Edge):
     suggestion: str = Field(min_length=1, max_length=500)
     evidence: tuple[str, ...] = ()
     modelling_decision: str | None = Field(default=None, alias="modellingDecision", max_length=500)
+    # "SOURCE -> VULNERABLE via PATHWAY", and the minimal pairs 'WORLD | PLAN |
+    # OLD => NEW' (virf.verify.twins) that show the rule turning on it.
+    mechanism: str | None = Field(default=None, max_length=300)
+    # An uncertainty rule's question about what it cannot decide ({x}: the
+    # individual it holds for).
+    question: str | None = Field(default=None, max_length=300)
+    twins: tuple[str, ...] = Field(default=(), max_length=8)
+
+    @field_validator("twins")
+    @classmethod
+    def _one_line_each(cls, value: tuple[str, ...]) -> tuple[str, ...]:
+        out = []
+        for text in value:
+            flat = " ".join(text.split())
+            if not flat or hidden_char(flat) is not None or len(flat) > 2000:
+                raise ValueError("each twin must be one line of at most 2000 visible characters")
+            out.append(flat)
+        return tuple(out)
 
     @field_validator(
         "category",
@@ -59,6 +77,8 @@ class DraftRule(_Edge):
         "suggestion",
         "modelling_decision",
         "definition",
+        "mechanism",
+        "question",
     )
     @classmethod
     def _one_line(cls, value: str | None) -> str | None:
@@ -96,6 +116,9 @@ class DraftRule(_Edge):
             trigger_reason=self.trigger_reason,
             suggestion=self.suggestion,
             check_at=self.check_at,
+            mechanism=self.mechanism or "",
+            twins=self.twins,
+            question=self.question or "",
         )
 
 

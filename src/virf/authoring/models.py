@@ -146,6 +146,11 @@ class RuleDraft(View):
     trigger_reason: str
     suggestion: str
     check_at: str
+    # The mechanism the rule states, and its minimal pairs (virf kb test);
+    # candidates stored before they existed have neither.
+    mechanism: str = ""
+    twins: tuple[str, ...] = ()
+    question: str = ""
 
 
 class CandidateView(View):

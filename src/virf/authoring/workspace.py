@@ -65,6 +65,9 @@ _USC_ANNOTATIONS: Final = (
     "suggestion",
     "source",
     "checkAt",
+    "mechanism",
+    "twin",
+    "question",
 )
 # The first line of every block a decision writes (see _block).
 _BLOCK_HEADER: Final = re.compile(r"^# candidate ([0-9]+): [A-Za-z][A-Za-z0-9_]*$", re.MULTILINE)
@@ -389,6 +392,7 @@ class Workspace:
             )
         items.extend(self._annotation_items(rule, vocab.uscs.values()))
         items.extend(self._evidence_items(parsed_draft, evidence_ids))
+        items.extend(_twin_items(name, rule.get("twins", ())))
         block = self._block(
             vocab,
             cid,
@@ -583,6 +587,9 @@ class Workspace:
             f":suggestion {_literal(rule['suggestion'])}",
             f":source {source}",
             f":checkAt {_literal(rule['check_at'])}",
+            *([f":mechanism {_literal(rule['mechanism'])}"] if rule.get("mechanism") else []),
+            *([f":question {_literal(rule['question'])}"] if rule.get("question") else []),
+            *(f":twin {_literal(t)}" for t in rule.get("twins", ())),
             *(f":evidence {_literal(pid)}" for pid in evidence_ids),
             f":drafter {_literal(drafter)}",
             f":candidate {_literal(str(cid))}",
@@ -860,6 +867,28 @@ class Workspace:
 
 def _append_block(module: str, block: str) -> str:
     return module.rstrip("\n") + "\n\n" + block
+
+
+def _twin_items(name: str, twins: Sequence[str]) -> list[CheckItem]:
+    """Whether the rule comes with minimal pairs that read (virf kb test runs them)."""
+    from virf.verify.twins import read_pair
+
+    if not twins:
+        return [
+            CheckItem.warning(
+                "twins",
+                "no minimal pair: give 'twins' ('WORLD | PLAN | OLD => NEW', a world where the "
+                "rule holds and a twin differing in the property that matters) so that "
+                "virf kb test can check the rule",
+                ok=False,
+            )
+        ]
+    for text in twins:
+        try:
+            read_pair(name, text)
+        except InputError as exc:
+            return [CheckItem.error("twins", str(exc))]
+    return [CheckItem.info("twins", f"{len(twins)} minimal pair(s) read")]
 
 
 def _novelty_items(name: str, related: Related) -> list[CheckItem]:

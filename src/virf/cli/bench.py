@@ -61,8 +61,8 @@ def bench_safeagentbench(
     kb: KbOpt = None,
     scenario: RoomScenarioOpt = "auto",
 ) -> None:
-    """Verify every task's reference plan and print hazard recall, false alarms and fidelity,
-    overall and per room."""
+    """Verify every task's reference plan and print hazard recall, hazard false alarms,
+    plans that cannot run (not executable) and fidelity, overall and per room."""
     from rich.console import Console
 
     from virf.bench.report import render_markdown

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from virf.cli.app import KbOpt, ScenarioOpt
+from virf.cli.app import EngineOpt, KbOpt, ScenarioOpt, progress_bar
 
 kb_app = typer.Typer(
     help="Inspect the safety knowledge base (TBox) and grow it from safety documents "
@@ -122,13 +122,130 @@ def kb_rules(
     vocab = load_tbox(scenario, kb=kb).vocabulary
     rules = sorted(vocab.uscs.values(), key=lambda u: (u.module, u.id))
     if as_json:
-        typer.echo(json.dumps([asdict(u) for u in rules], indent=2))
+        typer.echo(
+            json.dumps(
+                [
+                    {
+                        **asdict(u),
+                        "mechanism": next(iter(vocab.annotation(u.name, "mechanism")), ""),
+                        "twins": list(vocab.annotation(u.name, "twin")),
+                    }
+                    for u in rules
+                ],
+                indent=2,
+            )
+        )
         return
     for u in rules:
         typer.echo(f"{u.id}  [{u.kind}; {u.category}; {u.danger_level}; checked: {u.check_at}]")
         typer.echo(f"    {u.definition}")
         typer.echo(f"    {u.description}")
+        for mechanism in vocab.annotation(u.name, "mechanism"):
+            typer.echo(f"    mechanism: {mechanism}")
         typer.echo(f"    source: {u.source}")
+
+
+@kb_app.command("test")
+def kb_test(
+    scenario: ScenarioOpt = None,
+    kb: KbOpt = None,
+    engine: EngineOpt = "fast",
+    sweeps: Annotated[
+        bool | None,
+        typer.Option(
+            "--sweeps/--no-sweeps",
+            help="Also run the catalogue sweeps (throw, microwave, pour every type) "
+            "[default: when the knowledge base holds the household rules, whose "
+            "mechanisms the sweeps state].",
+            show_default=False,
+        ),
+    ] = None,
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print the results as one JSON object.")
+    ] = False,
+) -> None:
+    """Test the rules like code: every rule's minimal pairs (a world where it holds and a
+    twin, differing in the property that matters, where it does not), and sweeps over the
+    catalogue whose verdicts must follow each type's properties.  Exit 1 on any failure."""
+    from dataclasses import asdict
+
+    from rich.console import Console
+
+    from virf.ontology.tbox import load_tbox
+    from virf.reasoning import make_engine
+    from virf.render.tables import TextTable, to_rich
+    from virf.verify.kbtest import run_kb_test
+    from virf.verify.sweeps import HOUSEHOLD_MODULE
+
+    tbox = load_tbox(scenario, kb=kb)
+    reasoner = make_engine(engine, tbox)
+    if sweeps is None:
+        sweeps = any(u.module == HOUSEHOLD_MODULE for u in tbox.vocabulary.uscs.values())
+    err = Console(stderr=True)
+    with progress_bar(err) as progress:
+        bars: dict[str, object] = {}
+
+        def tick(what: str, done: int, total: int) -> None:
+            if what not in bars:
+                bars[what] = progress.add_task(what, total=total)
+            progress.update(bars[what], completed=done)
+
+        result = run_kb_test(tbox, reasoner, sweeps=sweeps, progress=tick)
+    failures = result.failures
+    if as_json:
+        typer.echo(
+            json.dumps(
+                {
+                    "scenario": result.scenario,
+                    "rules": result.rules,
+                    "pairs": len(result.pairs),
+                    "pair_failures": [asdict(p) for p in failures],
+                    "sweep_cases": result.sweep_cases,
+                    "sweep_failures": [asdict(f) for f in result.sweeps],
+                    "passed": result.passed,
+                },
+                indent=2,
+                sort_keys=True,
+            )
+        )
+    else:
+        console = Console(highlight=False, width=160)
+        checked = sum(1 for p in result.pairs if p.index)
+        console.print(
+            f"Scenario {result.scenario}: {result.rules} rules, {checked} minimal pairs, "
+            f"{len(failures)} failing"
+            + (
+                f"; sweeps: {result.sweep_cases} cases, {len(result.sweeps)} failing"
+                if sweeps
+                else ""
+            )
+        )
+        if failures:
+            console.print(
+                to_rich(
+                    TextTable.of(
+                        ("rule", "pair", "problem", "twin's change"),
+                        [(p.rule, str(p.index or "-"), p.problem, p.change) for p in failures],
+                        title="Minimal pairs that fail",
+                    )
+                )
+            )
+        if result.sweeps:
+            console.print(
+                to_rich(
+                    TextTable.of(
+                        ("sweep", "case", "expected", "got", "why it is expected"),
+                        [(f.sweep, f.case, f.expected, f.got, f.why) for f in result.sweeps],
+                        title="Sweep cases whose verdict does not follow the type's properties",
+                    )
+                )
+            )
+        if result.passed:
+            console.print(
+                "All rules pass their minimal pairs" + (" and the sweeps." if sweeps else ".")
+            )
+    if not result.passed:
+        raise typer.Exit(1)
 
 
 def _register_workflow() -> None:

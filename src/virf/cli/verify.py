@@ -86,7 +86,19 @@ def demo(
     cases = sorted(p.parent for p in folder.glob("*/plan.txt")) if folder.is_dir() else []
     if not cases:
         raise _fail(f"no examples in {folder} (expected <name>/scene.json and <name>/plan.txt)")
-    tutor = LogicTutor(engine=engine, kb=kb)
+    # An example may name the scenario it reproduces (the paper's examples run
+    # on the paper's rules); with --kb every example uses the workspace.
+    tutors: dict[str | None, LogicTutor] = {}
+
+    def tutor_for(expected: dict[str, Any]) -> LogicTutor:
+        scenario = None if kb is not None else expected.get("scenario")
+        if scenario is not None and not isinstance(scenario, str):
+            raise VirfError("expected.json: 'scenario' must be a scenario name")
+        if scenario not in tutors:
+            tutors[scenario] = LogicTutor(scenario=scenario, engine=engine, kb=kb)
+        return tutors[scenario]
+
+    tutor_for({})  # a bad --engine or --kb fails here, before any example
     console = Console(highlight=False, width=150)
     # Not a shared TextTable: the mismatch cell is red, and no Markdown twin exists.
     table = Table(title="VIRF demo", show_lines=False)
@@ -100,7 +112,7 @@ def demo(
                 expected = read_json_file(case / "expected.json", "expected verdict")
                 if not isinstance(expected, dict):
                     raise VirfError(f"{case / 'expected.json'} must be a JSON object")
-            report = tutor.verify_files(case / "scene.json", case / "plan.txt")
+            report = tutor_for(expected).verify_files(case / "scene.json", case / "plan.txt")
         except VirfError as exc:
             # One broken example is a mismatch, not the end of the demo.
             console.print(f"{case.name}: {exc}", style="red", markup=False)

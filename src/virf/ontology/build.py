@@ -15,10 +15,17 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-CATALOGUE_SOURCE = "AI2-THOR object types documentation, via the VIRF kitchen catalogue"
+CATALOGUE_SOURCE = (
+    "AI2-THOR object metadata of all 120 iTHOR floor plans and its object-types documentation, "
+    "via the VIRF kitchen catalogue"
+)
 # The object-type catalogue a generated class comes from (its `:catalogue` value).
 CATALOGUE = "AI2-THOR"
 COMMON_SENSE = "VIRF kitchen catalogue (common-sense modelling decision)"
+REFERENCE_SOURCE = (
+    "AI2-THOR runtime object metadata of all 120 iTHOR floor plans (the salient materials of "
+    "every instance), via the VIRF kitchen catalogue"
+)
 
 # Category -> parent classes.  Food categories sit under FoodItem; the rest are
 # pairwise disjoint from food so that 'not FoodItem' is provable for them.
@@ -97,6 +104,10 @@ AnnotationProperty: :id
 AnnotationProperty: :kind
 AnnotationProperty: :source
 AnnotationProperty: :typicalMaterial
+AnnotationProperty: :possibleMaterial
+    Annotations: rdfs:comment "A material some instances of this type have and others do not (AI2-THOR's instances differ): a hazard that needs it is asked about, never assumed."
+AnnotationProperty: :mayAfford
+    Annotations: rdfs:comment "An affordance some instances of this type have and others lack (AI2-THOR's instances differ): the simulator neither assumes nor refuses it."
 AnnotationProperty: :defaultState
 AnnotationProperty: :randomState
 AnnotationProperty: :slicedType
@@ -127,14 +138,21 @@ Class: :FoodMaterialObject
     SubClassOf:
         Annotations: :id "KIT-FoodMaterial-FoodItem", rdfs:comment "An object made of food is a food item.", :source "{common}", :kind "background"
         :FoodItem
-Class: :Liquid
+Class: :Substance
+    Annotations: rdfs:comment "A portion of stuff (a liquid, a poured cleaner, bleach in a toilet), not an object that holds it: what mixes when two substances meet."
     SubClassOf: :PhysicalObject
+Class: :Liquid
+    SubClassOf: :Substance
 Class: :Water
     SubClassOf: :Liquid, :Beverage
 Class: :Coffee
-    SubClassOf: :Liquid, :Beverage
+    SubClassOf: :Liquid, :Beverage,
+        Annotations: :id "KIT-Coffee-MayBeSweetened", rdfs:comment "Coffee is often taken with sugar, milk or cream.", :source "starter corpus: lifehacker-drinks-on-houseplants:plain-coffee-and-tea-only-in-small-black-amounts:1", :kind "background"
+        :hasProperty value :MayBeSweetened
 Class: :Wine
-    SubClassOf: :Liquid, :Beverage
+    SubClassOf: :Liquid, :Beverage,
+        Annotations: :id "KIT-Wine-Alcoholic", rdfs:comment "Wine contains alcohol.", :source "starter corpus: ncpc-alcohol-poison-for-children:small-amounts-harm-children:1", :kind "background"
+        :hasProperty value :Alcoholic
 Class: :UnknownLiquid
     Annotations: rdfs:comment "A liquid whose kind the scene does not say (a cup 'filled' with something)."
     SubClassOf: :Liquid
@@ -147,6 +165,9 @@ Class: :StainingLiquid
 DisjointClasses:
     Annotations: :id "KIT-LiquidKinds", rdfs:comment "Water, coffee, wine and oil are different liquids.", :source "{common}", :kind "background"
     :Water, :Coffee, :Wine, :Oil, :UnknownLiquid
+Class: :Medicine
+    Annotations: rdfs:comment "A medicine or supplement (pills, syrup, vitamins): poisonous to a child who finds it."
+    SubClassOf: :PhysicalObject
 Class: :Kitchenware
     SubClassOf: :PhysicalObject
 Class: :Appliance
@@ -214,13 +235,58 @@ def property_source(prop: str, catalogue: dict[str, Any]) -> str:
     return f"starter corpus: {passages}" + (f" ({note})" if note else "")
 
 
+def material_attributes(catalogue: dict[str, Any]) -> dict[str, frozenset[str]]:
+    """Each material's attributes, its parent material's included (bleach is
+    a chemical, and toxic)."""
+    materials: dict[str, Any] = catalogue.get("materials", {})
+
+    def of(name: str) -> frozenset[str]:
+        info = materials.get(name)
+        if info is None:
+            return frozenset()
+        own = frozenset(p["attribute"] for p in info.get("properties", []))
+        return own | of(info.get("parent", "Material"))
+
+    return {name: of(name) for name in materials}
+
+
+def possible_materials(info: dict[str, Any]) -> list[str]:
+    """Materials only some AI2-THOR instances of a type have."""
+    combos = [set(c) for c in info.get("material_variants", [])]
+    if not combos:
+        return []
+    return sorted(set.union(*combos) - set.intersection(*combos))
+
+
+def always_attributes(info: dict[str, Any], attrs: dict[str, frozenset[str]]) -> list[str]:
+    """Attributes every AI2-THOR instance of a type has through some material,
+    whichever of its material combinations it is made of, and that its
+    certain materials do not already give it: a statue of metal or of stone
+    is hard either way, so its hardness is not a question."""
+    combos = info.get("material_variants", [])
+    if not combos:
+        return []
+    each = [frozenset().union(*(attrs.get(m, frozenset()) for m in c)) for c in combos]
+    common = frozenset.intersection(*each)
+    certain = set(info.get("materials", [])) | set(info.get("typical_materials", []))
+    given = frozenset().union(*(attrs.get(m, frozenset()) for m in certain))
+    return sorted(common - given)
+
+
 def _type_frame(name: str, info: dict[str, Any], catalogue: dict[str, Any] | None = None) -> str:
+    catalogue = catalogue or {}
+    varies = set(info.get("varies", []))
     annotations = [
         f"rdfs:comment {_quote('AI2-THOR object type ' + name + '.')}",
         f":catalogue {_quote(CATALOGUE)}",
     ]
     for material in info.get("typical_materials", []):
         annotations.append(f":typicalMaterial {_quote(material)}")
+    for material in possible_materials(info):
+        annotations.append(f":possibleMaterial {_quote(material)}")
+    for field in sorted(varies):
+        if field in AFFORDANCES:
+            annotations.append(f":mayAfford {_quote(AFFORDANCES[field][0])}")
     for state in info.get("default_states", []):
         annotations.append(f":defaultState {_quote(state)}")
     for state in info.get("random_states", []):
@@ -251,12 +317,23 @@ def _type_frame(name: str, info: dict[str, Any], catalogue: dict[str, Any] | Non
                 f":hasMaterial value :{material}",
             )
         )
+    for attribute in always_attributes(info, material_attributes(catalogue)):
+        combos = " or ".join("+".join(c) or "unlisted" for c in info["material_variants"])
+        axioms.append(
+            _axiom(
+                f"KIT-{name}-always-{attribute}",
+                f"Every {name} has a part that is {attribute}, whichever of its AI2-THOR "
+                f"material combinations ({combos}) it is made of.",
+                REFERENCE_SOURCE,
+                f":hasMaterial some (:hasProperty value :{attribute})",
+            )
+        )
     for prop in info.get("properties", []):
         axioms.append(
             _axiom(
                 f"KIT-{name}-property-{prop}",
                 f"Every {name} is {prop}.",
-                property_source(prop, catalogue or {}),
+                property_source(prop, catalogue),
                 f":hasProperty value :{prop}",
             )
         )
@@ -272,7 +349,7 @@ def _type_frame(name: str, info: dict[str, Any], catalogue: dict[str, Any] | Non
             )
         )
     for field, (cls, text) in AFFORDANCES.items():
-        if info.get(field):
+        if info.get(field) and field not in varies:
             axioms.append(
                 _axiom(f"KIT-{name}-{cls}", f"A {name} {text}.", CATALOGUE_SOURCE, f":{cls}")
             )
@@ -281,6 +358,40 @@ def _type_frame(name: str, info: dict[str, Any], catalogue: dict[str, Any] | Non
     lines.append("    SubClassOf:")
     lines.append(",\n".join(axioms))
     return "\n".join(lines)
+
+
+def _materials_section(catalogue: dict[str, Any]) -> str:
+    """The materials, each with the attributes its own stuff gives every
+    object made (partly) of it, and the individual that stands for it."""
+    materials: dict[str, Any] = catalogue.get("materials", {})
+    parts = ["# ---------------------------------------------------------------- materials"]
+    for name, info in materials.items():
+        axioms = [f"        :{info.get('parent', 'Material')}"]
+        for prop in info.get("properties", []):
+            axioms.append(
+                _axiom(
+                    f"MAT-{name}-{prop['attribute']}",
+                    prop["comment"],
+                    prop["source"],
+                    f":hasProperty value :{prop['attribute']}",
+                )
+            )
+        frame = [f"Class: :{name}"]
+        if info.get("comment"):
+            frame.append(f"    Annotations: rdfs:comment {_quote(info['comment'])}")
+        frame.append("    SubClassOf:")
+        frame.append(",\n".join(axioms))
+        parts.append("\n".join(frame))
+    top = [n for n, info in materials.items() if info.get("parent", "Material") == "Material"]
+    parts.append(
+        "DisjointClasses:\n"
+        '    Annotations: :id "KIT-MaterialKinds", rdfs:comment "Different materials are '
+        f'different kinds of stuff.", :source {_quote(COMMON_SENSE)}, :kind "background"\n'
+        f"    {', '.join(':' + n for n in top)}"
+    )
+    for name in materials:
+        parts.append(f"Individual: :{name}\n    Types: :{name}")
+    return "\n".join(parts)
 
 
 # Extra category memberships that the rules rely on, kept here because they
@@ -293,22 +404,23 @@ EXTRA_MEMBERSHIPS: tuple[tuple[str, str, str], ...] = (
 )
 
 
-# Disjoint in the core (CORE-SingleBodyMaterial): a type may list one of them.
-BODY_MATERIALS = {"Metal", "Plastic", "Glass", "Ceramic", "Wood"}
-
-
 # Controls and the device type they switch (AI2-THOR: a StoveKnob toggles a StoveBurner).
 CONTROLS: tuple[tuple[str, str], ...] = (("StoveKnob", "StoveBurner"),)
 
 
 def render_kitchen(catalogue: dict[str, Any]) -> str:
     types: dict[str, Any] = catalogue["types"]
+    known = set(catalogue.get("materials", {}))
     for name, info in sorted(types.items()):
-        body = BODY_MATERIALS.intersection(info.get("materials", []))
-        if len(body) > 1:
+        used = {
+            *info.get("materials", []),
+            *info.get("typical_materials", []),
+            *(m for c in info.get("material_variants", []) for m in c),
+        }
+        if used - known:
             raise ValueError(
-                f"catalogue type {name} lists body materials {', '.join(sorted(body))}; "
-                "an object has one body material (CORE-SingleBodyMaterial): keep the main one"
+                f"catalogue type {name} uses materials the catalogue does not define: "
+                f"{', '.join(sorted(used - known))}"
             )
     categories = sorted({info["category"] for info in types.values()} | set(CATEGORY_PARENTS))
     unknown = [c for c in categories if c not in CATEGORY_PARENTS]
@@ -324,7 +436,8 @@ def render_kitchen(catalogue: dict[str, Any]) -> str:
     )
     parts = [
         header,
-        "# ---------------------------------------------------------------- category tree",
+        _materials_section(catalogue),
+        "\n# ---------------------------------------------------------------- category tree",
     ]
     for category in categories:
         if category in ("Meat",):

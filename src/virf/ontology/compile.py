@@ -231,6 +231,7 @@ def _index(owl: OwlModules) -> tuple[Vocabulary, tuple[ModuleStats, ...]]:
             module=module,
             question=_one(ann, "question"),
             generalizes=_one(ann, "generalizes"),
+            ai2thor_refuses=_one(ann, "ai2thorRefuses"),
         )
         (uscs if is_usc else preconditions)[name] = usc
         usc_module[name] = module
@@ -404,6 +405,13 @@ def from_json(text: str) -> CompiledKB:
         raise ValueError(f"knowledge artifact format {doc.get('format')}, expected {FORMAT}")
     raw = doc["vocabulary"]
     classes = frozenset(raw["classes"])
+    annotations = raw["annotations"]
+
+    def concept(name: str, fields_: dict[str, Any]) -> UnsafeStateConcept:
+        # An artifact written before the field existed still has the annotation.
+        refuses = annotations.get(name, {}).get("ai2thorRefuses") or [""]
+        return UnsafeStateConcept(**{"ai2thor_refuses": refuses[0], **fields_})
+
     vocabulary = Vocabulary(
         classes=classes,
         object_properties=frozenset(raw["object_properties"]),
@@ -416,10 +424,8 @@ def from_json(text: str) -> CompiledKB:
                 for k, props in raw["annotations"].items()
             }
         ),
-        uscs=MappingProxyType({k: UnsafeStateConcept(**u) for k, u in raw["uscs"].items()}),
-        preconditions=MappingProxyType(
-            {k: UnsafeStateConcept(**u) for k, u in raw["preconditions"].items()}
-        ),
+        uscs=MappingProxyType({k: concept(k, u) for k, u in raw["uscs"].items()}),
+        preconditions=MappingProxyType({k: concept(k, u) for k, u in raw["preconditions"].items()}),
         background=MappingProxyType(
             {
                 k: BackgroundAxiom(**{**b, "signature": frozenset(b["signature"])})

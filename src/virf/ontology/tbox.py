@@ -76,6 +76,9 @@ class UnsafeStateConcept:
     module: str = ""
     question: str = ""
     generalizes: str = ""
+    # ``:ai2thorRefuses`` on a step the plan cannot run: "yes" when AI2-THOR
+    # itself refuses the step, "no" when it would run it, "" when unsaid.
+    ai2thor_refuses: str = ""
 
     @property
     def final_only(self) -> bool:
@@ -176,6 +179,18 @@ class Vocabulary:
             if found:
                 return found
         return ()
+
+    def possible_materials(self, classes: frozenset[str] | set[str]) -> tuple[str, ...]:
+        """Materials some instances of these types have and others do not
+        (AI2-THOR's vases are ceramic, glass or metal)."""
+        return tuple(
+            sorted({m for cls in classes for m in self.annotation(cls, "possibleMaterial")})
+        )
+
+    def may_afford(self, classes: frozenset[str] | set[str], affordance: str) -> bool:
+        """Some instances of these types afford ``affordance`` and others do
+        not: the simulator neither assumes nor refuses it."""
+        return any(affordance in self.annotation(cls, "mayAfford") for cls in classes)
 
     @cached_property
     def _keys(self) -> Mapping[str, str]:

@@ -3,11 +3,14 @@
 * Association: the same object across views is the one of the same
   catalogue type at the same rank from the left (views taken from one side
   of a room keep that order), unless stage 1 gave ids that say otherwise.
-* Votes: a reading at or above the confidence threshold counts.  Readings of
-  one object that cannot all be true (metal in one view, plastic in
-  another; on and off) are all written into the scene: the ontology makes
-  them a contradiction, which the tutor reports as UNKNOWN with the question
-  of which is wrong.  Nothing is silently picked.
+* Votes: a reading at or above the confidence threshold counts.  States of
+  one object that cannot all be true (on in one view, off in another) are
+  all written into the scene: the ontology makes them a contradiction, which
+  the tutor reports as UNKNOWN with the question of which is wrong.
+  Materials that differ (metal in one view, plastic in another) are each
+  written as an assumed possibility, and a hazard that needs one is UNKNOWN
+  with the question of what the object is made of.  Nothing is silently
+  picked.
 * Uncertainty is kept: below the threshold a material is unknown
   (UnknownMaterial), a fill state unknown (UnknownFillState), any other
   state or relation an *assumed* fact (a hazard that needs it is UNKNOWN,
@@ -363,13 +366,17 @@ class _Fusion:
                 f"{obj.name}: {' / '.join(sorted(set(unsure) - set(sure_mats)))} was read below the "
                 f"threshold against a sure {' / '.join(sure_mats)}; the sure reading stands"
             )
+        # Sure readings that differ are possibilities, not facts: an object
+        # may be made of several materials (glass with a metal cap), so two
+        # readings are no contradiction, and taking both as facts would
+        # decide a hazard ("metal in the microwave") on one view's word.
         for m in sure_mats:
-            self.state(obj.name, "hasMaterial", m)
+            self.state(obj.name, "hasMaterial", m, assumed=len(sure_mats) > 1)
         if len(sure_mats) > 1:
             self.disagreements.append(
                 f"{obj.name}: material read as {' and '.join(sure_mats)} "
-                f"({self._who(mats, set(sure_mats))}); all are kept, so the tutor asks which "
-                "is wrong"
+                f"({self._who(mats, set(sure_mats))}); each is kept as a possibility, so the "
+                "tutor asks what it is made of"
             )
         elif not sure_mats and (mats or self.needs_material(obj)):
             # Nothing sure was said: not the catalogue's typical material

@@ -199,6 +199,7 @@ def _settle(data: dict[str, Any], q: Question, value: str, vocab: Vocabulary) ->
         if q.subject not in declared:  # made by the plan, not the scene's to state
             return False
         _drop_marker(data, q.subject, "UnknownMaterial")
+        _drop_assumed_materials(data, q.subject, vocab)
         _assert(data, q.subject, "hasMaterial", value)
         return True
     if q.kind == "fill":
@@ -290,6 +291,21 @@ def _drop_marker(data: dict[str, Any], subject: str, marker: str) -> None:
             isinstance(a, dict)
             and a.get("subject") == subject
             and str(a.get("object", "")).lower() == marker.lower()
+        )
+    ]
+
+
+def _drop_assumed_materials(data: dict[str, Any], subject: str, vocab: Vocabulary) -> None:
+    """Materials the scene only assumed for ``subject`` go once the user says
+    what it is made of."""
+    data["assertions"] = [
+        a
+        for a in data.get("assertions", [])
+        if not (
+            isinstance(a, dict)
+            and a.get("subject") == subject
+            and a.get("assumed") is True
+            and vocab.canonical_property(str(a.get("property", ""))) == "hasMaterial"
         )
     ]
 

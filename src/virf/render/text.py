@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import textwrap
 
-from virf.schema import Report
+from virf.schema import Report, Violation
 
 # One mark per step outcome, so the trace reads as a column.
 _TRACE_MARKS = {
@@ -21,6 +21,30 @@ def _wrap(text: str, indent: str) -> str:
     return textwrap.fill(text, width=100, initial_indent=indent, subsequent_indent=indent + "  ")
 
 
+def problem_words(report: Report) -> str:
+    """The kind of problem at the reported step, in words ('' when none)."""
+    open_ = report.status == "UNKNOWN"  # it depends on a fact the scene leaves open
+    if report.problem == "hazard":
+        return "possible hazard" if open_ else "hazard"
+    if report.problem != "not-executable":
+        return ""
+    refuses = report.violations[0].ai2thor_refuses if report.violations else None
+    simulator = {
+        True: "; AI2-THOR would refuse this step too",
+        False: "; AI2-THOR itself would not refuse it",
+        None: "",
+    }[refuses]
+    can = "may not" if open_ else "cannot"
+    return f"the plan {can} run here (not executable{simulator})"
+
+
+def _violation_tag(v: Violation) -> str:
+    tags = [] if v.definite else ["needs confirmation"]
+    if v.problem == "not-executable":
+        tags.append("not executable")
+    return f" [{'; '.join(tags)}]" if tags else ""
+
+
 def render_report(report: Report, title: str | None = None) -> str:
     """A human-readable report that shows the causal chain."""
     lines: list[str] = []
@@ -31,10 +55,12 @@ def render_report(report: Report, title: str | None = None) -> str:
         where = f"step {report.dangerous_step}"
         where += f" ({report.action})" if report.action else " (initial state)"
         head += f" at {where}"
+    if problem_words(report):
+        head += f" — {problem_words(report)}"
     lines.append(head)
     lines.append(_wrap(report.reason, "  "))
     for i, v in enumerate(report.violations, start=1):
-        tag = "" if v.definite else " [needs confirmation]"
+        tag = _violation_tag(v)
         lines.append(f"  Violation {i}: {v.id} ({v.category}, danger {v.danger_level}){tag}")
         lines.append(_wrap(v.description, "    "))
         if v.triggering_facts:

@@ -200,9 +200,19 @@ Phase = Literal[
     "error",
 ]
 
+# What kind of problem a finding is (see virf.verify.findings.problem): a
+# hazard, or a step the plan cannot run at all (a failed precondition, an
+# object the scene lacks).  Both block the plan and fail closed.
+Problem = Literal["hazard", "not-executable"]
+
 
 class Violation(_Frozen):
-    """One finding at one step."""
+    """One finding at one step.
+
+    ``problem`` says whether it is a hazard or a step the plan cannot run;
+    ``ai2thor_refuses`` whether AI2-THOR itself would refuse that step (None
+    for a hazard, or when the rule does not say).  Both are None in a report
+    written before they existed."""
 
     id: str
     name: str
@@ -216,6 +226,8 @@ class Violation(_Frozen):
     source: str
     step: int
     phase: Phase
+    problem: Problem | None = None
+    ai2thor_refuses: bool | None = None
     subject: str
     definite: bool
     message: str
@@ -277,9 +289,14 @@ class Question(_Frozen):
 
 
 class Report(_Frozen):
-    """The Logic Tutor's verdict on one plan (paper, Appendix E, extended)."""
+    """The Logic Tutor's verdict on one plan (paper, Appendix E, extended).
+
+    ``problem`` is the kind of problem at the reported step: "hazard" when
+    any violation there is a hazard, else "not-executable" (the plan cannot
+    run there); None for SAFE and ERROR reports."""
 
     status: Status
+    problem: Problem | None = None
     dangerous_step: int | None
     action: str | None
     violated_concept: ViolatedConcept | None
@@ -301,6 +318,16 @@ class Report(_Frozen):
 
         These are the invariants every report the verifier makes satisfies
         (ERROR reports are unconstrained: they fail closed whatever they say)."""
+        if self.status == "SAFE" and self.problem is not None:
+            raise ValueError(f"a SAFE report has no problem kind, got {self.problem}")
+        kinds = {v.problem for v in self.violations if v.step == self.dangerous_step}
+        if self.problem is not None and kinds and None not in kinds:
+            expected = "hazard" if "hazard" in kinds else "not-executable"
+            if self.problem != expected:
+                raise ValueError(
+                    f"the report's problem is {expected} (the kinds of its violations at "
+                    f"step {self.dangerous_step}), got {self.problem}"
+                )
         if self.status == "SAFE":
             if self.violations:
                 raise ValueError(f"a SAFE report has no violations, got {len(self.violations)}")

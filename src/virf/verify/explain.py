@@ -127,6 +127,11 @@ def needed_background(
     names: set[str] = {concept}
     for f in facts:
         names.update((f.subject, f.predicate))
+        # Facts are stored in one direction of an inverse pair (supports),
+        # while an axiom may read the other (the reach chain isOn o isNear).
+        inverse = vocab.inverses.get(f.predicate)
+        if inverse is not None:
+            names.add(inverse)
         names.update(f.members if f.kind is FactKind.CLOSURE else (f.object,))
         if f.kind is FactKind.TYPE:
             names.update(vocab.ancestors.get(f.object, ()))

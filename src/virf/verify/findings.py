@@ -5,6 +5,10 @@ A :class:`Finding` is built either from a reasoner's answer (see
 an inconsistent snapshot, a plan step naming an unclear, missing or living
 object, a failed precondition, or a violated step-bounded requirement.  None
 of these builders calls a reasoner; they get what they need as arguments.
+
+:func:`problem` is the one place that says whether a finding is a hazard or
+a step the plan cannot run (not executable), and :func:`ai2thor_refuses`
+whether AI2-THOR itself would refuse such a step.
 """
 
 from __future__ import annotations
@@ -13,7 +17,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 from virf.ontology.tbox import UnsafeStateConcept, Vocabulary
-from virf.schema import BackgroundKnowledge, Fact, FactKind, Phase, Provenance, Question
+from virf.schema import BackgroundKnowledge, Fact, FactKind, Phase, Problem, Provenance, Question
 from virf.verify.questions import (
     contradiction_question,
     requirement_question,
@@ -65,9 +69,47 @@ class Finding:
     questions: list[Question] = field(default_factory=list)
 
 
-def rank(f: Finding) -> tuple[int, int, int, str, str]:
-    """Sort key of the findings at one step: the first one leads the report."""
+# Synthetic concepts that are not what their phase or kind says: acting on a
+# person is a hazard to them, and a contradictory world makes every
+# conclusion unreliable; neither is a step the simulation merely cannot run.
+HAZARD_CONCEPTS = frozenset({"ActionOnPerson", "InconsistentWorldModel"})
+# Whether AI2-THOR itself refuses the step, for the simulator's own concepts
+# (ontology concepts say it with ``:ai2thorRefuses``): an object that is not
+# there cannot be acted on; for an ambiguous word the controller acts on one
+# of the instances.
+SIMULATOR_REFUSES = {"MissingObject": True, "AmbiguousObject": False}
+
+
+def problem(f: Finding) -> Problem:
+    """The kind of problem a finding is: a *hazard* (running the step would be
+    unsafe) or a step the plan *cannot run* (a failed precondition, an object
+    the scene lacks or cannot pin down, a plan-logic rule).  Both block the
+    plan; the report, the bench and the docs keep them apart."""
+    if f.concept.id in HAZARD_CONCEPTS:
+        return "hazard"
+    if f.phase in ("precondition", "missing-object"):
+        return "not-executable"
+    if f.concept.kind == "logical-inconsistency":
+        return "not-executable"
+    return "hazard"
+
+
+def ai2thor_refuses(f: Finding) -> bool | None:
+    """Whether AI2-THOR itself would refuse a step the plan cannot run (None
+    for a hazard, and for a concept that does not say)."""
+    if problem(f) != "not-executable":
+        return None
+    if f.concept.id in SIMULATOR_REFUSES:
+        return SIMULATOR_REFUSES[f.concept.id]
+    return {"yes": True, "no": False}.get(f.concept.ai2thor_refuses.strip().lower())
+
+
+def rank(f: Finding) -> tuple[int, int, int, int, str, str]:
+    """Sort key of the findings at one step: the first one leads the report.
+    Hazards lead steps the plan cannot run, so a report whose step has a
+    hazard leads with it."""
     return (
+        0 if problem(f) == "hazard" else 1,
         0 if f.definite else 1,
         DANGER_RANK.get(f.concept.danger_level, 9),
         PHASE_RANK[f.phase],

@@ -26,8 +26,13 @@ YES_NO = ("yes", "no")
 MARKERS: dict[tuple[str, str], QuestionKind] = {
     ("hasMaterial", "UnknownMaterial"): "material",
     ("hasState", "UnknownFillState"): "fill",
+    ("hasState", "UnknownContentsState"): "contents",
 }
-_MARKER_CLASS: dict[QuestionKind, str] = {"material": "UnknownMaterial", "fill": "UnknownFillState"}
+_MARKER_CLASS: dict[QuestionKind, str] = {
+    "material": "UnknownMaterial",
+    "fill": "UnknownFillState",
+    "contents": "UnknownContentsState",
+}
 
 
 def materials(vocab: Vocabulary) -> tuple[str, ...]:
@@ -71,7 +76,10 @@ def fact_question(f: Fact, step: int, vocab: Vocabulary, text: str | None = None
         )
 
     kind = MARKERS.get((f.predicate, f.object))
-    if kind == "material":
+    # A material assumed rather than known (one of the materials a type's
+    # instances may have, or a reading perception was unsure of) is settled
+    # by saying what the object is made of, like the unknown-material marker.
+    if kind == "material" or f.predicate == "hasMaterial":
         return ask(
             f"material:{f.subject}",
             "material",
@@ -80,6 +88,14 @@ def fact_question(f: Fact, step: int, vocab: Vocabulary, text: str | None = None
         )
     if kind == "fill":
         return ask(f"fill:{f.subject}", "fill", f"Does {f.subject} hold any liquid?", YES_NO)
+    if kind == "contents":
+        return ask(
+            f"contents:contains:{f.subject}",
+            "contents",
+            f"Is everything inside {f.subject} listed in the scene? "
+            "The scene does not say its 'contains' list is complete.",
+            YES_NO,
+        )
     if f.kind is FactKind.CLOSURE:
         where = "in" if f.predicate == "contains" else "on"
         listed = ", ".join(f.members)

@@ -4,7 +4,9 @@ The status follows from the findings: UNSAFE at the first step with a
 definite finding, else UNKNOWN at the first step with any finding, else SAFE.
 The report leads with the highest-ranked finding of that step, lists every
 finding there as a violation, and gathers the questions of every step up to
-it (an UNKNOWN report: of every step).
+it (an UNKNOWN report: of every step).  Its problem is a hazard when any
+finding at that step is one, else a step the plan cannot run; hazards rank
+first, so a hazard leads when there is one.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from typing import Literal
 from virf.schema import (
     CausalChain,
     Fact,
+    Problem,
     Provenance,
     Question,
     Report,
@@ -23,7 +26,7 @@ from virf.schema import (
     ViolatedConcept,
     Violation,
 )
-from virf.verify.findings import Finding, rank
+from virf.verify.findings import Finding, ai2thor_refuses, problem, rank
 from virf.world.plan import PlanStep
 from virf.world.simulate import Trace
 from virf.world.state import diff
@@ -67,6 +70,9 @@ def build_report(
                 questions.setdefault(q.key, q)
     violations = tuple(build_violation(f, spelling) for f in at_step)
     primary = violations[0] if violations else None
+    kind: Problem | None = None
+    if primary is not None:
+        kind = "hazard" if any(v.problem == "hazard" for v in violations) else "not-executable"
     action = None
     if step is not None and 1 <= step <= len(plan):
         action = plan[step - 1].text
@@ -81,6 +87,7 @@ def build_report(
         reason = f"step {step}: safety depends on facts that are not known ({primary.description})"
     return Report(
         status=status,
+        problem=kind,
         dangerous_step=step,
         action=action,
         violated_concept=ViolatedConcept(id=primary.id, description=primary.description)
@@ -133,6 +140,8 @@ def build_violation(f: Finding, spelling: Mapping[Fact, Fact]) -> Violation:
         source=u.source,
         step=f.step,
         phase=f.phase,
+        problem=problem(f),
+        ai2thor_refuses=ai2thor_refuses(f),
         subject=f.subject,
         definite=f.definite,
         message=f.message,

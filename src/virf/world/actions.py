@@ -53,9 +53,14 @@ def is_catalogue_type(vocab: Vocabulary, classes: frozenset[str]) -> bool:
 
 def lacks(vocab: Vocabulary, obj: str, state: WorldState, affordance: str) -> bool:
     # Only catalogue types declare their affordances: for any other type a
-    # missing one says nothing.
+    # missing one says nothing, and neither does one only some instances of
+    # the type have (AI2-THOR's bowls break unless they are plastic).
     classes = state.objects.get(obj, frozenset())
-    return is_catalogue_type(vocab, classes) and not vocab.any_is_a(classes, affordance)
+    return (
+        is_catalogue_type(vocab, classes)
+        and not vocab.any_is_a(classes, affordance)
+        and not vocab.may_afford(classes, affordance)
+    )
 
 
 class Change:
@@ -345,12 +350,13 @@ def _pour(c: Change) -> PreconditionFailure | None:
         c.objects[portion] = frozenset({"UnknownLiquid"})
         c.add(Fact(portion, "type", "UnknownLiquid", FactKind.TYPE))
         lands_in(portion)
-    # A cleaner's chemical goes where it is poured.
+    # A cleaner's chemical goes where it is poured, as a substance out of its
+    # bottle: what it meets there is what it reacts with.
     for chem in c.state.objects_of(held, "hasMaterial"):
         if chem in c.vocab.individuals and c.vocab.is_a(chem, "Chemical"):
             portion = f"{chem}_from_{held}"
-            c.objects[portion] = frozenset({"PhysicalObject"})
-            c.add(Fact(portion, "type", "PhysicalObject", FactKind.TYPE))
+            c.objects[portion] = frozenset({"Substance"})
+            c.add(Fact(portion, "type", "Substance", FactKind.TYPE))
             c.add(Fact(portion, "hasMaterial", chem))
             lands_in(portion)
     if liquids or filled:
@@ -402,7 +408,7 @@ HANDLERS: dict[str, Handler] = {
 
 # ---------------------------------------------------------------- shared effects
 def heat(c: Change) -> None:
-    """A running heat source (microwave, lit burner, toaster) cooks the
+    """A running heat source (lit burner, toaster) or microwave cooks the
     cookable things in or on it, and those in a pan or pot on it, as
     AI2-THOR does.  Runs after every step, whatever its verb."""
     objects, facts = c.objects, c.facts
@@ -417,7 +423,10 @@ def heat(c: Change) -> None:
         ]
 
     for source, classes in objects.items():
-        if not c.vocab.any_is_a(classes, "HeatSourceObject"):
+        if not (
+            c.vocab.any_is_a(classes, "HeatSourceObject")
+            or c.vocab.any_is_a(classes, "MicrowaveEmitterObject")
+        ):
             continue
         if Fact(source, "hasState", "OnState") not in facts:
             continue

@@ -81,6 +81,12 @@ VALUE_WORDS = {
     "empty": "EmptyState",
     "usedup": "UsedUpState",
     "sealed": "SealedState",
+    "lit": "OnState",
+    "burning": "OnState",
+    "running": "OnState",
+    "plugged": "PluggedInState",
+    "pluggedin": "PluggedInState",
+    "unplugged": "UnpluggedState",
     "unknown": "UnknownMaterial",
     "metallic": "Metal",
 }
@@ -255,7 +261,16 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
         if a.property in TYPE_PROPERTIES:
             declare(a.subject, str(a.object), f"assertions[{i}]")
 
-    values = _value_individuals(classes, vocab)
+    # An individual of a material class is a value ('Pot_1 hasMaterial
+    # Metal_1') when some assertion uses it as one; otherwise it is a portion
+    # of that stuff (bleach in a toilet), an object like any other.
+    used_as_value = {
+        str(a.object)
+        for a in assertions
+        if a.property not in TYPE_PROPERTIES
+        and vocab.canonical_property(a.property) in VALUE_PROPERTY.values()
+    }
+    values = _value_individuals(classes, vocab, used_as_value)
     facts: dict[Fact, Provenance] = {}
     spelling: dict[Fact, Fact] = {}
 
@@ -288,6 +303,8 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
             written = Fact(ind, "type", cls, FactKind.TYPE)
             if _value_kind(cls, classes, vocab) is not None and cls in vocab.individuals:
                 state_fact(ind, cls, written)  # an object typed OpenState is open
+                if vocab.is_a(cls, "Material"):
+                    kept.add("Substance")  # typed by its stuff alone: a portion of it
             elif cls in vocab.material_classes:
                 state_fact(ind, vocab.material_classes[cls], written)
                 kept.add("PhysicalObject")
@@ -431,6 +448,7 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
     _apply_default_states(objects, facts, vocab)
     _apply_material_knowledge(objects, facts, vocab)
     _mark_unknown_fill(objects, facts, vocab)
+    _mark_unknown_contents(objects, facts, vocab, frozenset(closed), frozenset(unknown_contents))
     _assume_controls(objects, object_order, facts, vocab)
     return Scene(
         objects=MappingProxyType(objects),
@@ -507,13 +525,17 @@ def _value_kind(term: str, classes: Mapping[str, set[str]], vocab: Vocabulary) -
     return None
 
 
-def _value_individuals(classes: Mapping[str, set[str]], vocab: Vocabulary) -> dict[str, list[str]]:
+def _value_individuals(
+    classes: Mapping[str, set[str]], vocab: Vocabulary, used_as_value: set[str]
+) -> dict[str, list[str]]:
     """User individuals of state, material or attribute classes, each with the
     canonical individuals it stands for (empty: keep the user's individual,
-    because some class of it has no canonical individual)."""
+    because some class of it has no canonical individual).  An individual of
+    material classes only is a value only where a scene uses it as one."""
     out: dict[str, list[str]] = {}
     for ind, cs in classes.items():
-        if _value_kind(ind, classes, vocab) is None:
+        kind = _value_kind(ind, classes, vocab)
+        if kind is None or (kind == "Material" and ind not in used_as_value):
             continue
         specific = _most_specific(cs, vocab)
         out[ind] = sorted(specific) if specific <= vocab.individuals else []
@@ -598,16 +620,37 @@ def _mark_unknown_fill(
             facts[Fact(ind, "hasState", "UnknownFillState")] = Provenance.ASSUMED
 
 
+def _mark_unknown_contents(
+    objects: dict[str, frozenset[str]],
+    facts: dict[Fact, Provenance],
+    vocab: Vocabulary,
+    closed: frozenset[str],
+    unknown_contents: frozenset[str],
+) -> None:
+    """A receptacle or vessel whose contents the scene does not list
+    completely gets an explicit UnknownContentsState marker: a toilet or a
+    bucket may already hold a cleaner nobody mentioned."""
+    for ind, cs in objects.items():
+        if not (vocab.any_is_a(cs, "ContainerReceptacle") or vocab.any_is_a(cs, "LiquidContainer")):
+            continue
+        listed = "contains" in closed or f"contains:{ind}" in closed
+        if not listed or ind in unknown_contents:
+            facts[Fact(ind, "hasState", "UnknownContentsState")] = Provenance.ASSUMED
+
+
 def _apply_material_knowledge(
     objects: dict[str, frozenset[str]], facts: dict[Fact, Provenance], vocab: Vocabulary
 ) -> None:
-    """Typical-material defaults, then unknown-material markers.
+    """Typical-material defaults, possible materials, then unknown-material
+    markers, for objects whose scene states no material.
 
     A Mug is ceramic *unless the scene says otherwise*: OWL has no defaults, so
-    the default is applied here, only when the scene states no material and the
-    classes imply none.  An object whose material is still unknown gets an
-    explicit UnknownMaterial marker (an ASSUMED fact): the open world made
-    visible, so that uncertainty rules can ask about it.
+    the default is applied here.  A Vase may be ceramic, glass or metal (AI2-THOR's
+    vases differ): each possibility is an ASSUMED fact, so a hazard that needs
+    one is UNKNOWN and asks what the vase is made of, never UNSAFE or SAFE.  An
+    object whose material is still unknown gets an explicit UnknownMaterial
+    marker (an ASSUMED fact): the open world made visible, so that uncertainty
+    rules can ask about it.
     """
     stated: dict[str, set[str]] = {}
     for f in facts:
@@ -616,13 +659,15 @@ def _apply_material_knowledge(
     for ind, cs in objects.items():
         if not vocab.any_is_a(cs, "PhysicalObject") or vocab.any_is_a(cs, "Liquid"):
             continue
-        if stated.get(ind) or vocab.materials_of(cs) or vocab.any_is_a(cs, "FoodItem"):
+        if stated.get(ind):
             continue
         typical = vocab.typical_materials(cs)
-        if typical:
-            for m in typical:
-                facts[Fact(ind, "hasMaterial", m)] = Provenance.DEFAULT
-        else:
+        possible = vocab.possible_materials(cs)
+        for m in typical:
+            facts[Fact(ind, "hasMaterial", m)] = Provenance.DEFAULT
+        for m in possible:
+            facts.setdefault(Fact(ind, "hasMaterial", m), Provenance.ASSUMED)
+        if not (typical or possible or vocab.materials_of(cs) or vocab.any_is_a(cs, "FoodItem")):
             facts[Fact(ind, "hasMaterial", "UnknownMaterial")] = Provenance.ASSUMED
 
 

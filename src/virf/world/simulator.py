@@ -282,15 +282,26 @@ class Simulator:
         out[Fact.closure(state.agent, "isHolding", held)] = Provenance.PLAN
         for ind in state.order + tuple(sorted(set(state.objects) - set(state.order))):
             classes = state.objects[ind]
+            # A vessel nothing can be put into (a bottle, a kettle) holds only
+            # the liquid the state gives it; while its fill is unknown, so is
+            # what it holds.
+            vessel = self.vocab.any_is_a(classes, "LiquidContainer")
+            unknown_fill = state.has(ind, "hasState", "UnknownFillState")
             for rel, cls in (
                 ("contains", "ContainerReceptacle"),
                 ("supports", "SurfaceReceptacle"),
             ):
-                if self.vocab.any_is_a(classes, cls):
+                receptacle = self.vocab.any_is_a(classes, cls)
+                if receptacle or (rel == "contains" and vessel):
                     members = state.objects_of(ind, rel)
-                    known = (
+                    listed = (
                         rel in state.closed_world or f"{rel}:{ind}" in state.closed_world
-                    ) and ind not in state.unknown_contents
+                    ) or not receptacle
+                    known = (
+                        listed
+                        and ind not in state.unknown_contents
+                        and not (rel == "contains" and unknown_fill)
+                    )
                     prov = Provenance.SCENE if known else Provenance.ASSUMED
                     out[Fact.closure(ind, rel, members)] = prov
         return out
