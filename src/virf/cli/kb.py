@@ -115,27 +115,13 @@ def kb_rules(
     as_json: Annotated[bool, typer.Option("--json", help="Print the rules as JSON.")] = False,
 ) -> None:
     """List the Unsafe State Concepts with their definitions and annotations."""
-    from dataclasses import asdict
-
     from virf.ontology.tbox import load_tbox
 
     vocab = load_tbox(scenario, kb=kb).vocabulary
-    rules = sorted(vocab.uscs.values(), key=lambda u: (u.module, u.id))
     if as_json:
-        typer.echo(
-            json.dumps(
-                [
-                    {
-                        **asdict(u),
-                        "mechanism": next(iter(vocab.annotation(u.name, "mechanism")), ""),
-                        "twins": list(vocab.annotation(u.name, "twin")),
-                    }
-                    for u in rules
-                ],
-                indent=2,
-            )
-        )
+        typer.echo(json.dumps(vocab.rule_listing(), indent=2))
         return
+    rules = sorted(vocab.uscs.values(), key=lambda u: (u.module, u.id))
     for u in rules:
         typer.echo(f"{u.id}  [{u.kind}; {u.category}; {u.danger_level}; checked: {u.check_at}]")
         typer.echo(f"    {u.definition}")
@@ -217,7 +203,8 @@ def kb_test(
             + (
                 f"; sweeps: {result.sweep_cases} cases, {len(result.sweeps)} failing"
                 if sweeps
-                else ""
+                else "; sweeps skipped (they state the household rules' mechanisms; "
+                "--sweeps runs them)"
             )
         )
         if failures:

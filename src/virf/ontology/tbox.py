@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from functools import cache, cached_property
 from importlib import resources
 from pathlib import Path
@@ -149,6 +149,18 @@ class Vocabulary:
 
     def annotation(self, term: str, prop: str) -> tuple[str, ...]:
         return self.annotations.get(term, {}).get(prop, ())
+
+    def rule_listing(self) -> list[dict[str, object]]:
+        """Every Unsafe State Concept as plain data, with its mechanism and
+        minimal pairs: what ``virf kb rules --json`` and ``GET /v1/rules`` give."""
+        return [
+            {
+                **asdict(u),
+                "mechanism": next(iter(self.annotation(u.name, "mechanism")), ""),
+                "twins": list(self.annotation(u.name, "twin")),
+            }
+            for u in sorted(self.uscs.values(), key=lambda u: (u.module, u.id))
+        ]
 
     def canonical_class(self, name: str) -> str | None:
         """Resolve a class name case-insensitively, through synonyms."""

@@ -20,7 +20,6 @@ import hmac
 import os
 import threading
 from collections.abc import Awaitable, Callable
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any, Final
 
@@ -191,10 +190,9 @@ def create_app(
         return Response(report.to_json() + "\n", media_type="application/json")
 
     @app.get("/v1/rules")
-    def rules() -> list[dict[str, Any]]:
+    def rules() -> list[dict[str, object]]:
         """The Unsafe State Concepts of the default scenario (``virf kb rules --json``)."""
-        uscs = sorted(default.tbox.vocabulary.uscs.values(), key=lambda u: (u.module, u.id))
-        return [asdict(u) for u in uscs]
+        return default.tbox.vocabulary.rule_listing()
 
     @app.get("/v1/health")
     def health() -> dict[str, Any]:
