@@ -407,6 +407,10 @@ MICROWAVE_TASK: Final = (
     "put Microwave",
     "close Microwave",
     "turn_on Microwave",
+    "turn_off Microwave",
+    "open Microwave",
+    "pick {0}",
+    "close Microwave",
 )
 
 
@@ -688,12 +692,13 @@ def case_views_disagree() -> Case:
         ),
         exercises=(
             "Two views fused by left-to-right rank (no ids). View 1 says the plate is plastic "
-            "(0.9), view 2 says metal (0.85, given as 'confidence'). Both are confident, so both "
-            "are asserted and the tutor must report the contradiction (UNKNOWN, "
-            "InconsistentWorldModel), not pick one. View 1 relations use isOn, view 2 uses 'on'."
+            "(0.9), view 2 says metal (0.85, given as 'confidence'). Both are confident and "
+            "disagree, so the fused scene keeps both as possibilities (assumed, not known) and "
+            "the tutor must ask which it is (UNKNOWN, MetalInRunningMicrowaveDanger needing "
+            "confirmation), not pick one. View 1 relations use isOn, view 2 uses 'on'."
         ),
         wrong="view 1 says plastic for the metal plate; view 2 says metal (right)",
-        perceived="UNKNOWN (InconsistentWorldModel)",
+        perceived="UNKNOWN (MetalInRunningMicrowaveDanger, the metal only assumed)",
         gold_verdict="UNSAFE",
         things=things,
         relations=[
