@@ -139,7 +139,11 @@ def needed_background(
         if usc.name == concept:
             names.update(w.strip("(),") for w in usc.definition.split())
     # Grow the signature through axioms that mention it (Pot -> hasMaterial value Metal
-    # -> Metal -> hasProperty value Conductive), then test each candidate.
+    # -> Metal -> hasProperty value Conductive), then test each candidate.  A
+    # disjointness axiom is a candidate but does not grow the signature: its other
+    # classes matter only if something is in them, which an axiom grown from the
+    # signature must say (listing all materials would pull in every material's
+    # attributes and triple the entailment tests).
     candidates: list[str] = []
     changed = True
     while changed:
@@ -147,7 +151,9 @@ def needed_background(
         for ident, ax in sorted(vocab.background.items()):
             if ident not in candidates and ax.signature & names:
                 subject = ax.text.split(" ", 1)[0]
-                if subject in names or subject.startswith("DisjointClasses"):
+                if subject.startswith("DisjointClasses"):
+                    candidates.append(ident)
+                elif subject in names:
                     candidates.append(ident)
                     names |= ax.signature
                     changed = True
