@@ -102,6 +102,12 @@ def paper_tutor() -> LogicTutor:
 
 
 @pytest.fixture(scope="session")
+def paper_reference_tutor() -> LogicTutor:
+    """The paper's rules with the reference engine (HermiT)."""
+    return LogicTutor(scenario="paper", engine="reference")
+
+
+@pytest.fixture(scope="session")
 def example_tutor(tutor: LogicTutor, paper_tutor: LogicTutor) -> Callable[[str], LogicTutor]:
     """The tutor an example folder is verified with: the scenario its
     expected.json names (the paper's examples reproduce the paper's rules),

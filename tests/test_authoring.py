@@ -28,6 +28,12 @@ CANDLE_AXIOM = (
     "Candle and (hasState some OnState) and "
     "(isNear some (PhysicalObject and (hasMaterial some Fabric)))"
 )
+# Its minimal pair: a lit candle beside fabric, and the twin where the cloth is metal.
+CANDLE_TWIN = (
+    "Candle_1: Candle; Cloth_1: PhysicalObject; Cloth_1 hasMaterial Fabric; "
+    "Candle_1 isNear Cloth_1 | turn_on Candle_1 | "
+    "Cloth_1 hasMaterial Fabric => Cloth_1 hasMaterial Metal"
+)
 
 
 def rule(name: str, definition: str, **extra: Any) -> dict[str, Any]:
@@ -88,7 +94,8 @@ def test_init_makes_the_layout_and_refuses_to_overwrite(ws: Workspace, tmp_path:
 # ---------------------------------------------------------------------- a person's rule
 def test_a_person_s_rule_goes_from_proposal_to_verification(ws: Workspace, tmp_path: Path) -> None:
     (cid,) = ws.propose(
-        proposal(tmp_path, rule("LitCandleNearFabricDanger", CANDLE_AXIOM)), "alice"
+        proposal(tmp_path, rule("LitCandleNearFabricDanger", CANDLE_AXIOM, twins=[CANDLE_TWIN])),
+        "alice",
     )
     view = ws.candidate(cid)
     assert view.summary.drafter == "person:alice" and view.summary.status == "pending"
@@ -102,6 +109,7 @@ def test_a_person_s_rule_goes_from_proposal_to_verification(ws: Workspace, tmp_p
         "consistent": "info",
         "satisfiable": "info",
         "novelty": "info",
+        "twins": "info",  # a drafted rule without a minimal pair gets a warning
     }
     ws.opened(cid, "bob")
     decision = ws.decide(cid, "accept", reviewer="bob")
@@ -115,6 +123,7 @@ def test_a_person_s_rule_goes_from_proposal_to_verification(ws: Workspace, tmp_p
         ':decision "accepted unedited"',
         ":decidedOn ",
         ':source "National Fire Protection Association (NFPA), Candle safety',
+        ":twin ",
     ):
         assert annotation in module
     [accepted] = ws.rules()
@@ -138,9 +147,15 @@ def test_a_person_s_rule_goes_from_proposal_to_verification(ws: Workspace, tmp_p
             {"subject": "Candle_1", "property": "isNear", "object": "Cloth_1"},
         ],
     }
-    with_kb = LogicTutor(kb=ws.root).verify(scene, ["find Candle", "turn_on Candle"])
+    kb_tutor = LogicTutor(kb=ws.root)
+    with_kb = kb_tutor.verify(scene, ["find Candle", "turn_on Candle"])
     assert with_kb.status == "UNSAFE" and with_kb.dangerous_step == 2
     assert with_kb.violations[0].id == "LitCandleNearFabricDanger"
+    # Its minimal pair travelled with it, and passes (virf kb test).
+    from virf.verify.kbtest import run_pairs
+
+    [pair] = run_pairs(kb_tutor.tbox, kb_tutor.engine, ["LitCandleNearFabricDanger"])
+    assert pair.ok, pair
     without = LogicTutor().verify(scene, ["find Candle", "turn_on Candle"])
     assert "LitCandleNearFabricDanger" not in {v.id for v in without.violations}
 

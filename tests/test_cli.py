@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from conftest import EXAMPLES_DIR, ROOT
+from conftest import EXAMPLES_DIR, ROOT, load_expected
 
 
 @pytest.fixture(scope="module")
@@ -36,9 +36,16 @@ def _example(name: str) -> tuple[Path, Path]:
     return EXAMPLES_DIR / name / "scene.json", EXAMPLES_DIR / name / "plan.txt"
 
 
+def _scenario(name: str) -> list[str]:
+    """``--scenario S`` when the example reproduces a scenario other than the
+    default (the paper's examples name ``"scenario": "paper"``)."""
+    scenario = load_expected(EXAMPLES_DIR / name).get("scenario")
+    return [] if scenario is None else ["--scenario", scenario]
+
+
 @pytest.mark.parametrize(("case", "code"), [("pedagogical-refined", 0), ("walkthrough", 1)])
 def test_verify_json(cli, example_report, case: str, code: int) -> None:
-    result = cli("verify", "--json", *_example(case))
+    result = cli("verify", "--json", *_scenario(case), *_example(case))
     assert result.exit_code == code, result.stderr
     report = json.loads(result.stdout)  # exactly one JSON document, nothing else
     assert isinstance(report, dict)
@@ -58,7 +65,7 @@ def test_verify_text_and_feedback(cli, example_report) -> None:
 
     scene, plan = _example("walkthrough")
     report = example_report("walkthrough")
-    result = cli("verify", "--feedback", scene, plan)
+    result = cli("verify", "--feedback", *_scenario("walkthrough"), scene, plan)
     assert result.exit_code == 1, result.stderr
     expected = render_report(report, title=f"{scene} + {plan}") + "\n" + feedback_prompt(report)
     assert result.stdout == expected
@@ -111,7 +118,7 @@ def test_the_installed_script_exits_with_the_verdict() -> None:
         pytest.skip(f"no installed virf script beside {sys.executable}")
     for case, code in (("pedagogical-refined", 0), ("walkthrough", 1)):
         result = subprocess.run(
-            [str(script), "verify", "--json", *map(str, _example(case))],
+            [str(script), "verify", "--json", *_scenario(case), *map(str, _example(case))],
             cwd=ROOT,
             capture_output=True,
             text=True,

@@ -97,7 +97,7 @@ def test_without_java_a_question_the_fast_engine_cannot_answer_is_an_error(
         "ReasonerFailure; from virf.schema import Fact, FactKind\n"
         "fast = make_engine('fast', load_tbox())\n"
         "try:\n"
-        "    fast.classify([Fact('_:x', 'type', 'Fridge', FactKind.TYPE)], ['FridgeLeftOpenDanger'])\n"
+        "    fast.classify([Fact('_:x', 'type', 'Fridge', FactKind.TYPE)], ['ColdStorageLeftOpenDanger'])\n"
         "except ReasonerFailure as exc:\n"
         "    print('failure:', exc)\n"
     )

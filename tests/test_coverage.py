@@ -5,6 +5,10 @@ the tests need no benchmark checkout): an egg in a running microwave, a knife
 in one (two categories), an unsafe plan no rule covers, safe plans with and
 without a firing rule, a long-horizon task without a plan, and a plan that
 does not parse.
+
+Most tests read the coverage of the paper's rules (scenario ``paper``), whose
+rule ids they name; the household rules' coverage of the same tasks (the
+default scenario) is checked by mechanism at the end of the computation part.
 """
 
 from __future__ import annotations
@@ -128,7 +132,14 @@ def task_files(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
 
 
 @pytest.fixture(scope="module")
-def result(tutor: LogicTutor, task_files: list[Path]) -> CoverageResult:
+def result(paper_tutor: LogicTutor, task_files: list[Path]) -> CoverageResult:
+    """Coverage by the paper's rules (scenario ``paper``)."""
+    return compute_coverage(paper_tutor, load_coverage_tasks(task_files))
+
+
+@pytest.fixture(scope="module")
+def household_result(tutor: LogicTutor, task_files: list[Path]) -> CoverageResult:
+    """Coverage by the household mechanism rules (the default scenario)."""
     return compute_coverage(tutor, load_coverage_tasks(task_files))
 
 
@@ -238,20 +249,54 @@ def test_tasks_without_a_plan_or_with_an_unparsable_plan_are_not_counted(
     assert (s["no_reference_plan"], s["plan_does_not_parse"]) == (1, 1)
 
 
-def test_rules_that_never_fire_are_listed(result: CoverageResult, tutor: LogicTutor) -> None:
+def test_rules_that_never_fire_are_listed(result: CoverageResult, paper_tutor: LogicTutor) -> None:
     never = {r.id: r for r in result.never_fired}
     assert never["AmmoniaBleachMixedDanger"].module == "safety-chemical"
     fired = {rule for t in result.tasks for rule in t.rules}
     assert "MicrowaveSealedObjectDanger" in fired
     assert not fired & set(never)
     # Every rule the verifier checks is accounted for, once.
-    assert len(result.rules) == len(tutor.tbox.vocabulary.uscs)
+    assert len(result.rules) == len(paper_tutor.tbox.vocabulary.uscs)
     listed = result.public()["never_fired"]
     assert {
         "id": "AmmoniaBleachMixedDanger",
         "module": "safety-chemical",
         "category": "Chemical Hazard",
     } in listed
+
+
+def test_the_household_rules_cover_the_same_tasks_by_mechanism(
+    household_result: CoverageResult, tutor: LogicTutor
+) -> None:
+    result = household_result
+    # The egg: a sealed object in a running microwave, from step 7 on.
+    egg = _task(result, "unsafe_detailed.jsonl", 1)
+    sealed = next(f for f in egg.firings if f.rule == "SealedObjectInRunningMicrowaveDanger")
+    assert egg.covered and sealed.steps[0] == 7 and sealed.definite
+    assert ("SealedObjectInRunningMicrowaveDanger", 1) in _category(
+        result, "Explosion Hazard"
+    ).rules
+    # The knife: metal in a running microwave and a non-food item in a heater.
+    knife = _task(result, "unsafe_detailed.jsonl", 3)
+    assert {"MetalInRunningMicrowaveDanger", "NonFoodInRunningHeaterDanger"} <= set(knife.rules)
+    assert _category(result, "Explosion Hazard").covered == 2
+    assert _category(result, "Fire Hazard").covered == 1
+    # The pot set down on the counter stays quiet; a potato straight on a lit
+    # burner is food on a heating surface, and left there at the end.
+    assert _task(result, "safe_detailed.jsonl", 1).firings == ()
+    potato = {f.rule: f for f in _task(result, "safe_detailed.jsonl", 2).firings}
+    assert potato["FoodDirectlyOnLitHeatingSurfaceDanger"].steps == (6,)
+    assert potato["ObjectLeftOnHeatingSurfaceDanger"].steps == (6,)
+    assert tutor.tbox.vocabulary.uscs["ObjectLeftOnHeatingSurfaceDanger"].check_at == "final"
+    # A pot of unknown contents on a lit burner asks; it is not definite.
+    pot = {f.rule: f for f in _task(result, "safe_detailed.jsonl", 3).firings}
+    assert not pot["EmptyCookwareOnLitHeatingSurfaceDanger"].definite
+    assert not pot["CookwareOfUnknownContentsOnLitHeatingSurfaceDanger"].definite
+    # No rule fires on the potato sliced on the counter.
+    assert not _task(result, "unsafe_detailed.jsonl", 2).covered
+    never = {r.id: r for r in result.never_fired}
+    assert never["IncompatibleChemicalsMeetDanger"].module == "safety-acquired"
+    assert len(result.rules) == len(tutor.tbox.vocabulary.uscs)
 
 
 def test_categories_a_task_lists_are_each_normalised() -> None:
@@ -293,8 +338,8 @@ def test_markdown_page_has_the_category_table(result: CoverageResult) -> None:
 def test_json_is_the_whole_result_and_stable_across_runs(
     coverage_cli: Callable[..., Result], task_files: list[Path], result: CoverageResult
 ) -> None:
-    first = coverage_cli("kb", "coverage", "--json", "--scenario", "kitchen", *task_files)
-    second = coverage_cli("kb", "coverage", "--json", "--scenario", "kitchen", *task_files)
+    first = coverage_cli("kb", "coverage", "--json", "--scenario", "paper", *task_files)
+    second = coverage_cli("kb", "coverage", "--json", "--scenario", "paper", *task_files)
     assert first.exit_code == 0, first.stderr
     assert first.stdout == second.stdout
     assert json.loads(first.stdout) == json.loads(json.dumps(result.public()))
@@ -304,7 +349,9 @@ def test_text_report_plot_and_markdown(
     coverage_cli: Callable[..., Result], task_files: list[Path], tmp_path: Path
 ) -> None:
     png, page = tmp_path / "coverage.png", tmp_path / "coverage.md"
-    out = coverage_cli("kb", "coverage", *task_files, "--plot", png, "--markdown", page)
+    out = coverage_cli(
+        "kb", "coverage", "--scenario", "paper", *task_files, "--plot", png, "--markdown", page
+    )
     assert out.exit_code == 0, out.stderr
     assert "Rule coverage of unsafe tasks per hazard category" in out.stdout
     assert "MicrowaveSealedObjectDanger (step 7" in out.stdout

@@ -80,9 +80,9 @@ def test_a_passed_deadline_stops_every_question(tutor: LogicTutor) -> None:
     facts = chain_facts(3)
     past = time.monotonic() - 1
     with pytest.raises(DeadlineExceeded):
-        tutor.engine.classify(facts, ["UnsafeMicrowaveUsage"], deadline=past)
+        tutor.engine.classify(facts, ["MetalInRunningMicrowaveDanger"], deadline=past)
     with pytest.raises(DeadlineExceeded):
-        tutor.engine.entails(facts, "UnsafeMicrowaveUsage", "Box_0", deadline=past)
+        tutor.engine.entails(facts, "MetalInRunningMicrowaveDanger", "Box_0", deadline=past)
     with pytest.raises(DeadlineExceeded):
         tutor.engine.consistent(facts, deadline=past)
     # Without a deadline nothing changes.
@@ -168,6 +168,8 @@ def test_an_engine_answers_normally_after_a_timeout(
     tutor: LogicTutor, reference_tutor: LogicTutor, example_report: Any, which: str, case: str
 ) -> None:
     owner = tutor if which == "fast" else reference_tutor
+    if case == "walkthrough":  # the paper's example, verified with the paper's rules
+        owner = LogicTutor(scenario="paper")
     hurried = Verifier(owner.tbox, owner.engine, timeout_s=0.2)
     assert hurried.verify(owner.scene(chain_scene(3000)), parse_plan(["find Box_0"])).status in (
         "ERROR",
@@ -198,7 +200,7 @@ def test_a_hazard_at_the_bottom_of_a_chain_is_the_reference_engines(
     ref = reference_tutor.verify(chain_scene(4, hazard=True), ["find Box_0"])
     assert fast.status == "UNSAFE"
     assert fast.model_copy(update={"engine": ref.engine}) == ref
-    metal = next(v for v in fast.violations if v.id == "UnsafeMicrowaveUsage")
+    metal = next(v for v in fast.violations if v.id == "MetalInRunningMicrowaveDanger")
     links = [t for t in metal.triggering_facts if t.predicate == "contains"]
     assert len(links) == 5  # the microwave, four boxes, the fork: every link is needed
 
@@ -220,13 +222,13 @@ def test_long_chain_answers_are_the_reference_engines(
     concepts = sorted(tutor.tbox.vocabulary.uscs)
     got = fast.classify(facts, concepts)
     assert got == ref.classify(facts, concepts)
-    assert "Microwave_1" in got.instances["UnsafeMicrowaveUsage"]
+    assert "Microwave_1" in got.instances["MetalInRunningMicrowaveDanger"]
     # A broken link anywhere, or the fork beside the plate instead of on it,
     # and the fork is no longer enclosed.
     for drop in (Fact("Box_20", "contains", "Box_21"), Fact("Plate_1", "supports", "Fork_1")):
         rest = [f for f in facts if f != drop]
-        assert fast.entails(rest, "UnsafeMicrowaveUsage", "Microwave_1") is False
-        assert ref.entails(rest, "UnsafeMicrowaveUsage", "Microwave_1") is False
+        assert fast.entails(rest, "MetalInRunningMicrowaveDanger", "Microwave_1") is False
+        assert ref.entails(rest, "MetalInRunningMicrowaveDanger", "Microwave_1") is False
     # "Box_10 encloses nothing" contradicts the chain below it.
     closed = [*facts, Fact.closure("Box_10", "encloses", [])]
     assert fast.consistent(closed) is ref.consistent(closed) is False

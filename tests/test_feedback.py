@@ -14,10 +14,10 @@ def _section(prompt: str, title: str) -> str:
     return match.group(1)
 
 
-def test_walkthrough_feedback_prompt(example_report, vocab) -> None:
-    report = example_report("walkthrough")
+def test_walkthrough_feedback_prompt(example_report, paper_tutor) -> None:
+    report = example_report("walkthrough")  # the paper's walkthrough, on its rules
     prompt = feedback_prompt(report)
-    usc = vocab.uscs["UnsafeMicrowaveUsage"]
+    usc = paper_tutor.tbox.vocabulary.uscs["UnsafeMicrowaveUsage"]
     assert "STEP 7" in prompt
     assert "turn_on(TestMicrowave_Action)" in _section(prompt, "FAILURE ANALYSIS")
     assert "Rule ID: UnsafeMicrowaveUsage" in _section(prompt, "VIOLATED SAFETY RULE")

@@ -294,7 +294,10 @@ def test_state_spellings_toaster_with_fork(tutor, state_spelling: dict[str, str]
     report = tutor.verify(scene, ["find Fork_1", "pick Fork_1", "find Toaster_1", "put Toaster_1"])
     assert (report.status, report.dangerous_step) == ("UNSAFE", 4)
     assert report.violated_concept is not None
-    assert report.violated_concept.id == "MetalInToasterDanger"
+    # Putting a fork into a toaster is a hazard whether or not it is on ...
+    assert report.violated_concept.id == "ConductiveObjectIntoLiveElementsDanger"
+    # ... and a fork among live elements needs the toaster on, as every spelling says.
+    assert "ConductiveObjectAmongLiveElementsDanger" in [v.id for v in report.violations]
 
 
 def test_open_replaces_a_door_closed_state_individual(tutor) -> None:
@@ -312,7 +315,7 @@ def test_open_replaces_a_door_closed_state_individual(tutor) -> None:
     left_open = tutor.verify(scene, ["find Fridge_1", "open Fridge_1"])
     assert (left_open.status, left_open.dangerous_step) == ("UNSAFE", 2)
     assert left_open.violated_concept is not None
-    assert left_open.violated_concept.id == "FridgeLeftOpenDanger"
+    assert left_open.violated_concept.id == "ColdStorageLeftOpenDanger"
 
 
 def test_reports_show_the_users_own_spelling(tutor) -> None:

@@ -4,6 +4,7 @@ catalogue sweeps follow the types' properties, and the test can fail."""
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 
@@ -49,8 +50,6 @@ def test_a_pair_swapped_with_its_twin_fails() -> None:
 def test_a_rule_keyed_on_a_name_fails_the_sweeps(tmp_path) -> None:  # type: ignore[no-untyped-def]
     # A rule that flags throwing a pillow by name gives a verdict the pillow's
     # properties (soft) do not call for.
-    from virf.ontology.owlapi import OwlModules  # noqa: F401  (the JVM is needed)
-
     module = tmp_path / "pillow.omn"
     module.write_text(
         """Prefix: : <http://virf.dev/ontology#>
@@ -81,14 +80,14 @@ Class: :PillowThrownDanger
 """,
         encoding="utf-8",
     )
-    tbox = load_tbox("kitchen", extra=[module])
+    tbox = load_tbox("kitchen", extra_modules=(str(module),))
     result = run_kb_test(tbox, make_engine("fast", tbox))
     assert not result.failures  # its pair passes: a pair alone does not catch a name
     assert any(f.sweep == "throw" and f.case == "Pillow" for f in result.sweeps)
 
 
 def test_twins_are_read_strictly() -> None:
-    with pytest.raises(InputError, match="WORLD | PLAN | OLD => NEW"):
+    with pytest.raises(InputError, match=re.escape("WORLD | PLAN | OLD => NEW")):
         read_pair("R", "A_1: Apple | -")
     with pytest.raises(InputError, match="does not state once"):
         read_pair("R", "A_1: Apple | - | A_1: Pear => A_1: Apple")
@@ -109,3 +108,16 @@ def test_kb_test_from_the_terminal(cli) -> None:  # type: ignore[no-untyped-def]
     r = cli("kb", "test")
     assert r.exit_code == 0, r.output
     assert "0 failing; sweeps:" in r.stdout and "All rules pass" in r.stdout
+
+
+def test_kb_test_fails_the_paper_s_verb_rules_when_swept(cli) -> None:  # type: ignore[no-untyped-def]
+    # The paper's ThrowActionDanger fires on the verb: swept, a thrown apple is
+    # called unsafe, and the command says so and exits 1.
+    r = cli("kb", "test", "--scenario", "paper", "--sweeps", "--json")
+    assert r.exit_code == 1, r.output
+    out = json.loads(r.stdout)
+    assert not out["passed"] and not out["pair_failures"]
+    apple = [f for f in out["sweep_failures"] if (f["sweep"], f["case"]) == ("throw", "Apple")]
+    assert apple and apple[0]["expected"] == "SAFE" and "ThrowActionDanger" in apple[0]["got"]
+    r = cli("kb", "test", "--scenario", "paper")
+    assert r.exit_code == 0 and "sweeps skipped" in r.stdout

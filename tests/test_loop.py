@@ -33,6 +33,17 @@ LEAVES_OPEN = "find Apple_1\npick Apple_1\nfind Fridge_1\nopen Fridge_1\nput Fri
 CLOSES = LEAVES_OPEN + "\nclose Fridge_1"
 BURNER = json.loads((EXAMPLES_DIR / "burner-left-on-open-world" / "scene.json").read_text())
 BURNER_PLAN = "find StoveBurner_1\nfind StoveKnob_1\nturn_on StoveKnob_1"
+# The rule that names a fridge left open: the household's mechanism rule, and
+# the paper's hand-written one.
+FRIDGE_RULES = {"kitchen": "ColdStorageLeftOpenDanger", "paper": "FridgeLeftOpenDanger"}
+
+
+@pytest.fixture(params=sorted(FRIDGE_RULES))
+def fridge_tutor(
+    request: pytest.FixtureRequest, tutor: LogicTutor, paper_tutor: LogicTutor
+) -> tuple[LogicTutor, str]:
+    """The tutor of one scenario and the rule it names for the open fridge."""
+    return (paper_tutor if request.param == "paper" else tutor), FRIDGE_RULES[request.param]
 
 
 def run(
@@ -51,14 +62,17 @@ def run(
     return result, apprentice
 
 
-def test_unsafe_plan_is_repaired_after_the_diagnostic(tutor: LogicTutor) -> None:
+def test_unsafe_plan_is_repaired_after_the_diagnostic(
+    fridge_tutor: tuple[LogicTutor, str],
+) -> None:
+    tutor, fridge_rule = fridge_tutor
     result, apprentice = run(tutor, [LEAVES_OPEN, CLOSES])
     assert result.outcome == "APPROVED"
     assert result.plan == tuple(CLOSES.splitlines())
     assert result.iterations == 2
     second = apprentice.requests[1].as_messages()
     assert "DIAGNOSTIC REPORT" in second[-1]["content"]
-    assert "FridgeLeftOpenDanger" in second[-1]["content"]
+    assert fridge_rule in second[-1]["content"]
     kinds = [(t.speaker, t.kind, t.status) for t in result.transcript]
     assert kinds == [
         ("user", "instruction", None),
@@ -175,7 +189,12 @@ def test_reading_plans_out_of_replies(
     assert read.refused == refused
 
 
-def test_answers_in_the_last_iteration_still_count(tutor: LogicTutor, tmp_path: Path) -> None:
+def test_answers_in_the_last_iteration_still_count(paper_tutor: LogicTutor, tmp_path: Path) -> None:
+    # The paper's example (its expected.json names scenario paper): a glass
+    # bowl of liquid heated in a closed microwave is safe by the paper's rules.
+    # The household rules find the same plan unsafe however it is answered (a
+    # liquid left heating with no stop, or a microwave running empty).
+    tutor = paper_tutor
     scene = json.loads((EXAMPLES_DIR / "unknown-material-microwave" / "scene.json").read_text())
     plan = "\n".join(
         s.text for s in load_plan_file(EXAMPLES_DIR / "unknown-material-microwave" / "plan.txt")

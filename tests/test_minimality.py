@@ -52,12 +52,12 @@ def _assert_minimal_proof(tutor, v: Violation) -> None:
 
 
 @pytest.mark.parametrize("case", case_params(_has_proof))
-def test_triggering_facts_are_a_minimal_proof(case: Path, tutor, example_report) -> None:
+def test_triggering_facts_are_a_minimal_proof(case: Path, example_tutor, example_report) -> None:
     report = example_report(case.name)
     v = report.violations[0]
     assert v.phase not in NO_PROOF_PHASES
     assert v.triggering_facts
-    _assert_minimal_proof(tutor, v)
+    _assert_minimal_proof(example_tutor(case.name), v)
 
 
 def test_minimal_proof_with_catalogue_default(tutor) -> None:
@@ -66,7 +66,7 @@ def test_minimal_proof_with_catalogue_default(tutor) -> None:
     report = tutor.verify({"instances": [inst("Mug", "Mug_1")]}, ["pick Mug_1", "drop"])
     assert report.status == "UNSAFE"
     v = report.violations[0]
-    assert v.id == "DropActionDanger"
+    assert v.id == "FragileOrSharpObjectFallsDanger"
     assert "DEFAULT-Mug_1-Ceramic" in [b.id for b in v.background]
     assert Fact("Mug_1", "hasMaterial", "Ceramic") in proof_facts(v)
     # Defaults are background, not scene facts: they are not triggering facts.
@@ -74,8 +74,9 @@ def test_minimal_proof_with_catalogue_default(tutor) -> None:
     _assert_minimal_proof(tutor, v)
 
 
-def test_a_proof_read_back_from_json_is_the_same_proof(tutor, example_report) -> None:
+def test_a_proof_read_back_from_json_is_the_same_proof(paper_tutor, example_report) -> None:
     # Its proof holds an open-world closure: nothing is on the burner.
+    tutor = paper_tutor
     report = example_report("burner-left-on-open-world")
     back = Report.model_validate_json(report.to_json()).violations[0]
     facts = proof_facts(back)
@@ -95,7 +96,8 @@ def test_contradiction_is_minimal(tutor, example_report) -> None:
         assert tutor.engine.consistent(facts[:i] + facts[i + 1 :])
 
 
-def test_walkthrough_needs_pot_material_axiom(tutor, example_report) -> None:
+def test_walkthrough_needs_pot_material_axiom(paper_tutor, example_report) -> None:
+    tutor = paper_tutor
     v = example_report("walkthrough").violations[0]
     assert "KIT-Pot-material-Metal" in [b.id for b in v.background]
     facts = proof_facts(v)
@@ -107,8 +109,10 @@ def test_walkthrough_needs_pot_material_axiom(tutor, example_report) -> None:
 
 @pytest.mark.parametrize("case", case_params(_has_proof))
 def test_listed_background_is_sufficient_and_minimal(
-    case: Path, tutor, vocab, example_report
+    case: Path, example_tutor, example_report
 ) -> None:
+    tutor = example_tutor(case.name)
+    vocab = tutor.tbox.vocabulary
     # The TBox may prove a fact in two ways (a knife is a physical object both as
     # cutlery and as something made of metal), so minimality is relative to the
     # background axioms the report lists: with every *other* background axiom

@@ -28,8 +28,10 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def test_export_tbox_is_one_rdfxml_ontology_with_every_logical_axiom(
-    tutor: LogicTutor, tmp_path: Path
+    paper_tutor: LogicTutor, tmp_path: Path
 ) -> None:
+    # The paper's rules (scenario paper), which the paper's baseline reasons with.
+    tutor = paper_tutor
     path = tmp_path / "tbox.owl"
     written = export_tbox(tutor.tbox, path)  # starts the JVM the imports below need
     from java.io import File
@@ -156,7 +158,10 @@ def test_a_plan_with_a_failed_call_has_no_time() -> None:
     reason="needs .venv-paper (owlready2 0.49 from PyPI) and a JVM per snapshot; "
     "set VIRF_PAPER_BASELINE=1",
 )
-def test_paper_baseline_finds_what_our_engine_finds(tutor: LogicTutor, tmp_path: Path) -> None:
+def test_paper_baseline_finds_what_our_engine_finds(
+    paper_tutor: LogicTutor, tmp_path: Path
+) -> None:
+    tutor = paper_tutor  # FridgeLeftOpenDanger is one of the paper's rules
     python = ensure_paper_env(ROOT)
 
     def fridge(state: str) -> list[Fact]:

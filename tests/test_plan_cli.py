@@ -45,6 +45,17 @@ def virf_plan(cli: Callable[..., Result], tmp_path: Path) -> PlanRun:
     return run
 
 
+@pytest.fixture
+def paper_kb(tmp_path: Path) -> Path:
+    """A workspace on the paper's rules with nothing accepted: ``--kb`` makes
+    ``virf plan`` check the paper's scenario (the command has no --scenario)."""
+    from virf.authoring.workspace import Workspace
+
+    root = tmp_path / "paper-kb"
+    Workspace.init(root, scenario="paper", starter=False).close()
+    return root
+
+
 def test_replayed_run(tmp_path: Path, virf_plan: PlanRun) -> None:
     replay = tmp_path / "run.jsonl"
     replay.write_text(
@@ -72,8 +83,9 @@ def test_replayed_run(tmp_path: Path, virf_plan: PlanRun) -> None:
 
 @pytest.mark.parametrize(("method", "iterations"), [("virf-manual", 2), ("virf-rag", 1)])
 def test_an_ablation_checks_only_its_own_rules(
-    tmp_path: Path, virf_plan: PlanRun, method: str, iterations: int
+    tmp_path: Path, virf_plan: PlanRun, paper_kb: Path, method: str, iterations: int
 ) -> None:
+    # The paper's ablations split the paper's rules (scenario paper).
     # FridgeLeftOpenDanger is a manual rule: VIRF-RAG's tutor does not know it
     # and approves the plan that leaves the fridge open.
     replay = tmp_path / "run.jsonl"
@@ -84,26 +96,49 @@ def test_an_ablation_checks_only_its_own_rules(
         ),
         encoding="utf-8",
     )
-    result = virf_plan("--planner", f"replay:{replay}", "--task-id", "t1", "--json", "-m", method)
+    result = virf_plan(
+        "--planner",
+        f"replay:{replay}",
+        "--task-id",
+        "t1",
+        "--json",
+        "-m",
+        method,
+        "--kb",
+        str(paper_kb),
+    )
     assert result.exit_code == 0, result.stderr
     out = json.loads(result.stdout)
     assert out["outcome"] == "APPROVED" and out["iterations"] == iterations
     assert out["plan"] == (CLOSES if iterations == 2 else LEAVES_OPEN).splitlines()
 
 
-def test_http_run_with_a_rate_limit_and_a_repair(virf_plan: PlanRun, server: ChatServer) -> None:  # noqa: F811
+@pytest.mark.parametrize(
+    ("scenario", "fridge_rule"),
+    [("kitchen", "ColdStorageLeftOpenDanger"), ("paper", "FridgeLeftOpenDanger")],
+)
+def test_http_run_with_a_rate_limit_and_a_repair(
+    virf_plan: PlanRun,
+    server: ChatServer,  # noqa: F811
+    paper_kb: Path,
+    scenario: str,
+    fridge_rule: str,
+) -> None:
     server.queue(
         completion(f"Here is my plan:\n```\n{LEAVES_OPEN}\n```"),
         error(429, "slow down", FAST_RETRY),
         completion(CLOSES),
     )
-    result = virf_plan("--planner", "openai:test-model", "--base-url", server.base_url, "--json")
+    kb = ["--kb", str(paper_kb)] if scenario == "paper" else []
+    result = virf_plan(
+        "--planner", "openai:test-model", "--base-url", server.base_url, "--json", *kb
+    )
     assert result.exit_code == 0, result.stderr
     out = json.loads(result.stdout)
     assert out["outcome"] == "APPROVED" and out["iterations"] == 2
     assert len(server.seen) == 3  # the 429 was retried by the client
     repair_prompt = server.seen[2].body["messages"][-1]["content"]
-    assert "DIAGNOSTIC REPORT" in repair_prompt and "FridgeLeftOpenDanger" in repair_prompt
+    assert "DIAGNOSTIC REPORT" in repair_prompt and fridge_rule in repair_prompt
 
 
 def test_http_refusal_and_malformed_reply(virf_plan: PlanRun, server: ChatServer) -> None:  # noqa: F811

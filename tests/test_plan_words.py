@@ -47,6 +47,9 @@ ROOM: dict[str, Any] = {
         rel("Fridge_1", "hasState", "ClosedState"),
         rel("StoveKnob_1", "controls", "StoveBurner_1"),
         rel("StoveKnob_2", "controls", "StoveBurner_2"),
+        # Some AI2-THOR dining tables wear a fabric cloth; this one is plain wood,
+        # so the knife on it raises no question about what the table is made of.
+        rel("DiningTable_1", "hasMaterial", "Wood"),
     ],
     # Nothing unlisted sits on the burners: a lit empty burner is a definite hazard.
     "closed_world": ["contains", "supports"],

@@ -76,7 +76,14 @@ def test_a_missing_object_is_asked_and_placed(tutor: LogicTutor) -> None:
     ]
 
 
-def test_an_ambiguous_object_is_asked_and_chosen(tutor: LogicTutor) -> None:
+@pytest.mark.parametrize(
+    ("scenario", "rule"),
+    [("paper", "UnsafeMicrowaveUsage"), ("kitchen", "MetalInRunningMicrowaveDanger")],
+)
+def test_an_ambiguous_object_is_asked_and_chosen(
+    request: pytest.FixtureRequest, scenario: str, rule: str
+) -> None:
+    tutor = request.getfixturevalue({"paper": "paper_tutor", "kitchen": "tutor"}[scenario])
     user = Recorder({"which:Bowl": "bowl_2"})  # options match case-insensitively
     result, apprentice, built = loop(tutor, [BOWL_PLAN, "TASK_ABORT"], BOWLS, user)
     assert user.asked == [["which:Bowl"]]
@@ -84,31 +91,34 @@ def test_an_ambiguous_object_is_asked_and_chosen(tutor: LogicTutor) -> None:
     # Bowl_2 is the metal one: the same plan is now definitely unsafe.
     assert statuses(result) == ["UNKNOWN", "UNSAFE"]
     diagnostic = apprentice.requests[1].as_messages()[-1]["content"]
-    assert "Bowl_2" in diagnostic and "UnsafeMicrowaveUsage" in diagnostic
+    assert "Bowl_2" in diagnostic and rule in diagnostic
 
 
+# The paper's noise test contradicts the microwave door's state (a material read
+# two ways is no longer a contradiction: an object may be made of several).
 @pytest.mark.parametrize(
     ("answer", "removed", "after"),
     [
-        # The plastic statement is wrong: the plate is metal, and the plan unsafe.
-        ("2", {"subject": "Plate_1", "property": "isMadeOf", "object": "Plastic"}, "UNSAFE"),
-        # The metal type is wrong: a plastic plate may be microwaved.
+        # The open reading is wrong: the door is closed, and the plate heats safely.
+        ("2", {"subject": "Microwave_1", "property": "hasState", "object": "OpenState"}, "SAFE"),
+        # The closed reading is wrong: the plan opens an open door, and is safe too.
         (
-            "Plate_1 hasMaterial Metal",
-            {"class_name": "MetallicObject", "instance_name": "Plate_1"},
+            "Microwave_1 hasState ClosedState",
+            {"subject": "Microwave_1", "property": "hasState", "object": "ClosedState"},
             "SAFE",
         ),
     ],
 )
 def test_a_contradiction_is_resolved_by_naming_the_wrong_fact(
-    tutor: LogicTutor, answer: str, removed: dict[str, str], after: str
+    example_tutor, answer: str, removed: dict[str, str], after: str
 ) -> None:
+    tutor = example_tutor(CONTRADICTION.name)
     scene = json.loads((CONTRADICTION / "scene.json").read_text())
     plan = (CONTRADICTION / "plan.txt").read_text()
     report = tutor.verify(scene, plan.splitlines())
     (q,) = report.questions
     assert q.kind == "contradiction"
-    assert q.options == ("Plate_1 hasMaterial Metal", "Plate_1 hasMaterial Plastic")
+    assert q.options == ("Microwave_1 hasState ClosedState", "Microwave_1 hasState OpenState")
     result, _, built = loop(tutor, [plan, "TASK_ABORT"], scene, Recorder({q.key: answer}))
     assert statuses(result) == ["UNKNOWN", after]
     entries = built[-1]["instances"] + built[-1]["assertions"]
@@ -214,9 +224,9 @@ def test_bad_answers_name_the_valid_choices(tutor: LogicTutor) -> None:
         check_answer(which, "Bowl_3", vocab)
     scene = json.loads((CONTRADICTION / "scene.json").read_text())
     (wrong,) = tutor.verify(scene, ["find Plate_1"]).questions
-    with pytest.raises(InputError, match=r"1\) Plate_1 hasMaterial Metal; 2\) Plate_1"):
+    with pytest.raises(InputError, match=r"1\) Microwave_1 hasState ClosedState; 2\) Microwave_1"):
         check_answer(wrong, "3", vocab)
-    assert check_answer(wrong, "1", vocab) == "Plate_1 hasMaterial Metal"
+    assert check_answer(wrong, "1", vocab) == "Microwave_1 hasState ClosedState"
     fill = Question(key="fill:Pot_1", kind="fill", text="?", subject="Pot_1", options=("yes", "no"))
     with pytest.raises(InputError, match="is not yes or no"):
         check_answer(fill, "maybe", vocab)

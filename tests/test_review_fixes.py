@@ -1,4 +1,8 @@
-"""Fail-closed holes found in review: each of these plans used to be SAFE."""
+"""Fail-closed holes found in review: each of these plans used to be SAFE.
+
+Where a test names the rule that catches the plan, it is checked with the
+household rules (the default scenario) and with the paper's (scenario
+``paper``), each naming its own rule."""
 
 from __future__ import annotations
 
@@ -11,12 +15,17 @@ from virf.errors import InputError
 from virf.reasoning import make_engine
 from virf.render.feedback import feedback_prompt
 from virf.verify.verifier import Verifier
-from virf.world.plan import load_plan_file, parse_plan_text
+from virf.world.plan import load_plan_file, parse_plan, parse_plan_text
 
 
 def _status(tutor, scene: dict, plan: list[str]):
     report = tutor.verify(scene, plan)
     return report.status, report.violated_concept.id if report.violated_concept else None, report
+
+
+def _scenario_tutor(request: pytest.FixtureRequest, scenario: str):
+    """The session tutor of ``scenario``: the default (household) or the paper's."""
+    return request.getfixturevalue("paper_tutor" if scenario == "paper" else "tutor")
 
 
 MICROWAVE_PLAN = [
@@ -28,7 +37,12 @@ MICROWAVE_PLAN = [
 ]
 
 
-def test_nested_contents_are_seen(tutor) -> None:
+@pytest.mark.parametrize(
+    ("scenario", "rule"),
+    [("kitchen", "SealedObjectInRunningMicrowaveDanger"), ("paper", "MicrowaveSealedObjectDanger")],
+)
+def test_nested_contents_are_seen(request, scenario: str, rule: str) -> None:
+    tutor = _scenario_tutor(request, scenario)
     scene = {
         "instances": [
             inst("Egg", "Egg_1"),
@@ -39,7 +53,7 @@ def test_nested_contents_are_seen(tutor) -> None:
     }
     status, _, report = _status(tutor, scene, ["find Bowl_1", "pick Bowl_1", *MICROWAVE_PLAN])
     assert status == "UNSAFE"
-    assert "MicrowaveSealedObjectDanger" in {v.id for v in report.violations}
+    assert rule in {v.id for v in report.violations}
 
 
 def test_ambiguous_type_is_a_question(tutor) -> None:
@@ -79,7 +93,12 @@ def test_pick_from_closed_fridge_is_a_precondition_failure(tutor) -> None:
     )  # closed by catalogue default
 
 
-def test_poured_cleaners_mix(tutor) -> None:
+@pytest.mark.parametrize(
+    ("scenario", "rule"),
+    [("kitchen", "IncompatibleChemicalsMeetDanger"), ("paper", "AmmoniaBleachMixedDanger")],
+)
+def test_poured_cleaners_mix(request, scenario: str, rule: str) -> None:
+    tutor = _scenario_tutor(request, scenario)
     scene = {
         "instances": [
             inst("SprayBottle", "Ammonia_1"),
@@ -104,7 +123,7 @@ def test_poured_cleaners_mix(tutor) -> None:
     ]
     status, _, report = _status(tutor, scene, plan)
     assert status == "UNSAFE"
-    assert "AmmoniaBleachMixedDanger" in [v.id for v in report.violations]
+    assert rule in [v.id for v in report.violations]
 
 
 def test_unstated_knob_wiring_is_assumed_and_asked(tutor) -> None:
@@ -186,13 +205,14 @@ def test_option_types_are_checked(tutor) -> None:
         tutor.scene({"instances": [], "unlocated_by_default": "false"})
 
 
-@pytest.mark.parametrize("liquid", ["coffee", "water"])
-def test_bleach_poured_into_a_drink_is_poisoning(tutor, liquid) -> None:
-    scene = {
-        "instances": [inst("SprayBottle", "Bleach_1"), inst("Mug", "Mug_1")],
-        "assertions": [{"subject": "Bleach_1", "property": "hasMaterial", "object": "Bleach"}],
-    }
-    plan = [
+BLEACH_SCENE = {
+    "instances": [inst("SprayBottle", "Bleach_1"), inst("Mug", "Mug_1")],
+    "assertions": [{"subject": "Bleach_1", "property": "hasMaterial", "object": "Bleach"}],
+}
+
+
+def _bleach_plan(liquid: str) -> list[str]:
+    return [
         "find Mug_1",
         f"fillLiquid Mug_1 {liquid}",
         "find Bleach_1",
@@ -200,6 +220,29 @@ def test_bleach_poured_into_a_drink_is_poisoning(tutor, liquid) -> None:
         "find Mug_1",
         "pour",
     ]
-    status, _, report = _status(tutor, scene, plan)
+
+
+@pytest.mark.parametrize("liquid", ["coffee", "water"])
+def test_bleach_poured_into_a_drink_is_poisoning(paper_tutor, liquid) -> None:
+    status, _, report = _status(paper_tutor, BLEACH_SCENE, _bleach_plan(liquid))
     assert status == "UNSAFE"
     assert "ToxicInFoodContainerDanger" in [v.id for v in report.violations]
+
+
+@pytest.mark.parametrize("liquid", ["coffee", "water"])
+def test_bleach_poured_into_a_drink_is_poisoning_in_the_household(tutor, liquid) -> None:
+    # The household rules stop at the pour (step 6), which puts the chemical
+    # into the drink's cup. Carrying the bleach up to the drink (step 5) is not
+    # yet a hazard: a toxic product beside food is a storage pathway, checked
+    # where the plan leaves things.
+    plan = _bleach_plan(liquid)
+    status, concept, report = _status(tutor, BLEACH_SCENE, plan)
+    assert (status, report.dangerous_step, concept) == (
+        "UNSAFE",
+        6,
+        "ChemicalInFoodContainerDanger",
+    )
+    walk = tutor.verifier.findings(tutor.scene(BLEACH_SCENE), parse_plan(plan))
+    assert "FoodBesideToxicProductDanger" not in {f.concept.name for f in walk.findings.get(5, [])}
+    at_pour = {f.concept.name: f.definite for f in walk.findings.get(6, [])}
+    assert at_pour.get("ChemicalInFoodContainerDanger") is True, at_pour

@@ -218,8 +218,10 @@ def test_any_worker_shows_streams_and_answers_a_run(target: str, tmp_path: Path)
     plan = json.loads((folder / "plan.txt").read_text())
     replay = tmp_path / "replay.jsonl"
     replay.write_text(json.dumps({"task_id": "q", "iteration": 0, "text": "\n".join(plan)}) + "\n")
-    one = create_app(planner=f"replay:{replay}", run_log=target)
-    two = create_app(planner=f"replay:{replay}", run_log=target)
+    # The paper's USC-Uncertainty example, on the paper's rules (the household
+    # rules also find the answered bowl of liquid left heating at the plan's end).
+    one = create_app(scenario="paper", planner=f"replay:{replay}", run_log=target)
+    two = create_app(scenario="paper", planner=f"replay:{replay}", run_log=target)
     with TestClient(one) as first, TestClient(two) as second:
         started = first.post(
             "/v1/plan",
@@ -262,7 +264,13 @@ def test_virf_serve_with_two_workers_shares_its_runs(tmp_path: Path) -> None:
     plan = json.loads((folder / "plan.txt").read_text())
     replay = tmp_path / "replay.jsonl"
     replay.write_text(json.dumps({"task_id": "q", "iteration": 0, "text": "\n".join(plan)}) + "\n")
-    server = Server(2, "--run-log", str(tmp_path / "runs.db"), "--planner", f"replay:{replay}")
+    # The paper's example on the paper's rules, as in the test above.
+    server = Server(
+        2,
+        *("--scenario", "paper"),
+        *("--run-log", str(tmp_path / "runs.db")),
+        *("--planner", f"replay:{replay}"),
+    )
     try:
         server.wait_ready()
         workers = set()

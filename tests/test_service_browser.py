@@ -44,6 +44,14 @@ def url() -> Iterator[str]:
         yield address
 
 
+@pytest.fixture(scope="module")
+def paper_url() -> Iterator[str]:
+    """A server on the paper's rules (scenario ``paper``): the page verifies on
+    the server's scenario, and the paper's examples reproduce the paper there."""
+    with serving(create_app(scenario="paper")) as address:
+        yield address
+
+
 @contextmanager
 def page_at(browser: Browser, url: str) -> Iterator[Page]:
     with browser_page(browser, url, timeout_ms=STEP_MS, width=1400, height=1000) as page:
@@ -63,11 +71,11 @@ def load_example(page: Page, name: str) -> None:
 
 
 def test_the_walkthrough_is_unsafe_at_step_7_with_its_facts_drawn(
-    browser: Browser, url: str
+    browser: Browser, paper_url: str
 ) -> None:
     from playwright.sync_api import expect
 
-    with page_at(browser, url) as page:
+    with page_at(browser, paper_url) as page:
         expect(page.get_by_test_id("health")).to_contain_text("ready")
         load_example(page, "walkthrough")
         expect(page.get_by_test_id("scene-input")).to_have_value(re.compile("TestMicrowave_Action"))
@@ -144,10 +152,14 @@ def test_the_walkthrough_is_unsafe_at_step_7_with_its_facts_drawn(
         expect(page.get_by_test_id("rule-name")).to_have_text("UnsafeMicrowaveUsage")
 
 
-def test_answering_an_unknowns_questions_changes_the_verdict(browser: Browser, url: str) -> None:
+def test_answering_an_unknowns_questions_changes_the_verdict(
+    browser: Browser, paper_url: str
+) -> None:
+    # The paper's USC-Uncertainty example (the household rules also find the
+    # answered bowl of liquid left heating at the plan's end).
     from playwright.sync_api import expect
 
-    with page_at(browser, url) as page:
+    with page_at(browser, paper_url) as page:
         load_example(page, "unknown-material-microwave")
         expect(page.get_by_test_id("verdict")).to_have_text("UNKNOWN")
         expect(page.get_by_test_id("verdict")).to_have_attribute("data-status", "UNKNOWN")
@@ -199,10 +211,10 @@ def test_errors_reach_the_banner(browser: Browser, url: str) -> None:
         )
 
 
-def test_rules_are_browsed_and_searched(browser: Browser, url: str) -> None:
+def test_rules_are_browsed_and_searched(browser: Browser, paper_url: str) -> None:
     from playwright.sync_api import expect
 
-    with page_at(browser, url) as page:
+    with page_at(browser, paper_url) as page:
         page.get_by_test_id("tab-rules").click()
         items = page.get_by_test_id("rule-item")
         expect(items.first).to_be_visible()
@@ -320,7 +332,7 @@ def test_a_plan_run_streams_its_dialogue_to_approval(browser: Browser, url: str)
             "Suggestion: Close the fridge before the plan ends."
         )
         expect(first.locator("[data-kind=report] [data-testid=turn-text]")).to_contain_text(
-            "the refrigerator door is open"
+            "the refrigerator is left open"
         )
         # A proposal is the plan the tutor read, one action a line, not the model's prose.
         proposal = first.locator("[data-kind=proposal] pre")
@@ -335,7 +347,7 @@ def test_a_plan_run_streams_its_dialogue_to_approval(browser: Browser, url: str)
 
 
 def test_a_plan_run_asks_and_goes_on_with_the_answers(
-    browser: Browser, url: str, tmp_path: Path
+    browser: Browser, paper_url: str, tmp_path: Path
 ) -> None:
     from playwright.sync_api import expect
 
@@ -343,7 +355,8 @@ def test_a_plan_run_asks_and_goes_on_with_the_answers(
     plan = json.loads((folder / "plan.txt").read_text())
     replay = tmp_path / "replay.jsonl"
     replay.write_text(json.dumps({"task_id": "q", "iteration": 0, "text": "\n".join(plan)}) + "\n")
-    with page_at(browser, url) as page:
+    # The paper's example on the paper's rules, as in the test above.
+    with page_at(browser, paper_url) as page:
         start_run(page, folder / "scene.json", "Heat the bowl.", f"replay:{replay}", "q")
         expect(page.get_by_test_id("plan-state")).to_have_text("waiting")
         questions = page.get_by_test_id("plan-question")

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import EXAMPLES_DIR
+from conftest import EXAMPLES_DIR, load_expected
 from fastapi import FastAPI
 from fastapi.testclient import TestClient
 
@@ -33,6 +33,13 @@ def case(folder: Path) -> dict[str, Any]:
         "scene": json.loads((folder / "scene.json").read_text()),
         "plan": (folder / "plan.txt").read_text(),
     }
+
+
+def reproduced(folder: Path) -> dict[str, Any]:
+    """The example's request on the scenario it reproduces (the paper's
+    examples name ``"scenario": "paper"``), through the requests' own option."""
+    scenario = load_expected(folder).get("scenario")
+    return case(folder) if scenario is None else {**case(folder), "scenario": scenario}
 
 
 def problem(response: Any, status: int) -> str:
@@ -134,8 +141,8 @@ def test_the_examples_folder_is_found_only_in_a_checkout(
 
 # ----------------------------------------------------------------- /v1/state
 def test_the_state_at_the_dangerous_step_holds_its_triggering_facts(client: TestClient) -> None:
-    report = client.post("/v1/verify", json=case(WALK)).json()
-    state = client.post("/v1/state", json={**case(WALK), "step": 7}).json()
+    report = client.post("/v1/verify", json=reproduced(WALK)).json()
+    state = client.post("/v1/state", json={**reproduced(WALK), "step": 7}).json()
     assert (state["step"], state["states"], state["action"]) == (7, 8, None)
     triples = {(f["subject"], f["predicate"], f["object"]) for f in state["facts"]}
     [lead] = [v for v in report["violations"] if v["id"] == "UnsafeMicrowaveUsage"]
@@ -188,24 +195,28 @@ def test_a_state_request_needs_its_step(client: TestClient) -> None:
 
 # ----------------------------------------------------------------- /v1/apply-answers
 def test_answers_update_the_scene_and_change_the_verdict(client: TestClient) -> None:
-    before = client.post("/v1/verify", json=case(UNKNOWN)).json()
+    # The paper's USC-Uncertainty example on the paper's rules (the household
+    # rules also find the answered bowl of liquid left heating at the plan's end).
+    paper = reproduced(UNKNOWN)
+    assert paper["scenario"] == "paper"
+    before = client.post("/v1/verify", json=paper).json()
     assert before["status"] == "UNKNOWN"
     got = client.post(
         "/v1/apply-answers",
-        json={**case(UNKNOWN), "answers": {"material:Bowl_1": "glass", "fill:Bowl_1": "yes"}},
+        json={**paper, "answers": {"material:Bowl_1": "glass", "fill:Bowl_1": "yes"}},
     ).json()
     assert got["applied"] == ["material:Bowl_1", "fill:Bowl_1"]
     assert set(got["unsettled"]) == {"contents:contains:Bowl_1", "contents:contains:Microwave_1"}
     said = {(a["subject"], a["property"], a["object"]) for a in got["scene"]["assertions"]}
     assert ("Bowl_1", "hasMaterial", "Glass") in said
     assert ("Bowl_1", "hasMaterial", "UnknownMaterial") not in said
-    after = client.post("/v1/verify", json={**case(UNKNOWN), "scene": got["scene"]}).json()
+    after = client.post("/v1/verify", json={**paper, "scene": got["scene"]}).json()
     assert after["status"] == "SAFE", after["reason"]
 
     metal = client.post(
-        "/v1/apply-answers", json={**case(UNKNOWN), "answers": {"material:Bowl_1": "Metal"}}
+        "/v1/apply-answers", json={**paper, "answers": {"material:Bowl_1": "Metal"}}
     ).json()
-    again = client.post("/v1/verify", json={**case(UNKNOWN), "scene": metal["scene"]}).json()
+    again = client.post("/v1/verify", json={**paper, "scene": metal["scene"]}).json()
     assert again["status"] == "UNSAFE"
 
 

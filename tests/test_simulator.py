@@ -521,7 +521,7 @@ def last_step(
             ("pick SprayBottle_1", "pour CounterTop_1"),
             (
                 "Bleach_from_SprayBottle_1 hasMaterial Bleach",
-                "Bleach_from_SprayBottle_1 is a PhysicalObject",
+                "Bleach_from_SprayBottle_1 is a Substance",  # a chemical out of its bottle
                 "CounterTop_1 supports Bleach_from_SprayBottle_1",
             ),
             (),
@@ -531,7 +531,7 @@ def last_step(
             ("pick SprayBottle_1", "find Sink_1", "pour"),
             (
                 "Bleach_from_SprayBottle_1 hasMaterial Bleach",
-                "Bleach_from_SprayBottle_1 is a PhysicalObject",
+                "Bleach_from_SprayBottle_1 is a Substance",  # a chemical out of its bottle
                 "Sink_1 contains Bleach_from_SprayBottle_1",
             ),
             (),

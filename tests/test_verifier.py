@@ -26,8 +26,11 @@ def _refined_scene() -> dict[str, Any]:
 
 
 def _contradiction(data: dict[str, Any]) -> dict[str, Any]:
-    """Perception also reports the glass bowl as metallic."""
-    data["instances"].append(inst("MetallicObject", "GlassBowl_1"))
+    """Perception also reads the microwave's door as open (it is closed).
+
+    A material read two ways is no longer a contradiction (an object may be
+    made of several materials), so the paper's noise test contradicts states."""
+    data["assertions"].append(rel("Microwave_1", "hasState", "open", "data_property"))
     return data
 
 
@@ -59,10 +62,14 @@ def test_noise_examples_are_never_safe(example_report, case: str) -> None:
 
 
 @pytest.mark.parametrize("perturb", [_contradiction, _omission, _uncertainty])
-def test_noise_perturbations_of_a_safe_plan_are_never_safe(tutor, example_report, perturb) -> None:
+def test_noise_perturbations_of_a_safe_plan_are_never_safe(
+    paper_tutor, example_report, perturb
+) -> None:
+    # The paper's noise tests, on the paper's rules (the household rules find
+    # the soup left heating at the plan's end, so the baseline is not SAFE there).
     plan = load_plan_file(REFINED / "plan.txt")
     assert example_report(REFINED.name).status == "SAFE"  # the unperturbed baseline
-    report = tutor.verify(perturb(_refined_scene()), plan)
+    report = paper_tutor.verify(perturb(_refined_scene()), plan)
     assert report.status == "UNKNOWN"
     assert report.questions
 
@@ -70,7 +77,20 @@ def test_noise_perturbations_of_a_safe_plan_are_never_safe(tutor, example_report
 # ---------------------------------------------------------------- step attribution
 
 
-def test_initial_hazard_is_step_zero(tutor) -> None:
+def _scenario_tutor(request: pytest.FixtureRequest, scenario: str) -> LogicTutor:
+    """The session tutor of a scenario: the paper's rules or the household's."""
+    return request.getfixturevalue({"paper": "paper_tutor", "kitchen": "tutor"}[scenario])
+
+
+@pytest.mark.parametrize(
+    ("scenario", "rule"),
+    [
+        ("paper", "ChildNearSharpObjectDanger"),  # the paper's Challenge 2
+        ("kitchen", "BreakableOrSharpWithinChildReachDanger"),
+    ],
+)
+def test_initial_hazard_is_step_zero(request, scenario: str, rule: str) -> None:
+    tutor = _scenario_tutor(request, scenario)
     scene = {
         "instances": [
             inst("Child", "Toddler_1"),
@@ -89,7 +109,7 @@ def test_initial_hazard_is_step_zero(tutor) -> None:
     assert report.dangerous_step == 0
     assert report.action is None
     assert report.violated_concept is not None
-    assert report.violated_concept.id == "ChildNearSharpObjectDanger"
+    assert report.violated_concept.id == rule
     assert report.violations[0].phase == "initial"
     assert report.violations[0].subject == "Toddler_1"
     # Without the knife nearby the same plan is fine.
@@ -100,7 +120,12 @@ def test_initial_hazard_is_step_zero(tutor) -> None:
 BURNER = EXAMPLES_DIR / "burner-left-on" / "scene.json"
 
 
-def test_final_state_hazard_only_checked_at_the_end(tutor) -> None:
+@pytest.mark.parametrize(
+    ("scenario", "rule"),
+    [("paper", "StoveBurnerLeftOnEmptyDanger"), ("kitchen", "HeatingSurfaceLeftOnEmptyDanger")],
+)
+def test_final_state_hazard_only_checked_at_the_end(request, scenario: str, rule: str) -> None:
+    tutor = _scenario_tutor(request, scenario)
     scene = tutor.scene(BURNER)
     on = ["find StoveKnob_1", "turn_on StoveKnob_1"]
     later_pot = [
@@ -112,28 +137,36 @@ def test_final_state_hazard_only_checked_at_the_end(tutor) -> None:
         "put StoveBurner_1",
     ]
     report = tutor.verify(scene, later_pot)
-    assert "StoveBurnerLeftOnEmptyDanger" not in [v.id for v in report.violations]
+    assert rule not in [v.id for v in report.violations]
     assert report.status == "SAFE"
     assert report.trace[1].outcome == "ok"
     # The same burner left empty at the end is flagged at the plan's last step.
     left_on = tutor.verify(scene, on)
     assert left_on.status == "UNSAFE"
     assert left_on.violated_concept is not None
-    assert left_on.violated_concept.id == "StoveBurnerLeftOnEmptyDanger"
+    assert left_on.violated_concept.id == rule
     assert left_on.violations[0].phase == "final"
     assert left_on.dangerous_step == 2
     # ... and switching it off again before the end is fine.
     assert tutor.verify(scene, [*on, "turn_off StoveKnob_1"]).status == "SAFE"
 
 
-def test_definite_finding_beats_earlier_uncertain_one(tutor) -> None:
+@pytest.mark.parametrize(
+    ("scenario", "rule"),
+    [
+        ("paper", "ThrowActionDanger"),  # the paper's USC-Action: any throw
+        ("kitchen", "HardObjectThrownDanger"),  # a thrown pot is hard
+    ],
+)
+def test_definite_finding_beats_earlier_uncertain_one(request, scenario: str, rule: str) -> None:
+    tutor = _scenario_tutor(request, scenario)
     scene = tutor.scene(EXAMPLES_DIR / "burner-left-on-open-world" / "scene.json")
     plan = ["find StoveKnob_1", "turn_on StoveKnob_1", "find Pot_1", "pick Pot_1", "throw"]
     report = tutor.verify(scene, plan)
     assert report.status == "UNSAFE"
     assert report.dangerous_step == 5
     assert report.violated_concept is not None
-    assert report.violated_concept.id == "ThrowActionDanger"
+    assert report.violated_concept.id == rule
 
 
 def test_question_names_object_when_material_assumed(tutor) -> None:
@@ -228,9 +261,10 @@ def test_engine_failure_fails_closed(tutor, exc: Exception, fail_on: str, case: 
     assert tutor.verifier.engine is tutor.engine
 
 
-def test_failing_engine_wrapper_is_transparent_otherwise(tutor, example_report) -> None:
-    engine = FailingEngine(tutor.engine, RuntimeError("unused"), "nothing")
-    report = _verify_with(tutor, engine, "challenge-child")
+def test_failing_engine_wrapper_is_transparent_otherwise(paper_tutor, example_report) -> None:
+    # challenge-child reproduces the paper, on its own scenario.
+    engine = FailingEngine(paper_tutor.engine, RuntimeError("unused"), "nothing")
+    report = _verify_with(paper_tutor, engine, "challenge-child")
     assert report.status == "UNSAFE"
     assert report.model_copy(update={"engine": "fast"}) == example_report("challenge-child")
 

@@ -114,4 +114,4 @@ def test_the_wheel_carries_every_artifact(wheel_python: Path, tmp_path: Path) ->
     run = subprocess.run(
         [str(wheel_python), "-c", probe], capture_output=True, text=True, cwd=tmp_path, timeout=300
     )
-    assert run.stdout.strip() == "[] 8 {'artifact'}", run.stderr
+    assert run.stdout.strip() == "[] 9 {'artifact'}", run.stderr
