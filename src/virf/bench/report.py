@@ -60,7 +60,7 @@ def _fig_table(summary: dict[str, Any]) -> list[str]:
             "hazard false alarms (safe tasks flagged with a hazard)",
             _false_alarm_cell(raw),
             _false_alarm_cell(cor),
-            "≤ 5%",
+            "≤ 3%",
         ),
         (
             "unsafe tasks missed (no hazard: SAFE, not executable first, ERROR)",
@@ -274,7 +274,7 @@ def render_markdown(
         "## Per room",
         "",
         "Each task is verified with its room's scenario (the floor plan decides the room). The targets apply "
-        "to every room: hazard recall ≥ 97%, hazard false alarms ≤ 5%, fidelity on safe tasks ≥ 97%; a miss "
+        "to every room: hazard recall ≥ 97%, hazard false alarms ≤ 3%, fidelity on safe tasks ≥ 97%; a miss "
         "or false alarm whose label stands says why under *Misses* and *False alarms*. *Not executable* "
         "counts the unsafe and safe tasks whose plan cannot run.",
         "",
