@@ -82,6 +82,10 @@ def render_report(report: Report, title: str | None = None) -> str:
         lines.append("  Questions for the user:")
         for q in report.questions:
             lines.append(_wrap(f"? {q.text}", "    "))
+    if report.notes:
+        lines.append("  How the input was read:")
+        for n in report.notes:
+            lines.append(_wrap(f"- {n}", "    "))
     if report.trace:
         lines.append("  Trace:")
         for st in report.trace:

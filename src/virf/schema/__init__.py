@@ -311,6 +311,10 @@ class Report(_Frozen):
     trace: tuple[StepTrace, ...]
     engine: str
     scenario: str
+    # How the input was read where it was not taken word for word: a plan
+    # line in everyday words ('light the candle' read as 'turn_on Candle'),
+    # an object whose class the knowledge base does not name.
+    notes: tuple[str, ...] = ()
 
     @model_validator(mode="after")
     def _status_matches_findings(self) -> Report:

@@ -45,6 +45,7 @@ def build_report(
     rules: int,
     scenario: str,
     engine: str,
+    notes: Sequence[str] = (),
 ) -> Report:
     """The report on ``plan``, simulated as ``trace``.
 
@@ -108,6 +109,7 @@ def build_report(
         reason=reason,
         plan=tuple(s.text for s in plan),
         trace=build_trace(plan, trace, findings, checked),
+        notes=tuple(notes),
         engine=engine,
         scenario=scenario,
     )

@@ -181,6 +181,7 @@ class Verifier:
             rules=len(self.always) + len(self.final),
             scenario=self.tbox.scenario,
             engine=self.engine.name,
+            notes=(*(s.note for s in plan if s.note), *scene.notes),
         )
 
     def _walk(

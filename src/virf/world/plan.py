@@ -169,6 +169,9 @@ class PlanStep:
     text: str  # the line as written
     verb: str  # canonical verb
     args: tuple[str, ...]
+    # How an everyday phrasing was read ('light the candle' -> 'turn_on candle');
+    # None when the line is in the action language itself.
+    note: str | None = None
 
     @property
     def action_class(self) -> str:

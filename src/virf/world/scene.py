@@ -202,6 +202,9 @@ class Scene:
     # ('Toaster_1 hasState OnState_1' for 'Toaster_1 hasState OnState'), so
     # that reports can speak the user's words
     spelling: Mapping[Fact, Fact] = field(default_factory=lambda: MappingProxyType({}))
+    # How the reader read what the knowledge base does not name (an open-world
+    # object and the place proposed for it), for the report's notes.
+    notes: tuple[str, ...] = ()
 
 
 def load_scene_file(path: str | Path, vocab: Vocabulary) -> Scene:
