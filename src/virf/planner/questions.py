@@ -239,10 +239,13 @@ def _settle(data: dict[str, Any], q: Question, value: str, vocab: Vocabulary) ->
         if q.fact is None or q.fact.subject not in declared:
             return False
         if value == "no":
-            # Only what the scene itself marked as assumed (perception unsure
-            # of it) can be taken back; the reader's own assumptions (a knob
-            # controls the burners) are not entries to remove.
-            return _retract(data, q.fact, vocab, Provenance.ASSUMED)
+            # What the scene itself marked as assumed (perception unsure of
+            # it) is taken back; an assumption of the reader's own (what an
+            # open-world object's name suggests, a knob controlling the
+            # burners) is written down as denied, so that it is not made again.
+            if _retract(data, q.fact, vocab, Provenance.ASSUMED):
+                return True
+            return _deny(data, q.fact, vocab)
         if q.fact.predicate == "rdf:type":
             data["instances"] = [
                 *data.get("instances", []),
@@ -264,6 +267,21 @@ def _settle(data: dict[str, Any], q: Question, value: str, vocab: Vocabulary) ->
         t = parse_triple_text(value)
         return t is not None and _retract(data, t, vocab)
     return False
+
+
+def _deny(data: dict[str, Any], fact: Triple, vocab: Vocabulary) -> bool:
+    """Record that ``fact``, an assumption of the scene reader, is false."""
+    try:
+        if build_scene(data, vocab).facts.get(Fact.from_triple(fact)) is not Provenance.ASSUMED:
+            return False
+    except InputError:
+        return False
+    text = f"{fact.subject} {fact.predicate} {fact.object}"
+    denied: list[Any] = list(data.get("denied", []))
+    if text not in denied:
+        denied.append(text)
+    data["denied"] = denied
+    return True
 
 
 def _declared(data: Mapping[str, Any]) -> dict[str, list[str]]:

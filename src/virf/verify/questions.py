@@ -19,6 +19,7 @@ from collections.abc import Iterable, Sequence
 
 from virf.ontology.tbox import UnsafeStateConcept, Vocabulary
 from virf.schema import Fact, FactKind, Question, QuestionKind, Triple
+from virf.world.scene import HYPOTHESIS_WORDS
 
 YES_NO = ("yes", "no")
 # The epistemic markers a scene (or VIRF's defaults) puts on an object whose
@@ -109,7 +110,20 @@ def fact_question(f: Fact, step: int, vocab: Vocabulary, text: str | None = None
             f"The scene does not say its '{f.predicate}' list is complete.",
             YES_NO,
         )
-    return ask(f"confirm:{triple_text(t)}", "confirm", f"Please confirm: {f.render()}?", YES_NO)
+    return ask(f"confirm:{triple_text(t)}", "confirm", _confirm_text(f), YES_NO)
+
+
+def _confirm_text(f: Fact) -> str:
+    """A yes-or-no question in words where the fact is a property or a type
+    ('Is HairDryer_1 an electrical appliance?', 'Is Toddler_1 a child?')."""
+    if f.predicate == "hasProperty":
+        words = HYPOTHESIS_WORDS.get(f.object, f"'{f.object}'")
+        return f"Is {f.subject} {words}?"
+    if f.kind is FactKind.TYPE:
+        noun = re.sub(r"(?<=[a-z])(?=[A-Z])", " ", f.object).lower()
+        article = "an" if noun[:1] in "aeiou" else "a"
+        return f"Is {f.subject} {article} {noun}?"
+    return f"Please confirm: {f.render()}?"
 
 
 def rule_questions(

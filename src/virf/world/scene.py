@@ -32,6 +32,7 @@ Format (Appendix C of the paper)::
 
 from __future__ import annotations
 
+import difflib
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -43,6 +44,7 @@ from pydantic import AfterValidator, Field
 
 from virf.errors import InputError, Record, Says, clip, closest, hidden_char, read_json_file
 from virf.names import term_key
+from virf.ontology.lexicon import Proposal, propose
 from virf.ontology.tbox import Vocabulary
 from virf.schema import Fact, FactKind, Provenance
 
@@ -91,6 +93,13 @@ VALUE_WORDS = {
     "metallic": "Metal",
 }
 DEFAULT_AGENT = "Robot_1"
+# A class name the knowledge base lacks is read as an open-world object when
+# it looks like a name of a kind of thing ('HairDryer', 'space heater').
+OPEN_CLASS_RE = re.compile(r"[A-Za-z][A-Za-z0-9]*(?:[ _\-][A-Za-z0-9]+)*")
+MAX_OPEN_CLASS = 64
+# How close in spelling an unknown name must be to a known class to be read
+# as a misspelling of it ('Mircowave') rather than as a new kind of thing.
+TYPO_CUTOFF = 0.8
 
 
 # The scene file's shape (docs/scenes.md).  Every spelling of a world passes
@@ -134,7 +143,7 @@ class SceneDocument(Record):
     # The message users know, word for word (it has never listed 'name').
     when_unknown_key = (
         "unknown scene key '{key}'; expected instances, assertions, closed_world, "
-        "unlocated_by_default, unknown_contents, referents, description"
+        "unlocated_by_default, unknown_contents, referents, denied, description"
     )
 
     instances: Annotated[
@@ -176,6 +185,11 @@ class SceneDocument(Record):
         Field(default_factory=list),
         Says("{where} 'closed_world' must be a list of relation names"),
     ]
+    denied: Annotated[
+        list[str],
+        Field(default_factory=list),
+        Says("{where} 'denied' must be a list of facts written 'Subject property Object'"),
+    ]
     unknown_contents: Annotated[
         list[str],
         Field(default_factory=list),
@@ -205,6 +219,9 @@ class Scene:
     # How the reader read what the knowledge base does not name (an open-world
     # object and the place proposed for it), for the report's notes.
     notes: tuple[str, ...] = ()
+    # Objects whose class the knowledge base does not name: instance -> the
+    # class name as written (HairDryer_1 -> 'HairDryer').
+    open_world: Mapping[str, str] = field(default_factory=lambda: MappingProxyType({}))
 
 
 def load_scene_file(path: str | Path, vocab: Vocabulary) -> Scene:
@@ -222,7 +239,12 @@ def load_scene_data(path: str | Path) -> dict[str, Any]:
     return data
 
 
-def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
+def build_scene(
+    data: Any, vocab: Vocabulary, name: str = "scene", *, strict_vocabulary: bool = False
+) -> Scene:
+    """The canonical world ``data`` describes. A class name the knowledge base
+    lacks makes an open-world object (see :func:`_open_world`) unless
+    ``strict_vocabulary``, which refuses it."""
     doc = SceneDocument.parse(data, "scene")
     instances, assertions = doc.instances, doc.assertions
 
@@ -231,6 +253,8 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
     # Names that could be read as another term: a plan says 'pan' for a Pan,
     # so an instance called 'pan' (or 'PAN') would be a second reading.
     keyed: dict[str, str] = {}
+    # Class names the knowledge base lacks, per instance, as written.
+    unknown_names: dict[str, list[str]] = {}
 
     def declare(iname: str, cname: str, where: str) -> None:
         if not NAME_RE.fullmatch(iname) or len(iname) > MAX_NAME:
@@ -250,11 +274,16 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
                 f"{where}: instance names '{keyed[key]}' and '{iname}' differ only in case or "
                 "separators, so a plan could not tell them apart"
             )
-        cls = vocab.require_class(cname)
+        cls = vocab.canonical_class(cname)
+        if cls is None:
+            _check_open_class(cname, vocab, strict_vocabulary)
         if iname not in classes:
             classes[iname] = set()
             order.append(iname)
-        classes[iname].add(cls)
+        if cls is None:
+            unknown_names.setdefault(iname, []).append(cname)
+        else:
+            classes[iname].add(cls)
 
     for i, inst in enumerate(instances):
         declare(inst.instance_name, inst.class_name, f"instances[{i}]")
@@ -263,6 +292,15 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
     for i, a in enumerate(assertions):
         if a.property in TYPE_PROPERTIES:
             declare(a.subject, str(a.object), f"assertions[{i}]")
+    # An object named by a class the knowledge base lacks is an open-world
+    # object: what the name suggests stays a hypothesis even when the user
+    # has since given it a known class too (a Vinegar confirmed as food may
+    # still be an acid).
+    open_world = {ind: words[0] for ind, words in unknown_names.items()}
+    proposals = {ind: propose(word) for ind, word in open_world.items()}
+    for ind, proposal in proposals.items():
+        if not classes[ind]:
+            classes[ind].add("MaterialEntity" if proposal.person else "PhysicalObject")
 
     # An individual of a material class is a value ('Pot_1 hasMaterial
     # Metal_1') when some assertion uses it as one; otherwise it is a portion
@@ -453,6 +491,8 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
     _mark_unknown_fill(objects, facts, vocab)
     _mark_unknown_contents(objects, facts, vocab, frozenset(closed), frozenset(unknown_contents))
     _assume_controls(objects, object_order, facts, vocab)
+    notes = _hypothesise(proposals, open_world, facts, vocab)
+    _deny(doc.denied, facts, classes, vocab)
     return Scene(
         objects=MappingProxyType(objects),
         order=object_order,
@@ -464,7 +504,116 @@ def build_scene(data: Any, vocab: Vocabulary, name: str = "scene") -> Scene:
         unknown_contents=frozenset(unknown_contents),
         referents=MappingProxyType({term_key(k): v for k, v in sorted(referents.items())}),
         spelling=MappingProxyType(dict(sorted(spelling.items()))),
+        notes=notes,
+        open_world=MappingProxyType(dict(sorted(open_world.items()))),
     )
+
+
+def _check_open_class(cname: str, vocab: Vocabulary, strict: bool) -> None:
+    """Refuse a class name that cannot be an open-world object: under
+    ``strict``, one that does not look like a name, or a misspelling of a
+    known class that the dictionary does not know either ('Mircowave' is a
+    microwave, and reading it as an unknown thing would lose its hazards)."""
+    if strict or len(cname) > MAX_OPEN_CLASS or not OPEN_CLASS_RE.fullmatch(cname):
+        vocab.require_class(cname)  # raises, naming the closest classes
+    if propose(cname).found:
+        return
+    near = closest(cname, vocab.classes)
+    typo = [
+        c
+        for c in near
+        if difflib.SequenceMatcher(None, cname.lower(), c.lower()).ratio() >= TYPO_CUTOFF
+    ]
+    if typo:
+        raise InputError(
+            f"unknown class '{clip(cname)}' (neither the knowledge base nor the dictionary "
+            f"knows it, and it is spelled like a known class); closest known: {', '.join(typo)}"
+        )
+
+
+# What a hypothesis asks, in words (questions and notes).
+HYPOTHESIS_WORDS = {
+    "ElectricallyPowered": "an electrical appliance",
+    "HeatSource": "a heat source",
+    "OpenFlame": "an open flame",
+    "HotBulb": "a lamp with a hot bulb",
+    "Flammable": "flammable",
+    "Fragile": "fragile",
+    "Toxic": "toxic",
+    "Sharp": "sharp",
+}
+
+
+def _hypothesise(
+    proposals: Mapping[str, Proposal],
+    open_world: Mapping[str, str],
+    facts: dict[Fact, Provenance],
+    vocab: Vocabulary,
+) -> tuple[str, ...]:
+    """Add each open-world object's proposal as assumed facts (a hazard that
+    needs one is UNKNOWN, asking about it) and say what was read."""
+    stated_material = {
+        f.subject
+        for f, p in facts.items()
+        if f.predicate == "hasMaterial" and p is Provenance.SCENE
+    }
+    notes = []
+    for ind in sorted(proposals):
+        p = proposals[ind]
+        said = []
+        for prop in p.properties:
+            if prop in vocab.individuals:
+                facts.setdefault(Fact(ind, "hasProperty", prop), Provenance.ASSUMED)
+                said.append(HYPOTHESIS_WORDS.get(prop, prop))
+        if ind not in stated_material:
+            for m in p.materials:
+                if m in vocab.individuals:
+                    facts.setdefault(Fact(ind, "hasMaterial", m), Provenance.ASSUMED)
+                    said.append(f"made of {m}")
+        for t in p.types:
+            if vocab.canonical_class(t) is not None:
+                facts.setdefault(Fact(ind, "type", t, FactKind.TYPE), Provenance.ASSUMED)
+                said.append(f"a {t}")
+        base = "a person (MaterialEntity)" if p.person else "a PhysicalObject"
+        hypotheses = (
+            f"it may be {', '.join(said)}, which is asked only where a hazard depends on it"
+            if said
+            else "nothing suggests a hazard of its own; its material is unknown"
+        )
+        notes.append(
+            f"{ind}: '{open_world[ind]}' is not a class of the knowledge base; read as {base} "
+            f"of the open world ({p.describe()}); {hypotheses}"
+        )
+    return tuple(notes)
+
+
+def _deny(
+    denied: list[str],
+    facts: dict[Fact, Provenance],
+    classes: Mapping[str, set[str]],
+    vocab: Vocabulary,
+) -> None:
+    """Drop the assumptions the user has said are false ('denied': a 'no' to
+    a question about one); denying what the scene states is a contradiction."""
+    for i, text in enumerate(denied):
+        parts = text.split()
+        if len(parts) != 3:
+            raise InputError(f"scene denied[{i}]: '{clip(text)}' must be 'Subject property Object'")
+        subject, prop, obj = parts
+        if subject not in classes:
+            raise InputError(f"scene denied[{i}]: '{clip(subject)}' is not a declared instance")
+        if prop in TYPE_PROPERTIES:
+            fact = Fact(subject, "type", obj, FactKind.TYPE)
+        else:
+            canonical = vocab.canonical_property(prop)
+            if canonical is None:
+                raise InputError(f"scene denied[{i}]: unknown property '{clip(prop)}'")
+            fact = Fact(subject, canonical, obj)
+        provenance = facts.get(fact)
+        if provenance is Provenance.SCENE:
+            raise InputError(f"scene denied[{i}]: the scene also states {fact.render()}")
+        if provenance is Provenance.ASSUMED:
+            del facts[fact]
 
 
 def _check_referent_words(referents: Mapping[str, str]) -> None:
