@@ -54,7 +54,53 @@ WORDNET_FILES = (
     "verb.exc",
 )
 # WordNet 3.0's lexicographer files in number order (lexnames(5WN)).
-LEXNAMES = ["adj.all", "adj.pert", "adv.all", "noun.Tops", "noun.act", "noun.animal", "noun.artifact", "noun.attribute", "noun.body", "noun.cognition", "noun.communication", "noun.event", "noun.feeling", "noun.food", "noun.group", "noun.location", "noun.motive", "noun.object", "noun.person", "noun.phenomenon", "noun.plant", "noun.possession", "noun.process", "noun.quantity", "noun.relation", "noun.shape", "noun.state", "noun.substance", "noun.time", "verb.body", "verb.change", "verb.cognition", "verb.communication", "verb.competition", "verb.consumption", "verb.contact", "verb.creation", "verb.emotion", "verb.motion", "verb.perception", "verb.possession", "verb.social", "verb.stative", "verb.weather", "adj.ppl"]
+LEXNAMES = [
+    "adj.all",
+    "adj.pert",
+    "adv.all",
+    "noun.Tops",
+    "noun.act",
+    "noun.animal",
+    "noun.artifact",
+    "noun.attribute",
+    "noun.body",
+    "noun.cognition",
+    "noun.communication",
+    "noun.event",
+    "noun.feeling",
+    "noun.food",
+    "noun.group",
+    "noun.location",
+    "noun.motive",
+    "noun.object",
+    "noun.person",
+    "noun.phenomenon",
+    "noun.plant",
+    "noun.possession",
+    "noun.process",
+    "noun.quantity",
+    "noun.relation",
+    "noun.shape",
+    "noun.state",
+    "noun.substance",
+    "noun.time",
+    "verb.body",
+    "verb.change",
+    "verb.cognition",
+    "verb.communication",
+    "verb.competition",
+    "verb.consumption",
+    "verb.contact",
+    "verb.creation",
+    "verb.emotion",
+    "verb.motion",
+    "verb.perception",
+    "verb.possession",
+    "verb.social",
+    "verb.stative",
+    "verb.weather",
+    "adj.ppl",
+]
 INSTALL_HINT = (
     "install WordNet with 'make wordnet' (Debian packages wordnet-base, wordnet-sense-index)"
 )
@@ -102,6 +148,8 @@ CUES: dict[str, tuple[tuple[str, str], ...]] = {
     "clothing.n.01": (("property", "Flammable"), ("material", "Fabric")),
     "floor_cover.n.01": (("property", "Flammable"), ("material", "Fabric")),
     "curtain.n.01": (("property", "Flammable"), ("material", "Fabric")),
+    "drygoods.n.01": (("property", "Flammable"), ("material", "Fabric")),
+    "towel.n.01": (("property", "Flammable"), ("material", "Fabric")),
     "wood.n.01": (("property", "Flammable"), ("material", "Wood")),
     "book.n.02": (("property", "Flammable"), ("material", "Paper")),
     "fuel.n.01": (("property", "Flammable"),),
@@ -319,12 +367,15 @@ class Proposal:
     materials: tuple[str, ...]  # material individuals to hypothesise
     types: tuple[str, ...]  # classes to hypothesise (Child, Person, FoodItem)
     found: bool  # WordNet knows the word (or its last word)
+    dictionary: bool = True  # WordNet was available to ask
 
     @property
     def person(self) -> bool:
         return bool({"Person", "Child"} & set(self.types))
 
     def describe(self) -> str:
+        if not self.dictionary:
+            return f"WordNet is not installed, so nothing is proposed: {INSTALL_HINT}"
         if not self.found:
             return f"'{self.word}' is not in WordNet"
         chain = " -> ".join((self.word, *self.path[:3]))
@@ -397,7 +448,14 @@ def propose(term: str) -> Proposal:
                     cues.setdefault(cue, None)
     wn = _wordnet()
     synsets, read = _senses(wn, words) if wn is not None and words else ([], "")
-    kept = _keep(synsets, words[: len(words) - len(read.split())]) if synsets else []
+    modifiers = words[: len(words) - len(read.split())] if synsets else []
+    kept = _keep(synsets, modifiers) if synsets else []
+    # A word before the name that names a stuff says what the thing is made
+    # of: a 'cardboard box', an 'oil lamp', a 'glass jar'.
+    for m in modifiers:
+        first = wn.synsets(m, pos="n")[:1] if wn is not None else []
+        if first and first[0].lexname() == "noun.substance":
+            kept.append(first[0])
     for s in kept:
         for cue in _cues(s):
             cues.setdefault(cue, None)
@@ -428,6 +486,7 @@ def propose(term: str) -> Proposal:
         materials=of("material"),
         types=types,
         found=bool(kept),
+        dictionary=wn is not None,
     )
 
 

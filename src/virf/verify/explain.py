@@ -23,6 +23,7 @@ from virf.reasoning import Engine
 from virf.schema import BackgroundKnowledge, Fact, FactKind, Phase, Provenance
 from virf.verify.findings import Finding, inconsistency
 from virf.verify.questions import rule_questions
+from virf.world.actions import portion_source
 from virf.world.simulator import Simulator
 from virf.world.state import WorldState
 
@@ -246,7 +247,18 @@ class Explainer:
         defaults = [f for f in facts if snapshot[f] is Provenance.DEFAULT]
         background = background_knowledge(background_ids, defaults, self.vocab)
         definite = usc.kind != "uncertainty" and not assumed
-        questions = [] if definite else rule_questions(usc, ind, facts, assumed, step, self.vocab)
+        questions = (
+            []
+            if definite
+            else rule_questions(
+                usc,
+                ind,
+                [_behind(f, snapshot) for f in facts],
+                [_behind(f, snapshot) for f in assumed],
+                step,
+                self.vocab,
+            )
+        )
         chain = "; ".join(f.render() for f in facts if snapshot[f] is not Provenance.DEFAULT)
         extra = "; ".join(b.text for b in background)
         message = f"{usc.trigger_reason[:1].upper()}{usc.trigger_reason[1:]}: {chain}"
@@ -279,3 +291,15 @@ def note_onset(f: Finding, states: Sequence[WorldState], sim: Simulator) -> None
         else:
             break
     f.message += f" It holds from step {onset} until the plan ends."
+
+
+def _behind(f: Fact, snapshot: Mapping[Fact, Provenance]) -> Fact:
+    """The scene's assumption a plan-made one follows from, which is what the
+    user can answer: 'Acid_from_Vinegar_1 hasMaterial Acid' is only assumed
+    because 'Vinegar_1 hasMaterial Acid' is."""
+    objects = {g.subject for g in snapshot if g.kind is FactKind.TYPE}
+    source = portion_source(f.subject, objects)
+    if source is None:
+        return f
+    origin = Fact(source, f.predicate, f.object, f.kind)
+    return origin if snapshot.get(origin) is Provenance.ASSUMED else f

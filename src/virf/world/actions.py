@@ -63,6 +63,18 @@ def lacks(vocab: Vocabulary, obj: str, state: WorldState, affordance: str) -> bo
     )
 
 
+def portion_name(kind: str, source: str) -> str:
+    """The individual the plan makes from ``source`` (what is poured out of
+    it, its slices): ``Acid_from_Vinegar_1``."""
+    return f"{kind}_from_{source}"
+
+
+def portion_source(name: str, objects: Iterable[str]) -> str | None:
+    """The object a plan-made portion came from, if ``name`` is one."""
+    kind, sep, source = name.partition("_from_")
+    return source if sep and kind and source in set(objects) else None
+
+
 class Change:
     """One step being applied: the state it starts in and working copies of
     the facts, objects and finds that become the next state."""
@@ -87,6 +99,13 @@ class Change:
 
     def add(self, f: Fact) -> None:
         self.facts[f] = Provenance.PLAN
+
+    def add_following(self, f: Fact, source: Fact) -> None:
+        """Add ``f``, which the plan makes from ``source``: it is only as sure
+        as ``source`` (a portion poured from a bottle that may hold an acid
+        may be an acid)."""
+        sure = self.state.facts.get(source) is not Provenance.ASSUMED
+        self.facts[f] = Provenance.PLAN if sure else Provenance.ASSUMED
 
     def drop(self, pred: Iterable[Fact]) -> None:
         # Materialised first: ``pred`` is usually a generator over the facts.
@@ -346,18 +365,24 @@ def _pour(c: Change) -> PreconditionFailure | None:
 
     if filled and not liquids:
         # Filled with something the scene does not name.
-        portion = f"Liquid_from_{held}"
+        portion = portion_name("Liquid", held)
         c.objects[portion] = frozenset({"UnknownLiquid"})
         c.add(Fact(portion, "type", "UnknownLiquid", FactKind.TYPE))
         lands_in(portion)
     # A cleaner's chemical goes where it is poured, as a substance out of its
     # bottle: what it meets there is what it reacts with.
+    # Something poured that is not a vessel (an open-world 'OvenCleaner') is
+    # its own stuff: when nobody knows what it is made of, nobody knows what
+    # lands where it is poured either.
+    unknown_stuff = not c.is_a(held, "LiquidContainer")
     for chem in c.state.objects_of(held, "hasMaterial"):
-        if chem in c.vocab.individuals and c.vocab.is_a(chem, "Chemical"):
-            portion = f"{chem}_from_{held}"
+        if chem in c.vocab.individuals and (
+            c.vocab.is_a(chem, "Chemical") or (unknown_stuff and chem == "UnknownMaterial")
+        ):
+            portion = portion_name(chem, held)
             c.objects[portion] = frozenset({"Substance"})
             c.add(Fact(portion, "type", "Substance", FactKind.TYPE))
-            c.add(Fact(portion, "hasMaterial", chem))
+            c.add_following(Fact(portion, "hasMaterial", chem), Fact(held, "hasMaterial", chem))
             lands_in(portion)
     if liquids or filled:
         c.set_state(held, "EmptyState")
@@ -447,7 +472,7 @@ def _derive(c: Change, source: str, annotation: str) -> None:
         derived = c.vocab.annotation(cls, annotation)
         if not derived or derived[0] not in c.vocab.classes:
             continue
-        name = f"{derived[0]}_from_{source}"
+        name = portion_name(derived[0], source)
         if name in objects:
             return
         objects[name] = frozenset({derived[0]})

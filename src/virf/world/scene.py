@@ -874,6 +874,18 @@ def describe_scene(scene: Scene) -> dict[str, Any]:
         "unknown_contents": sorted(scene.unknown_contents),
         "unlocated_by_default": scene.unlocated_by_default,
         "referents": dict(scene.referents),
+        "open_world_objects": {
+            ind: {
+                "written": word,
+                "proposal": propose(word).describe(),
+                "hypotheses": sorted(
+                    f.render()
+                    for f, p in scene.facts.items()
+                    if f.subject == ind and p is Provenance.ASSUMED
+                ),
+            }
+            for ind, word in scene.open_world.items()
+        },
         "open_world_markers": sorted(
             f.render()
             for f, p in scene.facts.items()
