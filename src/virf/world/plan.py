@@ -7,7 +7,7 @@ skipped, leading numbering such as ``3.`` or ``3)`` is ignored)::
     open X            close X                  turn_on X | turn on X | toggle on X
     turn_off X ...    slice X   break X   cook X   dirty X   clean X
     fillLiquid X water|coffee|wine             emptyLiquid X
-    pour | pour X     drop      throw
+    pour | pour X     drop | drop X           throw | throw X
 
 and the function style of the paper's walkthrough: ``put_in(Pot_1, Microwave_1)``.
 A plan file may also be a JSON list of such strings.
@@ -90,8 +90,10 @@ ARITY = {
     "fillLiquid": (2, 2),
     "emptyLiquid": (1, 1),
     "pour": (0, 1),
-    "drop": (0, 0),
-    "throw": (0, 0),
+    # The object named is the one held: "throw AlarmClock" throws what the
+    # hand holds only if that is the AlarmClock.
+    "drop": (0, 1),
+    "throw": (0, 1),
 }
 _ALIASES = {
     "find": "find",
@@ -172,6 +174,10 @@ class PlanStep:
     # How an everyday phrasing was read ('light the candle' -> 'turn_on candle');
     # None when the line is in the action language itself.
     note: str | None = None
+    # The object the line says is poured from ('pour the mug into the sink'):
+    # it must be the object the agent holds.  ``throw X`` and ``drop X`` name
+    # theirs as their argument.
+    held: str | None = None
 
     @property
     def action_class(self) -> str:
@@ -179,6 +185,14 @@ class PlanStep:
 
     def canonical(self) -> str:
         return " ".join((self.verb, *self.args))
+
+    @property
+    def held_term(self) -> str | None:
+        """The words naming the object this step needs in the hand, if the
+        line names it ('throw AlarmClock', 'pour the mug into the sink')."""
+        if self.verb in ("drop", "throw") and self.args:
+            return self.args[0]
+        return self.held
 
 
 def _unknown_verb(word: str, line_no: int) -> InputError:

@@ -109,9 +109,13 @@ class Simulator:
         # Two singulars naming different things would be a guess.
         return next(iter(readings.values())) if len(readings) == 1 else None
 
-    def resolve_term(self, state: WorldState, term: str) -> str | tuple[str, ...] | None:
+    def resolve_term(
+        self, state: WorldState, term: str, prefer: str | None = None
+    ) -> str | tuple[str, ...] | None:
         """The instance ``term`` names; None if none; the candidates if the
-        choice is ambiguous (several equally plausible instances)."""
+        choice is ambiguous (several equally plausible instances).
+        ``prefer`` wins among the candidates (the held object, for a line that
+        says it is held: 'throw the mug')."""
         spelled = self.spelling(state, term)
         if spelled is None:
             return None
@@ -143,6 +147,8 @@ class Simulator:
         ]
         if not candidates:
             return None
+        if prefer in candidates:
+            return prefer
         # The object the agent dealt with most recently wins: a later 'put Fridge'
         # means the fridge just found, as in AI2-THOR where actions act on the
         # object in view.
@@ -181,8 +187,8 @@ class Simulator:
         return tuple(by_key[h] for h in hits)
 
     def resolve(self, state: WorldState, step: PlanStep) -> ResolvedStep | MissingObject:
-        def need(term: str) -> str | MissingObject:
-            found = self.resolve_term(state, term)
+        def need(term: str, prefer: str | None = None) -> str | MissingObject:
+            found = self.resolve_term(state, term, prefer)
             if found is None:
                 pool = list(state.objects) + sorted(
                     {c for cs in state.objects.values() for c in cs}
@@ -199,6 +205,18 @@ class Simulator:
 
         verb, args = step.verb, step.args
         held = state.held()
+        # The object the line says is in the hand ('throw AlarmClock'): among
+        # the instances its words name, the held one; the action's handler
+        # refuses the step when the hand holds another object or nothing.
+        named_held: str | None = None
+        if step.held_term is not None:
+            found_held = need(step.held_term, prefer=held)
+            if isinstance(found_held, MissingObject):
+                return found_held
+            named_held = found_held
+        # What the step acts on as held: nothing when the line names another
+        # object, so a step that cannot run claims no action on either.
+        patient_held = held if named_held in (None, held) else None
         # The whole phrase names the receptacle if it can ("put dining table");
         # otherwise one object-receptacle split must work, since choosing
         # between several would be a guess.
@@ -215,7 +233,7 @@ class Simulator:
                 return dest
             patient = held
             if len(args) == 2:
-                named = need(args[0])
+                named = need(args[0], prefer=held)
                 if isinstance(named, MissingObject):
                     return named
                 patient = named
@@ -229,9 +247,9 @@ class Simulator:
                 dest_r = named
             if dest_r == held:
                 dest_r = None
-            return ResolvedStep(step, target=dest_r, patient=held)
+            return ResolvedStep(step, target=dest_r, patient=patient_held, named_held=named_held)
         if verb in ("drop", "throw"):
-            return ResolvedStep(step, patient=held)
+            return ResolvedStep(step, patient=patient_held, named_held=named_held)
         target = need(args[0])
         if isinstance(target, MissingObject):
             return target

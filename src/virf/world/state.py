@@ -95,6 +95,9 @@ class ResolvedStep:
     patient: str | None = None  # the object moved or transformed besides the target
     liquid: str | None = None  # liquid individual created by fillLiquid
     instrument: str | None = None  # held tool used
+    # The object the line says is in the hand ('throw AlarmClock'): the step
+    # cannot run unless it is the one held.
+    named_held: str | None = None
 
 
 @dataclass(frozen=True)
