@@ -123,6 +123,7 @@ def test_names_in_words_are_read(line: str, verb: str, args: tuple[str, ...]) ->
 @pytest.mark.parametrize(
     ("line", "message"),
     [
+        ("drop cup on the table", r"'drop cup on the table' names more than one thing"),
         ("throw Apple_1 Cup_1", r"'throw' takes 0 to 1 argument\(s\), got 2"),
         ("find", r"'find' takes 1 argument\(s\), got 0"),
         ("pick Apple_1 dining table", r"'pick' takes 1 argument\(s\), got 2"),
