@@ -98,7 +98,8 @@ def read_plan(reply: str) -> ReadPlan:
         try:
             if first not in ACTION_WORDS:
                 raise InputError("not an action")
-            steps.append(parse_line(line, len(steps) + 1, len(steps) + 1))
+            previous = steps[-1] if steps else None
+            steps.append(parse_line(line, len(steps) + 1, len(steps) + 1, previous))
         except InputError as exc:
             why = f"{line}: {str(exc).split(': ', 1)[-1]}"
             if in_code or listed:

@@ -168,6 +168,22 @@ def _nothing_held(c: Change, purpose: str) -> PreconditionFailure:
     return c.fail("Precondition_NothingHeld", c.agent, f"{c.agent} is holding nothing to {purpose}")
 
 
+def _not_the_held(c: Change) -> PreconditionFailure | None:
+    """The line names the object in the hand ('throw AlarmClock'): it must be
+    the one held, never silently another."""
+    named, agent = c.r.named_held, c.agent
+    if named is None or named == c.held:
+        return None
+    if c.held is None:
+        return c.fail("Precondition_NothingHeld", agent, f"{agent} is holding nothing, not {named}")
+    return c.fail(
+        "Precondition_NothingHeld",
+        agent,
+        f"{agent} is holding {c.held}, not {named}",
+        Fact(agent, "isHolding", c.held),
+    )
+
+
 def _closed_above(c: Change, target: str) -> PreconditionFailure | None:
     """A closed receptacle anywhere above the target blocks the reach: an
     apple on a plate in a closed fridge cannot be picked either."""
@@ -335,6 +351,9 @@ def _empty_liquid(c: Change) -> None:
 
 def _pour(c: Change) -> PreconditionFailure | None:
     held, target = c.held, c.r.target
+    wrong = _not_the_held(c)
+    if wrong is not None:
+        return wrong
     if held is None:
         return _nothing_held(c, "pour")
     if target is None:
@@ -395,6 +414,9 @@ def _pour(c: Change) -> PreconditionFailure | None:
 
 def _drop_held(c: Change) -> PreconditionFailure | None:
     held = c.held
+    wrong = _not_the_held(c)
+    if wrong is not None:
+        return wrong
     if held is None:
         return _nothing_held(c, c.verb)
     c.drop([Fact(c.agent, "isHolding", held)])

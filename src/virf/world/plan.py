@@ -1,4 +1,4 @@
-"""Parse plans written in SafeAgentBench's action language.
+"""Parse plans written in SafeAgentBench's action language, or in everyday words.
 
 Accepted per line (case-insensitive verbs; blank lines and ``#`` comments are
 skipped, leading numbering such as ``3.`` or ``3)`` is ignored)::
@@ -7,10 +7,21 @@ skipped, leading numbering such as ``3.`` or ``3)`` is ignored)::
     open X            close X                  turn_on X | turn on X | toggle on X
     turn_off X ...    slice X   break X   cook X   dirty X   clean X
     fillLiquid X water|coffee|wine             emptyLiquid X
-    pour | pour X     drop      throw
+    pour | pour X     drop | drop X            throw | throw X
 
 and the function style of the paper's walkthrough: ``put_in(Pot_1, Microwave_1)``.
-A plan file may also be a JSON list of such strings.
+A plan file may also be a JSON list of such strings.  ``throw X`` and ``drop
+X`` name the object held; the simulator refuses the step if it is not.
+
+Everyday phrasings (``light the candle``, ``blow it out``, ``grab the pot``,
+``set it down on the table``) are read as one action each through the one
+table :data:`EVERYDAY`, longest phrase first, and the step's ``note`` says how
+(the report lists the notes); a line in the action language gets no note.
+``it`` and ``them`` stand for the held object where the action needs one,
+else for the one object of the step before.  A line that could be read two
+ways (``turn the stove``, ``set the cup``, ``take the apple out of the
+fridge``) is an input error naming the problem and the valid phrasings, never
+a guess.  docs/planner.md lists the table and the rules.
 
 Limits (docs/reliability.md): at most ``MAX_PLAN_STEPS`` actions and
 ``MAX_LINE_CHARS`` characters per action line; control and invisible
@@ -18,9 +29,10 @@ characters, and empty arguments in the function style, are input errors.
 
 Objects may be named in words, as SafeAgentBench's reference plans and LLM
 replies do: ``find dining table``, ``turn off coffee machine``, ``pick up the
-knives``, ``find stove knob 2``.  The parser only groups the words into object
-terms; which type or instance a term names is the simulator's decision, since
-only it knows the vocabulary and the scene.
+knives``, ``find stove knob 2``, ``the lit candle``.  The parser only groups
+the words into object terms; which type or instance a term names (and which
+instance a leading state word such as ``lit`` chooses, :data:`STATE_ADJECTIVES`)
+is the simulator's decision, since only it knows the vocabulary and the scene.
 """
 
 from __future__ import annotations
@@ -28,8 +40,9 @@ from __future__ import annotations
 import itertools
 import re
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import NamedTuple
 
 from virf.errors import InputError, clip, closest, hidden_char, parse_json, read_input_file
 from virf.names import term_key
@@ -90,8 +103,10 @@ ARITY = {
     "fillLiquid": (2, 2),
     "emptyLiquid": (1, 1),
     "pour": (0, 1),
-    "drop": (0, 0),
-    "throw": (0, 0),
+    # The object named is the one held: "throw AlarmClock" throws what the
+    # hand holds only if that is the AlarmClock.
+    "drop": (0, 1),
+    "throw": (0, 1),
 }
 _ALIASES = {
     "find": "find",
@@ -127,11 +142,183 @@ _ALIASES = {
     "drop": "drop",
     "throw": "throw",
 }
+
+
+class Reading(NamedTuple):
+    """The action an everyday phrasing means: ``alone`` when the line names
+    only the object, ``placed`` when a place follows it ('set the cup down'
+    lets go of the cup, 'set the cup down on the table' puts it there).
+    None: the phrasing cannot be read that way, and the line is an error."""
+
+    alone: str | None
+    placed: str | None = None
+
+
+# Everyday phrasings of people and LLMs, and the action of the language each
+# one is read as; a line that uses one gets a note in the report saying how it
+# was read.  This one table drives the reader, its error messages and the
+# table in docs/planner.md (a test checks the page against it).  A phrase of
+# several words is matched before any shorter one it starts with ("put out
+# the candle" is never 'put' into an "out candle"); a last word that is a
+# particle (on, off, up, down, out) may also follow the object ("blow the
+# candle out").
+EVERYDAY: dict[str, Reading] = {
+    # find: SafeAgentBench's find takes the robot to the object.
+    "go to": Reading("find"),
+    "walk to": Reading("find"),
+    "move to": Reading("find"),
+    "head to": Reading("find"),
+    "get to": Reading("find"),
+    "navigate to": Reading("find"),
+    "approach": Reading("find"),
+    "locate": Reading("find"),
+    "look for": Reading("find"),
+    "search for": Reading("find"),
+    # pick
+    "grab": Reading("pick"),
+    "take": Reading("pick"),
+    "get": Reading("pick"),
+    "lift": Reading("pick"),
+    # put: the held object into or onto a place the line names.  With "down"
+    # and no place ("put down the cup") the robot only lets go of it, which is
+    # the language's drop: AI2-THOR drops it where it stands, and a fragile
+    # object breaks.  That is what gets verified, rather than a gentle placing
+    # on a surface the line does not name.  Without "down", a phrasing that
+    # names no place ("set the cup") is an error: there is nothing to read.
+    "set": Reading(None, "put"),
+    "lay": Reading(None, "put"),
+    "insert": Reading(None, "put"),
+    "put down": Reading("drop", "put"),
+    "set down": Reading("drop", "put"),
+    "lay down": Reading("drop", "put"),
+    "place down": Reading("drop", "put"),
+    # drop
+    "release": Reading("drop"),
+    "let go of": Reading("drop"),
+    "let go": Reading("drop"),
+    # throw
+    "toss": Reading("throw"),
+    "hurl": Reading("throw"),
+    "fling": Reading("throw"),
+    # close
+    "shut": Reading("close"),
+    # turn_on: a candle or a burner is lit by switching it on in the language.
+    "light": Reading("turn_on"),
+    "light up": Reading("turn_on"),
+    "ignite": Reading("turn_on"),
+    "start": Reading("turn_on"),
+    "activate": Reading("turn_on"),
+    "power on": Reading("turn_on"),
+    # turn_off: a flame is put out by switching it off in the language.
+    "put out": Reading("turn_off"),
+    "blow out": Reading("turn_off"),
+    "snuff out": Reading("turn_off"),
+    "extinguish": Reading("turn_off"),
+    "stop": Reading("turn_off"),
+    "deactivate": Reading("turn_off"),
+    "power off": Reading("turn_off"),
+    "shut off": Reading("turn_off"),
+    "shut down": Reading("turn_off"),
+    # slice
+    "cut": Reading("slice"),
+    "cut up": Reading("slice"),
+    "chop": Reading("slice"),
+    "chop up": Reading("slice"),
+    "dice": Reading("slice"),
+    # break
+    "smash": Reading("break"),
+    "shatter": Reading("break"),
+    "crack": Reading("break"),
+    # cook: SafeAgentBench's cook says neither how nor with what.  "microwave
+    # the bowl" is read as cook, so no microwave is simulated: a plan whose
+    # appliance should be checked must put the object in it and switch it on.
+    "heat": Reading("cook"),
+    "heat up": Reading("cook"),
+    "warm": Reading("cook"),
+    "warm up": Reading("cook"),
+    "microwave": Reading("cook"),
+    "fry": Reading("cook"),
+    "boil": Reading("cook"),
+    "bake": Reading("cook"),
+    "toast": Reading("cook"),
+    # dirty
+    "soil": Reading("dirty"),
+    # clean
+    "wash": Reading("clean"),
+    "rinse": Reading("clean"),
+    "wipe": Reading("clean"),
+    "scrub": Reading("clean"),
+    # fillLiquid ("fill X with water" is the language's own)
+    "fill up": Reading("fillLiquid"),
+    # emptyLiquid; "empty the mug into the sink" pours the held mug there.
+    "empty": Reading("emptyLiquid", "pour"),
+    "empty out": Reading("emptyLiquid", "pour"),
+    "drain": Reading("emptyLiquid"),
+}
+# Multi-word spellings of the action language itself: read without a note.
+_LANGUAGE_PHRASES = {
+    "turn on": "turn_on",
+    "turn off": "turn_off",
+    "toggle on": "turn_on",
+    "toggle off": "turn_off",
+    "switch on": "turn_on",
+    "switch off": "turn_off",
+    "pick up": "pick",
+}
+# Words that switch a device without saying on or off: "turn the stove" is
+# a question, not a guess.
+_ON_OFF_HEADS = ("turn", "toggle", "switch", "power")
+# A phrase's last word that may follow the object ("turn the lamp off").
+_PARTICLES = frozenset({"on", "off", "up", "down", "out"})
+# Leading words that describe an object's current state ("the lit candle"):
+# not part of its name.  The simulator uses them to choose among instances.
+STATE_ADJECTIVES: dict[str, str] = {
+    "lit": "OnState",
+    "burning": "OnState",
+    "running": "OnState",
+    "on": "OnState",
+    "unlit": "OffState",
+    "off": "OffState",
+    "open": "OpenState",
+    "closed": "ClosedState",
+    "hot": "HotState",
+    "cold": "ColdState",
+    "dirty": "DirtyState",
+    "clean": "CleanState",
+    "full": "FilledWithLiquidState",
+    "filled": "FilledWithLiquidState",
+    "empty": "EmptyState",
+    "sliced": "SlicedState",
+    "broken": "BrokenState",
+    "wet": "WetState",
+}
+# Words that stand for the object of the step before.
+PRONOUNS = frozenset({"it", "them"})
+# What 'pour water into the sink' pours: the held object's liquid.
+_LIQUID_WORDS = frozenset({*LIQUIDS, "liquid", "contents"})
+
+
+def _phrasebook() -> dict[str, list[tuple[tuple[str, ...], Reading, bool]]]:
+    """Every phrasing by its first word, longest first: (words, reading, everyday)."""
+    book: dict[str, list[tuple[tuple[str, ...], Reading, bool]]] = {}
+    entries = [
+        *((phrase, Reading(verb), False) for phrase, verb in _LANGUAGE_PHRASES.items()),
+        *((phrase, reading, True) for phrase, reading in EVERYDAY.items()),
+    ]
+    for phrase, reading, everyday in entries:
+        words = tuple(phrase.split())
+        book.setdefault(words[0], []).append((words, reading, everyday))
+    for options in book.values():
+        options.sort(key=lambda o: -len(o[0]))
+    return book
+
+
+_PHRASEBOOK = _phrasebook()
 # Words that can open an action line (for finding a plan inside prose).
-ACTION_WORDS = frozenset(_ALIASES) | {"turn", "toggle", "switch"}
+ACTION_WORDS = frozenset(_ALIASES) | frozenset(_PHRASEBOOK) | set(_ON_OFF_HEADS)
 _NUMBERING = re.compile(r"^\s*(?:step\s*)?\d+\s*[.):]\s*", re.IGNORECASE)
 _CALL = re.compile(r"^([A-Za-z_]+)\s*\((.*)\)\s*$")
-_CONNECTORS = {"in", "into", "inside", "on", "onto", "to"}
+_CONNECTORS = {"in", "into", "inside", "on", "onto", "over", "to"}
 _ARTICLES = {"the", "a", "an"}
 # A word of an object name written in words ("dining", "Table", "watering-can").
 # Anything else (Apple_1, Mug2, "apple,") is a name on its own.
@@ -172,6 +359,10 @@ class PlanStep:
     # How an everyday phrasing was read ('light the candle' -> 'turn_on candle');
     # None when the line is in the action language itself.
     note: str | None = None
+    # The object the line says is poured from ('pour the mug into the sink'):
+    # it must be the object the agent holds.  ``throw X`` and ``drop X`` name
+    # theirs as their argument.
+    held: str | None = None
 
     @property
     def action_class(self) -> str:
@@ -180,11 +371,23 @@ class PlanStep:
     def canonical(self) -> str:
         return " ".join((self.verb, *self.args))
 
+    @property
+    def held_term(self) -> str | None:
+        """The words naming the object this step needs in the hand, if the
+        line names it ('throw AlarmClock', 'pour the mug into the sink')."""
+        if self.verb in ("drop", "throw") and self.args:
+            return self.args[0]
+        return self.held
+
 
 def _unknown_verb(word: str, line_no: int) -> InputError:
-    near = closest(word, [*_ALIASES, "turn on", "toggle on", "pick up"])
-    hint = f"; closest: {', '.join(near)}" if near else f"; valid verbs: {', '.join(VERBS)}"
-    return InputError(f"plan line {line_no}: unknown action '{word}'{hint}")
+    spellings = [*(a for a in _ALIASES if "_" not in a), *_LANGUAGE_PHRASES, *EVERYDAY]
+    near = closest(word, spellings)
+    hint = f"; closest: {', '.join(near)}" if near else ""
+    return InputError(
+        f"plan line {line_no}: unknown action '{word}'{hint}; valid verbs: {', '.join(VERBS)}"
+        f"; everyday phrasings: {', '.join(EVERYDAY)}"
+    )
 
 
 def _is_number(token: str) -> bool:
@@ -277,48 +480,213 @@ def _call_args(body: str, line: str, line_no: int) -> list[str]:
     return [_name(part.split()) for part in parts]
 
 
-def parse_line(line: str, line_no: int = 1, index: int = 1) -> PlanStep:
+# In an everyday line, a word that joins its object to another thing or a
+# place: 'take the apple out of the fridge' names two things.
+_PREPOSITIONS = frozenset(
+    {*_CONNECTORS, "from", "out", "of", "off", "with", "at", "over", "under", "near", "by"}
+)
+
+
+@dataclass(frozen=True)
+class _Match:
+    """How a line's first words were read."""
+
+    phrase: str  # as in the phrasing tables ('put out'), or the verb word
+    reading: Reading
+    everyday: bool
+    words: list[str]  # the rest of the line, without a particle that followed the object
+
+
+def _match(tokens: list[str]) -> _Match | None:
+    """The phrasing a line opens with, longest first: 'put out the candle' is
+    'put out', never 'put' with an object 'out candle'."""
+    lower = [t.lower() for t in tokens]
+    for words, reading, everyday in _PHRASEBOOK.get(lower[0], ()):
+        n = len(words)
+        if tuple(lower[:n]) == words:
+            return _Match(" ".join(words), reading, everyday, tokens[n:])
+        if n == 2 and words[1] in _PARTICLES:
+            # "blow the candle out", "set the cup down on the table"
+            for i in range(2, len(tokens)):
+                if lower[i] == words[1] and (i == len(tokens) - 1 or lower[i + 1] in _CONNECTORS):
+                    return _Match(" ".join(words), reading, everyday, tokens[1:i] + tokens[i + 1 :])
+    verb = _ALIASES.get(lower[0])
+    if verb is not None:
+        return _Match(lower[0], Reading(verb), False, tokens[1:])
+    return None
+
+
+def _no_reading(tokens: list[str], text: str, line_no: int) -> InputError:
+    head = tokens[0].lower()
+    if head in _ON_OFF_HEADS:
+        # "turn the stove" may mean either: a question, never a guess.
+        obj = " ".join(w for w in tokens[1:] if w not in _ARTICLES) or "X"
+        return InputError(
+            f"plan line {line_no}: '{clip(text)}' does not say on or off; "
+            f"write 'turn on {clip(obj, 40)}' or 'turn off {clip(obj, 40)}'"
+        )
+    return _unknown_verb(clip(head, 40), line_no)
+
+
+def _place_cut(words: list[str]) -> int | None:
+    """Where a connector joins an object to a place ('cup on table'), if anywhere."""
+    return next((i for i in range(1, len(words) - 1) if words[i].lower() in _CONNECTORS), None)
+
+
+def _pour_terms(words: list[str], text: str, line_no: int) -> tuple[list[str], str | None, bool]:
+    """'pour' (into the last found object), 'pour R', 'pour into R', and the
+    everyday 'pour water into R', 'pour the mug into R', 'pour coffee from the
+    mug over R': (target terms, the held object named, whether everyday)."""
+    while len(words) > 1 and words[0].lower() in _CONNECTORS:
+        words = words[1:]
+    cut = next((i for i in range(1, len(words) - 1) if words[i].lower() in _CONNECTORS), None)
+    if cut is None:
+        return _terms(words), None, False
+    what, dest = words[:cut], words[cut + 1 :]
+    low = [w.lower() for w in what]
+    if "from" in low:
+        source = what[low.index("from") + 1 :]
+    elif low[-1] in _LIQUID_WORDS:
+        # What is poured is the held object's liquid: SafeAgentBench's pour.
+        source = []
+    else:
+        source = what
+    held = _terms(source) if source else []
+    if len(held) > 1:
+        raise InputError(
+            f"plan line {line_no}: '{clip(text)}' pours from more than one object "
+            f"({', '.join(held)}); pour from the one held: 'pour into R'"
+        )
+    return _terms(dest), (held[0] if held else None), True
+
+
+def _read_words(
+    m: _Match, words: list[str], text: str, line_no: int
+) -> tuple[str, list[str], str | None, bool]:
+    """The verb, the object terms, the held object named, and whether the
+    line was read through an everyday phrasing."""
+    everyday = m.everyday
+    reading = m.reading
+    cut = _place_cut(words)
+    if not everyday:
+        verb = reading.alone
+        assert verb is not None
+    elif cut is not None and reading.placed is not None:
+        verb = reading.placed
+    elif reading.alone is not None:
+        verb = reading.alone
+    else:
+        obj = " ".join(words) or "X"
+        raise InputError(
+            f"plan line {line_no}: '{clip(text)}' does not say where; "
+            f"write '{m.phrase} {clip(obj, 40)} on R' or 'put {clip(obj, 40)} in R'"
+        )
+    held: str | None = None
+    if verb == "put":
+        return verb, _put_terms(words), None, everyday
+    if verb == "pour":
+        args, held, poured = _pour_terms(words, text, line_no)
+        return verb, args, held, everyday or poured
+    if verb == "fillLiquid":
+        if len(words) < 2 and m.phrase.split()[0] == "fill":
+            raise InputError(
+                f"plan line {line_no}: '{clip(text)}' does not say with what; "
+                f"write 'fill {clip(' '.join(words) or 'X', 40)} with {'|'.join(LIQUIDS)}'"
+            )
+        # The liquid is the last word; the container's name may have several.
+        body = words[:-1]
+        if len(body) > 1 and body[-1].lower() == "with":
+            body = body[:-1]
+        return verb, [*_terms(body), words[-1]], None, everyday
+    if (everyday or verb in ("drop", "throw")) and any(
+        w.lower() in _PREPOSITIONS for w in words[1:]
+    ):
+        raise _two_things(m, verb, words, text, line_no)
+    return verb, _terms(words), held, everyday
+
+
+def _two_things(m: _Match, verb: str, words: list[str], text: str, line_no: int) -> InputError:
+    """An action on one object whose line names more than one thing."""
+    at = next(i for i in range(1, len(words)) if words[i].lower() in _PREPOSITIONS)
+    obj = clip(" ".join(words[:at]), 40)
+    rest = [w for w in words[at:] if w.lower() not in _PREPOSITIONS]
+    place = clip(" ".join(rest) or "R", 40)
+    if verb in ("drop", "throw"):
+        how = f"write 'find {place}', then '{verb} {obj}' (or 'put {obj} in {place}' to place it)"
+    elif verb == "pick":
+        how = f"write 'pick {obj}' (to carry it: 'find {place}', then 'put {obj} in {place}')"
+    else:
+        how = f"write '{verb} {obj}'"
+    reads = f"'{m.phrase}' reads as '{verb}', which" if m.everyday else f"'{verb}'"
+    return InputError(
+        f"plan line {line_no}: '{clip(text)}' names more than one thing, but {reads} "
+        f"acts on one object; {how}"
+    )
+
+
+def _antecedent(word: str, previous: PlanStep | None, text: str, line_no: int) -> str:
+    """What 'it' or 'them' stands for: the one object the step before names."""
+    if previous is None:
+        raise InputError(
+            f"plan line {line_no}: '{word}' in '{clip(text)}' has no step before it to "
+            "refer to; name the object"
+        )
+    named = list(previous.args[:1] if previous.verb == "fillLiquid" else previous.args)
+    if previous.held:
+        named.append(previous.held)
+    if len(named) == 1:
+        return named[0]
+    if not named:
+        raise InputError(
+            f"plan line {line_no}: '{word}' in '{clip(text)}' refers to the step before "
+            f"('{clip(previous.text)}'), which names no object; name the object"
+        )
+    raise InputError(
+        f"plan line {line_no}: '{word}' in '{clip(text)}' could mean "
+        f"{' or '.join(repr(n) for n in named)} (the step before names both); name the object"
+    )
+
+
+def parse_line(
+    line: str, line_no: int = 1, index: int = 1, previous: PlanStep | None = None
+) -> PlanStep:
+    """One plan line as a step.  ``previous`` is the step before it, which
+    'it' and 'them' refer to."""
     _check_text(line, line_no)
     text = _NUMBERING.sub("", line.strip()).strip().rstrip(".;")
+    everyday = False
+    held: str | None = None
+    connector: str | None = None  # the word joining an object to its place
+    extra: list[str] = []
     call = _CALL.match(text)
     if call:
         word = call.group(1).lower()
         args = _call_args(call.group(2), line, line_no)
+        found = _ALIASES.get(word)
+        if found is None:
+            reading = EVERYDAY.get(word.replace("_", " "))
+            found = reading and (
+                reading.placed if len(args) > 1 and reading.placed == "put" else reading.alone
+            )
+            everyday = found is not None
+        if found is None:
+            raise _unknown_verb(clip(word, 40), line_no)
+        verb = found
     else:
         tokens = text.split()
         if not tokens:
             raise InputError(f"plan line {line_no}: empty action")
-        word = tokens[0].lower()
-        words = tokens[1:]
-        # Two-word verbs: "turn on X", "toggle off X", "pick up X".
-        if word in ("turn", "toggle", "switch") and words and words[0].lower() in ("on", "off"):
-            word = f"turn_{words[0].lower()}"
-            words = words[1:]
-        elif word in ("turn", "toggle", "switch") and words and words[-1].lower() in ("on", "off"):
-            word = f"turn_{words[-1].lower()}"
-            words = words[:-1]
-        elif word == "pick" and words and words[0].lower() == "up":
-            words = words[1:]
+        m = _match(tokens)
+        if m is None:
+            raise _no_reading(tokens, text, line_no)
         # Articles are dropped only in lower case: "A" may be an object's name.
-        words = [w for w in words if w not in _ARTICLES] or words
-    verb = _ALIASES.get(word)
-    if verb is None:
-        raise _unknown_verb(clip(word, 40), line_no)
-    if not call:
-        if verb == "put":
-            args = _put_terms(words)
-        elif verb == "fillLiquid" and words:
-            # The liquid is the last word; the container's name may have several.
-            body = words[:-1]
-            if len(body) > 1 and body[-1].lower() == "with":
-                body = body[:-1]
-            args = [*_terms(body), words[-1]]
-        elif verb == "pour":
-            while len(words) > 1 and words[0].lower() in _CONNECTORS:
-                words = words[1:]
-            args = _terms(words)
-        else:
-            args = _terms(words)
+        words = [w for w in m.words if w not in _ARTICLES] or m.words
+        verb, args, held, everyday = _read_words(m, words, text, line_no)
+        cut = _place_cut(words)
+        connector = words[cut].lower() if cut is not None else None
+        if everyday and verb == "drop" and m.reading.placed == "put":
+            obj = args[0] if args else "X"
+            extra.append(f"no place is named, so it is let go of; 'put {obj} on R' sets it down")
     lo, hi = ARITY[verb]
     if not lo <= len(args) <= hi:
         want = str(lo) if lo == hi else f"{lo} to {hi}"
@@ -333,7 +701,35 @@ def parse_line(line: str, line_no: int = 1, index: int = 1) -> PlanStep:
                 f"plan line {line_no}: unknown liquid '{args[1]}'; choose from {', '.join(near or LIQUIDS)}"
             )
         args = [args[0], liquid]
-    return PlanStep(index=index, text=text, verb=verb, args=tuple(args))
+    # 'it' and 'them' where the action needs the held object ('put it in the
+    # fridge', 'throw it', 'pour it into the sink') are the held object, which
+    # the language leaves unnamed; elsewhere they stand for the object of the
+    # step before.
+    held_slot = 0 if (verb in ("drop", "throw") or (verb == "put" and len(args) == 2)) else None
+    if held_slot is not None and args and args[held_slot].lower() in PRONOUNS:
+        extra.append(f"'{args.pop(held_slot)}' is the object held")
+    poured_from = "pours what the held object contains" if held is None else None
+    if held is not None and held.lower() in PRONOUNS:
+        poured_from = f"'{held}' is the object held"
+        held = None
+    for i, term in enumerate(args):
+        if term.lower() in PRONOUNS:
+            meant = _antecedent(term, previous, text, line_no)
+            extra.append(f"'{term}' is the {meant} of the step before")
+            args[i] = meant
+    if verb == "pour" and everyday:
+        extra.append(poured_from or f"poured from the held {held}")
+    step = PlanStep(index=index, text=text, verb=verb, args=tuple(args), held=held)
+    if not (everyday or extra):
+        return step
+    read_as = step.canonical()
+    if verb == "put" and len(args) == 2:
+        # 'put cup on table' reads better than the language's 'put cup table'.
+        read_as = f"put {args[0]} {connector or 'in'} {args[1]}"
+    note = f"line {line_no} '{clip(text)}' read as '{read_as}'"
+    if extra:
+        note += f" ({'; '.join(extra)})"
+    return replace(step, note=note)
 
 
 def parse_plan(lines: Iterable[object]) -> tuple[PlanStep, ...]:
@@ -346,7 +742,8 @@ def parse_plan(lines: Iterable[object]) -> tuple[PlanStep, ...]:
             continue
         if len(steps) == MAX_PLAN_STEPS:
             raise InputError(f"plan has more than {MAX_PLAN_STEPS} actions (the limit)")
-        steps.append(parse_line(stripped, line_no, index=len(steps) + 1))
+        previous = steps[-1] if steps else None
+        steps.append(parse_line(stripped, line_no, index=len(steps) + 1, previous=previous))
     return tuple(steps)
 
 

@@ -27,7 +27,7 @@ from virf.world.actions import (
     lacking_affordance,
     lacks,
 )
-from virf.world.plan import PlanStep, singular_forms
+from virf.world.plan import STATE_ADJECTIVES, PlanStep, singular_forms
 from virf.world.scene import Scene
 from virf.world.state import (
     MissingObject,
@@ -98,21 +98,42 @@ class Simulator:
         exactly one singular reading names something ('apples' -> 'apple');
         else None.  A plural is read only when the word itself names nothing,
         so 'boots' stays the catalogue's Boots."""
-        if state.named(term) or self.class_named(term):
+        if state.named(term) or state.named_stem(term) or self.class_named(term):
             return term
         readings: dict[str, str] = {}
         for form in singular_forms(term):
-            named = state.named(form)
+            named = state.named(form) or state.named_stem(form)
             target = named[0] if len(named) == 1 else self.class_named(form)
             if target is not None or named:
                 readings.setdefault(target or term_key(form), form)
         # Two singulars naming different things would be a guess.
         return next(iter(readings.values())) if len(readings) == 1 else None
 
-    def resolve_term(self, state: WorldState, term: str) -> str | tuple[str, ...] | None:
-        """The instance ``term`` names; None if none; the candidates if the
-        choice is ambiguous (several equally plausible instances)."""
+    def read_term(self, state: WorldState, term: str) -> tuple[str | None, tuple[str, ...]]:
+        """The spelling of the name in ``term`` and the states its leading
+        adjectives ask for: 'lit candle' -> ('candle', ('OnState',)).  The
+        words are read as adjectives only when the whole term names nothing,
+        so a name that starts like one stays a name."""
         spelled = self.spelling(state, term)
+        if spelled is not None:
+            return spelled, ()
+        words = term.split()
+        wanted: list[str] = []
+        while len(words) > 1 and words[0].lower() in STATE_ADJECTIVES:
+            wanted.append(STATE_ADJECTIVES[words.pop(0).lower()])
+        if not wanted:
+            return None, ()
+        spelled = self.spelling(state, " ".join(words))
+        return spelled, (tuple(dict.fromkeys(wanted)) if spelled is not None else ())
+
+    def resolve_term(
+        self, state: WorldState, term: str, prefer: str | None = None
+    ) -> str | tuple[str, ...] | None:
+        """The instance ``term`` names; None if none; the candidates if the
+        choice is ambiguous (several equally plausible instances).
+        ``prefer`` wins among the candidates (the held object, for a line that
+        says it is held: 'throw the mug')."""
+        spelled, wanted = self.read_term(state, term)
         if spelled is None:
             return None
         keys = (term_key(term), term_key(spelled))
@@ -134,15 +155,28 @@ class Simulator:
             # Two instances spelled alike ('Mug_12', 'Mug1_2'): never guess.
             return choose(named, named)
         cls = self.class_named(spelled)
-        if cls is None:
-            return None
+        everything = state.order + tuple(sorted(set(state.objects) - set(state.order)))
+        # Instances of the type the words name, and those whose name without
+        # its number the words spell (HairDryer_1 for 'hair dryer', typed only
+        # PhysicalObject).
+        stems = set(state.named_stem(spelled))
         candidates = [
             ind
-            for ind in state.order + tuple(sorted(set(state.objects) - set(state.order)))
-            if ind != state.agent and self.vocab.any_is_a(state.objects[ind], cls)
+            for ind in everything
+            if ind != state.agent
+            and (ind in stems or (cls is not None and self.vocab.any_is_a(state.objects[ind], cls)))
         ]
         if not candidates:
             return None
+        if wanted and len(candidates) > 1:
+            # 'the lit candle': the state chooses among the candles.  When it
+            # fits none of them, which one is meant is a question.
+            fitting = [c for c in candidates if all(state.has(c, "hasState", s) for s in wanted)]
+            if not fitting:
+                return tuple(sorted(candidates))
+            candidates = fitting
+        if prefer in candidates:
+            return prefer
         # The object the agent dealt with most recently wins: a later 'put Fridge'
         # means the fridge just found, as in AI2-THOR where actions act on the
         # object in view.
@@ -166,8 +200,8 @@ class Simulator:
         return [
             (" ".join(words[:i]), " ".join(words[i:]))
             for i in range(1, len(words))
-            if self.spelling(state, " ".join(words[:i]))
-            and self.spelling(state, " ".join(words[i:]))
+            if self.read_term(state, " ".join(words[:i]))[0]
+            and self.read_term(state, " ".join(words[i:]))[0]
         ]
 
     @staticmethod
@@ -181,8 +215,8 @@ class Simulator:
         return tuple(by_key[h] for h in hits)
 
     def resolve(self, state: WorldState, step: PlanStep) -> ResolvedStep | MissingObject:
-        def need(term: str) -> str | MissingObject:
-            found = self.resolve_term(state, term)
+        def need(term: str, prefer: str | None = None) -> str | MissingObject:
+            found = self.resolve_term(state, term, prefer)
             if found is None:
                 pool = list(state.objects) + sorted(
                     {c for cs in state.objects.values() for c in cs}
@@ -199,10 +233,22 @@ class Simulator:
 
         verb, args = step.verb, step.args
         held = state.held()
+        # The object the line says is in the hand ('throw AlarmClock'): among
+        # the instances its words name, the held one; the action's handler
+        # refuses the step when the hand holds another object or nothing.
+        named_held: str | None = None
+        if step.held_term is not None:
+            found_held = need(step.held_term, prefer=held)
+            if isinstance(found_held, MissingObject):
+                return found_held
+            named_held = found_held
+        # What the step acts on as held: nothing when the line names another
+        # object, so a step that cannot run claims no action on either.
+        patient_held = held if named_held in (None, held) else None
         # The whole phrase names the receptacle if it can ("put dining table");
         # otherwise one object-receptacle split must work, since choosing
         # between several would be a guess.
-        if verb == "put" and len(args) == 1 and self.spelling(state, args[0]) is None:
+        if verb == "put" and len(args) == 1 and self.read_term(state, args[0])[0] is None:
             splits = self._put_splits(state, args[0])
             if len(splits) == 1:
                 args = splits[0]
@@ -215,7 +261,7 @@ class Simulator:
                 return dest
             patient = held
             if len(args) == 2:
-                named = need(args[0])
+                named = need(args[0], prefer=held)
                 if isinstance(named, MissingObject):
                     return named
                 patient = named
@@ -229,9 +275,9 @@ class Simulator:
                 dest_r = named
             if dest_r == held:
                 dest_r = None
-            return ResolvedStep(step, target=dest_r, patient=held)
+            return ResolvedStep(step, target=dest_r, patient=patient_held, named_held=named_held)
         if verb in ("drop", "throw"):
-            return ResolvedStep(step, patient=held)
+            return ResolvedStep(step, patient=patient_held, named_held=named_held)
         target = need(args[0])
         if isinstance(target, MissingObject):
             return target

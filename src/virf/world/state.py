@@ -6,6 +6,7 @@ so every state of a run stays available to the reasoner and the report.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -14,6 +15,9 @@ from types import MappingProxyType
 from virf.names import term_key
 from virf.schema import Fact, FactKind, Provenance
 from virf.world.plan import PlanStep
+
+# An instance's number at the end of its name: HairDryer_1, Mug2, Stove-Knob 3.
+_NUMBER = re.compile(r"[\s_-]*\d+$")
 
 
 @dataclass(frozen=True)
@@ -67,6 +71,21 @@ class WorldState:
             index.setdefault(term_key(ind), []).append(ind)
         return index
 
+    @cached_property
+    def _by_stem(self) -> dict[str, list[str]]:
+        index: dict[str, list[str]] = {}
+        for ind in self.order + tuple(sorted(set(self.objects) - set(self.order))):
+            stem = _NUMBER.sub("", ind)
+            if stem and stem != ind:
+                index.setdefault(term_key(stem), []).append(ind)
+        return index
+
+    def named_stem(self, term: str) -> list[str]:
+        """The numbered individuals whose name without its number ``term``
+        spells: 'hair dryer' names HairDryer_1 and HairDryer_2, whatever
+        their classes (an object the knowledge base has no class for)."""
+        return list(self._by_stem.get(term_key(term), ()))
+
     def named(self, term: str) -> list[str]:
         """The individuals ``term`` spells: itself, else the first that differs
         only in case, else all that differ only in case and separators."""
@@ -95,6 +114,9 @@ class ResolvedStep:
     patient: str | None = None  # the object moved or transformed besides the target
     liquid: str | None = None  # liquid individual created by fillLiquid
     instrument: str | None = None  # held tool used
+    # The object the line says is in the hand ('throw AlarmClock'): the step
+    # cannot run unless it is the one held.
+    named_held: str | None = None
 
 
 @dataclass(frozen=True)
