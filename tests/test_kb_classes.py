@@ -258,18 +258,3 @@ def test_kinds(vocab: Vocabulary) -> None:
     assert "ChildNearPoisonDanger" not in every  # a rule, though it is about a Child
     ranked = rank_classes("toddler", vocab, "agent")
     assert {r.kind for r in ranked} == {"agent"}
-
-
-def test_a_scene_with_an_unknown_class_names_the_neighbours(cli: Cli, tmp_path: Any) -> None:
-    scene = tmp_path / "scene.json"
-    scene.write_text(
-        json.dumps({"instances": [{"class_name": "HairDryer", "instance_name": "Dryer_1"}]}),
-        encoding="utf-8",
-    )
-    plan = tmp_path / "plan.txt"
-    plan.write_text("find Dryer_1\n", encoding="utf-8")
-    result = cli("verify", scene, plan)
-    assert result.exit_code == 2
-    (line,) = result.stderr.strip().splitlines()
-    assert line.startswith("error: ") and "unknown class 'HairDryer'" in line
-    assert "closest by meaning: VacuumCleaner" in line and "by spelling: " in line
