@@ -11,7 +11,6 @@ because the simulator gives meaning only to the relations it knows.
 from __future__ import annotations
 
 import hashlib
-import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +18,7 @@ from typing import TYPE_CHECKING, Final
 
 from virf.authoring import manchester
 from virf.authoring.models import CheckItem, TermChoice
-from virf.names import term_key
+from virf.names import name_words, term_key
 from virf.ontology.tbox import Vocabulary
 
 if TYPE_CHECKING:
@@ -31,12 +30,6 @@ FALLBACK_PARENT: Final = "PhysicalObject"
 ALTERNATIVES: Final = 3
 
 Encoder = Callable[[Sequence[str]], "np.ndarray"]
-
-
-def words(name: str) -> str:
-    """A vocabulary name as words for the embedder: ``StoveBurner`` -> "stove burner"."""
-    spaced = re.sub(r"(?<=[a-z0-9])(?=[A-Z])|(?<=[A-Z])(?=[A-Z][a-z])|[_\-]+", " ", name)
-    return spaced.strip().lower()
 
 
 @dataclass(frozen=True)
@@ -78,7 +71,7 @@ class VocabularyIndex:
             except (OSError, ValueError):
                 matrix = None  # a damaged cache is rebuilt
         if matrix is None:
-            matrix = np.asarray(encode([words(n) for n in everything]), dtype=np.float32)
+            matrix = np.asarray(encode([name_words(n) for n in everything]), dtype=np.float32)
             if path is not None:
                 try:
                     path.parent.mkdir(parents=True, exist_ok=True)
@@ -95,7 +88,7 @@ class VocabularyIndex:
         names = self.entries[role]
         if not names:
             return []
-        query = self._np.asarray(self._encode([words(name)]), dtype=self._np.float32)[0]
+        query = self._np.asarray(self._encode([name_words(name)]), dtype=self._np.float32)[0]
         scores = self._matrix[self._rows[role]] @ query
         order = sorted(range(len(names)), key=lambda i: (-float(scores[i]), names[i]))[:n]
         return [(names[i], round(float(scores[i]), 4)) for i in order]

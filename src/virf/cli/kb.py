@@ -131,6 +131,66 @@ def kb_rules(
         typer.echo(f"    source: {u.source}")
 
 
+@kb_app.command("classes")
+def kb_classes(
+    scenario: ScenarioOpt = None,
+    kb: KbOpt = None,
+    search: Annotated[
+        str | None,
+        typer.Option(
+            "--search",
+            "-q",
+            help="Rank the classes by how near they are to these words, by spelling and by "
+            "meaning (sentence embeddings): --search 'hair dryer'.",
+        ),
+    ] = None,
+    kind: Annotated[
+        str | None,
+        typer.Option(
+            "--kind", help="Only classes of this kind: object, agent, state, material, property."
+        ),
+    ] = None,
+    limit: Annotated[
+        int | None,
+        typer.Option(
+            "--limit",
+            "-n",
+            min=1,
+            help="At most this many classes (default: 10 with --search, else all).",
+            show_default=False,
+        ),
+    ] = None,
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print the classes as one JSON object.")
+    ] = False,
+) -> None:
+    """List the classes a scene can use (object types, people, states, materials and
+    properties) with their parents, materials, affordances and properties; --search
+    finds the ones nearest some words."""
+    from rich.console import Console
+
+    from virf.errors import clip
+    from virf.ontology.classes import classes_document, find_classes
+    from virf.ontology.tbox import load_tbox
+    from virf.render.classes import class_table
+    from virf.render.tables import to_rich
+
+    tbox = load_tbox(scenario, kb=kb)
+    if limit is None and search is not None:
+        limit = 10
+    rows = find_classes(tbox, kind, search, limit)
+    if as_json:
+        typer.echo(json.dumps(classes_document(tbox, kind, search, rows), indent=2))
+        return
+    what = f"Classes of kind {kind}" if kind else "Classes"
+    title = (
+        f"{what} in scenario {tbox.scenario} nearest '{clip(search)}'"
+        if search is not None
+        else f"{what} in scenario {tbox.scenario} ({len(rows)})"
+    )
+    Console(highlight=False, width=160).print(to_rich(class_table(rows, title)))
+
+
 @kb_app.command("test")
 def kb_test(
     scenario: ScenarioOpt = None,

@@ -21,7 +21,7 @@ from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from virf.errors import InputError, closest, unknown_term
+from virf.errors import InputError, closest
 from virf.files import write_atomically
 from virf.names import term_key
 
@@ -172,9 +172,15 @@ class Vocabulary:
         return self.class_synonyms.get(hit, hit)
 
     def require_class(self, name: str) -> str:
+        """The class ``name`` resolves to; InputError for an unknown one, whose
+        line names the closest classes by meaning and by spelling."""
         found = self.canonical_class(name)
         if found is None:
-            raise unknown_term("class", name, self.classes)
+            # Only here does the embedder load: resolving a known name never
+            # touches it.
+            from virf.ontology.suggest import unknown_class
+
+            raise unknown_class(name, self)
         return found
 
     def materials_of(self, classes: frozenset[str] | set[str]) -> frozenset[str]:

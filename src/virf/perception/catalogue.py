@@ -18,7 +18,7 @@ from typing import Final, Literal
 import numpy as np
 
 from virf.embed import Embedder, default_embedder
-from virf.names import term_key
+from virf.names import name_words, term_key
 from virf.ontology.tbox import Vocabulary
 
 # Chosen on labels of kitchen objects: 'frying pan' (Pan, 0.76) and 'tea
@@ -36,11 +36,6 @@ class Match:
     how: Literal["name", "embedding", "none"]
     score: float | None = None  # cosine similarity, for an embedding match
     runner_up: str | None = None
-
-
-def words(cls: str) -> str:
-    """``CoffeeMachine`` -> ``coffee machine``: what an embedding compares."""
-    return re.sub(r"(?<=[a-z])(?=[A-Z])|(?<=[A-Z])(?=[A-Z][a-z])", " ", cls).lower()
 
 
 class Catalogue:
@@ -82,7 +77,7 @@ class Catalogue:
 
     @cached_property
     def _vectors(self) -> np.ndarray:
-        return self.embedder.encode([words(t) for t in self.types])
+        return self.embedder.encode([name_words(t) for t in self.types])
 
     @property
     def embedder(self) -> Embedder:
