@@ -100,6 +100,10 @@ MAX_OPEN_CLASS = 64
 # How close in spelling an unknown name must be to a known class to be read
 # as a misspelling of it ('Mircowave') rather than as a new kind of thing.
 TYPO_CUTOFF = 0.8
+# How near in meaning (cosine of the sentence embeddings) a class must be to
+# be proposed as the place of a word WordNet lacks ('nightlight'); below it
+# the neighbours are noise ('zorblax' -> PepperShaker at 0.45).
+PROPOSAL_FLOOR = 0.5
 
 
 # The scene file's shape (docs/scenes.md).  Every spelling of a world passes
@@ -575,6 +579,8 @@ def _hypothesise(
                 facts.setdefault(Fact(ind, "type", t, FactKind.TYPE), Provenance.ASSUMED)
                 said.append(f"a {t}")
         base = "a person (MaterialEntity)" if p.person else "a PhysicalObject"
+        parent = _proposed_parent(open_world[ind], p, vocab)
+        place = f"; proposed place: under {parent}" if parent else ""
         hypotheses = (
             f"it may be {', '.join(said)}, which is asked only where a hazard depends on it"
             if said
@@ -582,9 +588,32 @@ def _hypothesise(
         )
         notes.append(
             f"{ind}: '{open_world[ind]}' is not a class of the knowledge base; read as {base} "
-            f"of the open world ({p.describe()}); {hypotheses}"
+            f"of the open world ({p.describe()}{place}); {hypotheses}"
         )
     return tuple(notes)
+
+
+def _proposed_parent(word: str, p: Proposal, vocab: Vocabulary) -> str | None:
+    """Where the object might sit in the ontology, for the user and for
+    learning: the nearest WordNet hypernym the knowledge base names (a
+    bookshelf is a kind of shelf), else, for a word WordNet lacks, the class
+    closest in meaning (the bundled sentence embedder)."""
+    for hypernym in p.path[:6]:
+        cls = vocab.canonical_class(term_key(hypernym))
+        if cls is not None and cls not in ("PhysicalObject", "Entity", "Agent"):
+            return f"{cls} (WordNet)"
+    if p.found or not p.dictionary:
+        return None
+    from virf.ontology.suggest import rank_classes  # loads the embedder: only here
+
+    try:
+        ranked = rank_classes(word, vocab, "object")
+    except Exception:  # noqa: BLE001 - a missing model only loses the proposal
+        return None
+    best = max(ranked, key=lambda r: (r.meaning, r.name), default=None)
+    if best is None or best.meaning < PROPOSAL_FLOOR:
+        return None
+    return f"{best.name} (closest in meaning)"
 
 
 def _deny(
