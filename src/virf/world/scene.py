@@ -42,7 +42,16 @@ from typing import Annotated, Any, Literal
 
 from pydantic import AfterValidator, Field
 
-from virf.errors import InputError, Record, Says, clip, closest, hidden_char, read_json_file
+from virf.errors import (
+    EnvironmentProblem,
+    InputError,
+    Record,
+    Says,
+    clip,
+    closest,
+    hidden_char,
+    read_json_file,
+)
 from virf.names import term_key
 from virf.ontology.lexicon import Proposal, propose
 from virf.ontology.tbox import Vocabulary
@@ -608,7 +617,7 @@ def _proposed_parent(word: str, p: Proposal, vocab: Vocabulary) -> str | None:
 
     try:
         ranked = rank_classes(word, vocab, "object")
-    except Exception:  # noqa: BLE001 - a missing model only loses the proposal
+    except (EnvironmentProblem, OSError):  # a missing model only loses the proposal
         return None
     best = max(ranked, key=lambda r: (r.meaning, r.name), default=None)
     if best is None or best.meaning < PROPOSAL_FLOOR:
