@@ -96,7 +96,7 @@ def add_learning(app: FastAPI, tutors: Tutors, workspace: Workspace | None) -> N
             raise InputError(f"no question '{clip(key)}' for this scene and plan{listed}")
         name = body.scene.get("name")
         source = learning.Source(
-            name if isinstance(name, str) and name.strip() else "posted",
+            name if isinstance(name, str) and name.strip() else "posted-scene",
             body.scene,
             tuple(s.text for s in steps),
         )
