@@ -6,6 +6,7 @@ and the answers a ``virf plan`` run's transcript holds."""
 from __future__ import annotations
 
 import json
+import re
 from typing import Any
 
 import pytest
@@ -15,6 +16,7 @@ from virf.api import LogicTutor
 from virf.authoring import manchester
 from virf.authoring.learn import (
     answered_from_transcript,
+    check_who,
     class_name,
     lessons,
     scene_digest,
@@ -93,6 +95,17 @@ def test_a_class_word_becomes_an_upper_camel_case_name(word: str, name: str) -> 
 def test_a_word_that_cannot_be_a_class_name_is_refused_in_one_line(word: str) -> None:
     with pytest.raises(InputError, match=r"cannot learn the class .*UpperCamelCase"):
         class_name(word)
+
+
+def test_who_answered_is_one_visible_line() -> None:
+    assert check_who("  Ana \n Lima ") == "Ana Lima"
+    for bad, words in (
+        ("", "say who answered"),
+        ("ana\x1b[2J", "hidden character \\x1b"),
+        ("a" * 101, "longer than 100 characters"),
+    ):
+        with pytest.raises(InputError, match=re.escape(words)):
+            check_who(bad)
 
 
 def test_the_scene_digest_does_not_depend_on_key_order() -> None:

@@ -100,7 +100,9 @@ def test_answer_remember_accept_and_the_next_verdict(browser: Browser, tmp_path:
         expect(answer).to_contain_text("Is HairDryer_1 an electrical appliance?")
         expect(answer.get_by_test_id("learned-answer-value")).to_have_text("yes")
         expect(page.get_by_test_id("check-summary")).to_contain_text("All checks pass")
-        expect(page.get_by_test_id("preview-change")).to_contain_text(
+        expect(
+            page.get_by_test_id("preview-change").filter(has_text="(learned from)")
+        ).to_contain_text(
             "UNKNOWN (LiveDeviceBesideWaterDanger) → UNSAFE (LiveDeviceBesideWaterDanger)"
         )
         expect(page.get_by_test_id("preview-kb-test")).to_contain_text("virf kb test")

@@ -48,7 +48,7 @@ from virf.authoring.models import (
     Preview,
     Related,
 )
-from virf.errors import InputError, clip
+from virf.errors import InputError, clip, hidden_char, printable
 from virf.migrations import now
 from virf.names import term_key
 from virf.ontology.lexicon import propose
@@ -564,6 +564,23 @@ def _answers_item(learned: Learned) -> CheckItem:
 
 
 # ---------------------------------------------------------------------- the whole step
+MAX_WHO: Final = 100
+
+
+def check_who(who: str) -> str:
+    """Who answered, on one line: it is kept as evidence and written into
+    the module when the class is accepted."""
+    flat = " ".join(who.split())
+    if not flat:
+        raise InputError("say who answered (--who NAME)")
+    bad = hidden_char(flat)
+    if bad is not None:
+        raise InputError(f"the name of who answered contains the hidden character {printable(bad)}")
+    if len(flat) > MAX_WHO:
+        raise InputError(f"the name of who answered is longer than {MAX_WHO} characters")
+    return flat
+
+
 @dataclass(frozen=True)
 class Outcome:
     """A learned candidate, as stored and checked."""
@@ -588,9 +605,7 @@ def learn(
     """Store a candidate for every class of ``source``'s open-world objects
     that the answers confirmed something about; check and preview each.
     Returns the candidates and, for the open-world classes left out, why."""
-    who = " ".join(who.split())
-    if not who:
-        raise InputError("say who answered (--who NAME)")
+    who = check_who(who)
     vocab = ws.tbox().vocabulary
     found = lessons(source.data, answered, vocab, scene_name=source.name)
     scene = build_scene(source.data, vocab, name=source.name)

@@ -52,6 +52,15 @@ def learning_kb(kb: Path | None, learn: Path | None) -> Path | None:
     return learn
 
 
+def who_of(who: str | None) -> str | None:
+    """``--who``, checked before any work (one visible line)."""
+    if who is None:
+        return None
+    from virf.authoring.learn import check_who
+
+    return check_who(who)
+
+
 def open_workspace(path: Path) -> Workspace:
     from virf.authoring.workspace import Workspace
 

@@ -28,6 +28,7 @@ from virf.cli.learning import (
     learn_lines,
     learning_kb,
     open_workspace,
+    who_of,
 )
 from virf.cli.perceive import (
     BboxUnitsOpt,
@@ -172,6 +173,7 @@ def plan(
     if who is not None and learn is None:
         raise VirfError("--who names who answered, for --learn; give --learn WORKSPACE too")
     kb = learning_kb(kb, learn)
+    who = who_of(who)
     workspace = open_workspace(learn) if learn is not None else None
     run_log: Any = None
     try:

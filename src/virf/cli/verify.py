@@ -16,6 +16,7 @@ from virf.cli.learning import (
     learning_kb,
     open_workspace,
     warn_unused,
+    who_of,
 )
 from virf.errors import VirfError
 
@@ -87,6 +88,7 @@ def verify(
     if who is not None and learn is None:
         raise VirfError("--who names who answered, for --learn; give --learn WORKSPACE too")
     kb = learning_kb(kb, learn)
+    who = who_of(who)
     steps = load_plan_file(plan)
     given = None
     if answers is not None:
