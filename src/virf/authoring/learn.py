@@ -263,10 +263,17 @@ def _lesson(g: _Group, vocab: Vocabulary) -> Lesson:
         for q, value, key in g.answers
     )
     confirmed_parents = tuple(dict.fromkeys(parents))
+
+    def why(key: tuple[str, str]) -> str:
+        said = g.said.get(key)
+        if said is None:
+            return "not asked"
+        return "the answers disagree" if any(said.values()) else "answered no"
+
     unconfirmed = tuple(
-        f"{_said_words(pred, obj)} ({'answered no' if (pred, obj) in g.said else 'not asked'})"
-        for pred, obj in sorted(g.assumed)
-        if not effect.get((pred, obj), "").startswith(g.name)
+        f"{_said_words(*key)} ({why(key)})"
+        for key in sorted(g.assumed)
+        if not effect.get(key, "").startswith(g.name)
     )
     return Lesson(
         name=g.name,
