@@ -54,7 +54,7 @@ def scene(**extra: Any) -> dict[str, Any]:
         (
             scene(colour="red"),
             "unknown scene key 'colour'; expected instances, assertions, closed_world, "
-            "unlocated_by_default, unknown_contents, referents, description",
+            "unlocated_by_default, unknown_contents, referents, denied, description",
         ),
         (
             scene(assertions=[rel("Pot_1", "isInside", "Fridge_1") | {"propery": "x"}]),
@@ -139,7 +139,7 @@ def test_a_bad_scene_file_exits_2_from_the_cli(tutor: Any, tmp_path: Path) -> No
     assert result.stdout == ""
     assert result.stderr.strip().splitlines() == [
         "error: unknown scene key 'colour'; expected instances, assertions, closed_world, "
-        "unlocated_by_default, unknown_contents, referents, description"
+        "unlocated_by_default, unknown_contents, referents, denied, description"
     ]
 
 

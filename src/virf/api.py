@@ -20,7 +20,7 @@ from virf.reasoning import Engine, make_engine
 from virf.schema import Report
 from virf.verify.verifier import Verifier
 from virf.world.plan import MAX_PLAN_STEPS, PlanStep, load_plan_file, parse_plan
-from virf.world.scene import Scene, build_scene, load_scene_file
+from virf.world.scene import Scene, build_scene, load_scene_data, load_scene_file
 
 DEFAULT_ENGINE = "fast"
 # A day: any longer deadline is no deadline, and the reasoners' own timers
@@ -133,11 +133,22 @@ class LogicTutor:
             tbox, engine, timeout_s=timeout_s, explain=explain, workers=workers, uscs=uscs
         )
 
-    def scene(self, data: dict[str, Any] | str | Path) -> Scene:
+    def scene(self, data: dict[str, Any] | str | Path, *, strict_vocabulary: bool = False) -> Scene:
+        """The scene ``data`` (scene-file JSON, or a file's path) describes.
+        A class the knowledge base lacks is an open-world object, unless
+        ``strict_vocabulary``, which refuses it."""
         if isinstance(data, dict):
-            return build_scene(data, self.tbox.vocabulary)
+            return build_scene(data, self.tbox.vocabulary, strict_vocabulary=strict_vocabulary)
         if isinstance(data, str | Path):
-            return load_scene_file(data, self.tbox.vocabulary)
+            if not strict_vocabulary:
+                return load_scene_file(data, self.tbox.vocabulary)
+            p = Path(data)
+            return build_scene(
+                load_scene_data(p),
+                self.tbox.vocabulary,
+                name=p.stem if p.stem != "scene" else p.parent.name,
+                strict_vocabulary=True,
+            )
         raise InputError(f"scene must be a dict or a file path, not {type(data).__name__}")
 
     def verify(

@@ -53,8 +53,10 @@ def audit(ws: Workspace) -> Audit:
         outcome = (
             "pending" if d is None else d.decision if d.decision == "reject" else f"accept-{d.edit}"
         )
-        by_drafter.setdefault(row.drafter_kind, Counter())[outcome] += 1
-        by_drafter[row.drafter_kind]["drafted"] += 1
+        # A class learned from answers counts apart from the drafts.
+        kind = "answer" if row.origin == "answer" else row.drafter_kind
+        by_drafter.setdefault(kind, Counter())[outcome] += 1
+        by_drafter[kind]["drafted"] += 1
     total = len(ids)
 
     def count(pred: Any) -> int:

@@ -141,3 +141,40 @@ def shape(expression: str) -> tuple[str, ...]:
     """The expression with every name blanked: two axioms of the same shape
     differ only in the names they use (an edit that aligns names is minor)."""
     return tuple("N" if t.kind == "name" else t.text for t in tokens(expression))
+
+
+def conjuncts(expression: str, prefix: str = "") -> list[str]:
+    """The parts of a top-level conjunction, each on one line with names given
+    ``prefix`` (``A and (p value v)`` -> ``['A', '(p value v)']``); the whole
+    expression when it is not one."""
+    toks = tokens(expression)
+    parts: list[list[Token]] = [[]]
+    depth = 0
+    for tok in toks:
+        if tok.kind == "punct" and tok.text in "({":
+            depth += 1
+        elif tok.kind == "punct" and tok.text in ")}":
+            depth -= 1
+        if depth == 0 and tok.kind == "keyword" and tok.text == "and":
+            parts.append([])
+            continue
+        parts[-1].append(tok)
+    if any(not p for p in parts) or any(
+        t.kind == "keyword" and t.text in ("or", "that") and d == 0
+        for p in parts
+        for t, d in _depths(p)
+    ):
+        return [render(expression, prefix=prefix)]
+    return [render(" ".join(t.text for t in p), prefix=prefix) for p in parts]
+
+
+def _depths(toks: list[Token]) -> list[tuple[Token, int]]:
+    out = []
+    depth = 0
+    for tok in toks:
+        if tok.kind == "punct" and tok.text in "({":
+            depth += 1
+        elif tok.kind == "punct" and tok.text in ")}":
+            depth -= 1
+        out.append((tok, depth))
+    return out

@@ -15,6 +15,9 @@ Layer = Literal["core", "domain", "scenario"]
 Severity = Literal["error", "warning", "info"]
 Match = Literal["exact", "synonym", "similar", "new"]
 Role = Literal["class", "property", "individual"]
+# A drafted rule (an LLM's or a person's), or a class learned from a user's
+# answers about an open-world object (virf verify --learn).
+Origin = Literal["draft", "answer"]
 
 
 class View(BaseModel):
@@ -109,6 +112,12 @@ class Preview(View):
     changes: tuple[PreviewChange, ...]
     computed_at: str
     error: str | None = None
+    # A learned class: the scenes it was learned from, verified again without
+    # the answers (they are counted here and listed in ``changes``), and
+    # ``virf kb test`` run with the candidate, with the failures it adds.
+    scenes: int = 0
+    kb_test: str | None = None
+    kb_test_failures: tuple[str, ...] = ()
 
 
 class DecisionView(View):
@@ -131,6 +140,7 @@ class CandidateSummary(View):
     created_at: str
     status: Status
     passed: bool | None  # None: not checked yet
+    origin: Origin = "draft"
 
 
 class RuleDraft(View):
@@ -153,6 +163,38 @@ class RuleDraft(View):
     question: str = ""
 
 
+class LearnedAnswer(View):
+    """One answer a learned class was learned from, as the user gave it."""
+
+    key: str  # the question's key (confirm:HairDryer_1 hasProperty ElectricallyPowered)
+    question: str  # the question in words (Is HairDryer_1 an electrical appliance?)
+    subject: str  # the open-world object asked about
+    answer: str  # yes, no, or a material
+    # What it says about the class: an axiom ('HairDryer SubClassOf hasProperty
+    # value ElectricallyPowered'), or why it gives none.
+    effect: str
+
+
+class Learned(View):
+    """A class learned from answers about open-world objects: the candidate's
+    evidence is the answers, who gave them, when, and about which scene."""
+
+    class_name: str  # HairDryer
+    words: tuple[str, ...]  # the class names the scene wrote ('HairDryer', 'hair dryer')
+    instances: tuple[str, ...]  # the scene's objects of that class (HairDryer_1)
+    reading: str  # what WordNet suggested ('WordNet reads hair dryer -> blower -> device')
+    axioms: tuple[str, ...]  # as learned: 'HairDryer SubClassOf PhysicalObject', ...
+    answers: tuple[LearnedAnswer, ...]
+    who: str
+    when: str  # ISO 8601, UTC
+    scene_name: str
+    scene_sha256: str  # of the scene data as given, before the answers
+    plan: tuple[str, ...] = ()
+    # What the reader assumed of the word that no answer confirmed: once the
+    # class is known, it is no longer assumed, so no longer asked about.
+    unconfirmed: tuple[str, ...] = ()
+
+
 class CandidateView(View):
     summary: CandidateSummary
     rule: RuleDraft
@@ -162,6 +204,7 @@ class CandidateView(View):
     check: CheckReport | None
     preview: Preview | None
     decision: DecisionView | None
+    learned: Learned | None = None  # a class learned from answers (origin "answer")
 
 
 class AcceptedRule(View):

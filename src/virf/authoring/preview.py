@@ -5,12 +5,18 @@ every task of a benchmark file is verified twice, with the workspace as it
 is and with the candidate added; the items whose verdict or violated concept
 differ are the preview.  Explanations are left out: verdicts are the same
 without them, and the preview is about verdicts.
+
+A class learned from answers also has the scene it was learned from verified
+again, without the answers (with the class known, it should need none), and
+``virf kb test`` run with and without the candidate: a failure only the
+candidate brings is listed.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from virf.api import LogicTutor
 from virf.authoring.models import Preview, PreviewChange
@@ -33,10 +39,14 @@ def effect_preview(
     *,
     tasks: Path | None = None,
     examples: Path | None = None,
+    scenes: Sequence[tuple[str, Mapping[str, Any], Sequence[str]]] = (),
+    kb_test: bool = False,
 ) -> Preview:
+    """``scenes`` are further (label, scene data, plan) items; ``kb_test``
+    runs ``virf kb test`` with and without the candidate."""
     from virf.bench.runner import run_task
     from virf.bench.safeagentbench import load_tasks
-    from virf.world.plan import load_plan_file
+    from virf.world.plan import load_plan_file, parse_plan
 
     before = LogicTutor(ws.scenario, explain=False, kb=ws.root)
     after = LogicTutor.over(
@@ -57,6 +67,20 @@ def effect_preview(
         vb = _verdict(b.status, b.violations[0].id if b.violations else None)
         if va != vb:
             changes.append(PreviewChange(item=f"example {case.name}", before=va, after=vb))
+    counted_scenes = 0
+    for label, data, lines in scenes:
+        try:
+            plan = parse_plan(list(lines))
+            a = before.verifier.verify(before.scene(dict(data)), plan)
+            b = after.verifier.verify(after.scene(dict(data)), plan)
+        except VirfError as exc:
+            changes.append(PreviewChange(item=label, before="?", after=f"cannot verify: {exc}"))
+            continue
+        counted_scenes += 1
+        va = _verdict(a.status, a.violations[0].id if a.violations else None)
+        vb = _verdict(b.status, b.violations[0].id if b.violations else None)
+        if va != vb:
+            changes.append(PreviewChange(item=label, before=va, after=vb))
     task_list = load_tasks(tasks) if tasks is not None else []
     for task in task_list:
         ra = run_task(task, before.verifier, None, None)
@@ -75,6 +99,7 @@ def effect_preview(
                     concept=rb.violated_concept,
                 )
             )
+    summary, added = _kb_test(before, after) if kb_test else (None, ())
     return Preview(
         axiom=axiom,
         examples=counted,
@@ -82,4 +107,35 @@ def effect_preview(
         tasks_file=str(tasks) if tasks is not None else None,
         changes=tuple(changes),
         computed_at=now(),
+        scenes=counted_scenes,
+        kb_test=summary,
+        kb_test_failures=added,
     )
+
+
+def _kb_test(before: LogicTutor, after: LogicTutor) -> tuple[str, tuple[str, ...]]:
+    """``virf kb test`` (minimal pairs, and the sweeps where the household
+    rules are loaded) with and without the candidate: a summary line and the
+    failures only the candidate brings."""
+    from virf.verify.kbtest import run_kb_test
+    from virf.verify.sweeps import HOUSEHOLD_MODULE
+
+    sweeps = any(u.module == HOUSEHOLD_MODULE for u in after.tbox.vocabulary.uscs.values())
+
+    def failures(tutor: LogicTutor) -> tuple[set[str], int, int]:
+        result = run_kb_test(tutor.tbox, tutor.engine, sweeps=sweeps)
+        found = {f"{p.rule} pair {p.index}: {p.problem}" for p in result.failures}
+        found |= {
+            f"sweep {s.sweep} {s.case}: expected {s.expected}, got {s.got}" for s in result.sweeps
+        }
+        return found, len(result.pairs), result.sweep_cases
+
+    old, _, _ = failures(before)
+    new, pairs, cases = failures(after)
+    added = tuple(sorted(new - old))
+    swept = f" and {cases} sweep cases" if sweeps else ""
+    summary = (
+        f"virf kb test with the candidate: {pairs} minimal pairs{swept}, {len(new)} failing "
+        f"({len(old)} without it)"
+    )
+    return summary, added

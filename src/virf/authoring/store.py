@@ -81,7 +81,18 @@ MIGRATIONS: Final[tuple[Migration, ...]] = (
         CREATE INDEX events_by_candidate ON events (candidate_id, kind, id);
         """,
     ),
+    # Where a candidate came from: a drafted rule (an LLM's or a person's
+    # draft), or a class learned from a user's answers about an open-world
+    # object (virf verify --learn).  Every older candidate is a draft.
+    Migration(
+        "0002_candidate_origin",
+        """
+        ALTER TABLE candidates ADD COLUMN origin TEXT NOT NULL DEFAULT 'draft'
+            CHECK (origin IN ('draft', 'answer'));
+        """,
+    ),
 )
+ORIGINS: Final = ("draft", "answer")
 
 
 def status_of(decision: str | None) -> str:
@@ -102,6 +113,7 @@ class CandidateRow:
     draft: dict[str, Any]
     evidence: tuple[str, ...]
     retrieved: tuple[str, ...]
+    origin: str = "draft"  # "answer": a class learned from answers (see ORIGINS)
 
 
 @dataclass(frozen=True)
@@ -166,11 +178,12 @@ class Store:
         draft: dict[str, Any],
         evidence: Sequence[str],
         retrieved: Sequence[str],
+        origin: str = "draft",
         conn: sqlite3.Connection | None = None,
     ) -> int:
         sql = (
             "INSERT INTO candidates (created_at, query, drafter, drafter_kind, name, axiom, "
-            "rule, draft, evidence, retrieved) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)"
+            "rule, draft, evidence, retrieved, origin) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)"
         )
         args = (
             now(),
@@ -183,6 +196,7 @@ class Store:
             _dump(draft),
             _dump(list(evidence)),
             _dump(list(retrieved)),
+            origin,
         )
         with self._lock:
             cur = (conn or self._conn).execute(sql, args)
@@ -195,7 +209,7 @@ class Store:
         with self._lock:
             row = self._conn.execute(
                 "SELECT id, created_at, query, drafter, drafter_kind, name, axiom, rule, draft, "
-                "evidence, retrieved FROM candidates WHERE id = ?",
+                "evidence, retrieved, origin FROM candidates WHERE id = ?",
                 (cid,),
             ).fetchone()
             if row is None:
@@ -215,6 +229,7 @@ class Store:
             draft=json.loads(row[8]),
             evidence=tuple(json.loads(row[9])),
             retrieved=tuple(json.loads(row[10])),
+            origin=row[11],
         )
 
     def candidate_ids(self) -> list[int]:

@@ -287,6 +287,34 @@ class Workspace:
                 self.check(cid)
         return ids
 
+    def propose_learned(
+        self, classes: Sequence[tuple[str, str, dict[str, Any], dict[str, Any]]], who: str
+    ) -> list[int]:
+        """Store classes learned from ``who``'s answers (origin "answer"), each
+        ``(name, superclass expression, rule fields, learned document)`` as
+        :mod:`virf.authoring.learn` makes them; all or none."""
+        ids = []
+        with self.store.transaction() as conn:
+            for name, axiom, rule, document in classes:
+                ids.append(
+                    self.store.add_candidate(
+                        query=None,
+                        drafter=f"answer:{who}",
+                        drafter_kind="person",
+                        name=name,
+                        axiom=axiom,
+                        rule=rule,
+                        draft=document,
+                        evidence=[],
+                        retrieved=[],
+                        origin="answer",
+                        conn=conn,
+                    )
+                )
+        for cid, (name, *_rest) in zip(ids, classes, strict=True):
+            self.store.add_event("learned", cid, actor=who, detail=name)
+        return ids
+
     def _store_draft(
         self, draft: Draft, *, query: str | None, drafter: str, kind: str, retrieved: Sequence[str]
     ) -> list[int]:
@@ -347,11 +375,22 @@ class Workspace:
         row = self.store.candidate(cid)
         self._undecided(cid)
         text = row.axiom if axiom is None else axiom
-        report = self._check(row.id, row.rule, row.draft, row.evidence, text, row.drafter)
+        report = self._check_row(row, text)
         self.store.add_check(cid, text, report.passed, report.model_dump(mode="json"))
         return report
 
     recheck = check
+
+    def _check_row(
+        self, row: CandidateRow, axiom: str, decision: dict[str, str] | None = None
+    ) -> CheckReport:
+        """The checks of ``axiom`` as the candidate's: a drafted rule's, or a
+        learned class's (:func:`virf.authoring.learn.check`)."""
+        if row.origin == "answer":
+            from virf.authoring import learn
+
+            return learn.check(self, row, axiom, decision)
+        return self._check(row.id, row.rule, row.draft, row.evidence, axiom, row.drafter, decision)
 
     def _check(
         self,
@@ -636,14 +675,30 @@ class Workspace:
         if tasks is not None and not tasks.is_file():
             raise InputError(f"benchmark file {clip(str(tasks))} does not exist")
         text = axiom if axiom is not None else self._current_axiom(cid, row.axiom)
-        report = self._check(row.id, row.rule, row.draft, row.evidence, text, row.drafter)
+        report = self._check_row(row, text)
         if not report.passed:
             failed = next(i for i in report.items if i.severity == "error")
             raise InputError(f"candidate {cid} does not pass its checks: {failed.message}")
         self.cache_dir.mkdir(exist_ok=True)
         module = self.cache_dir / f"preview-{cid}.omn"
         write_atomically(module, self._candidate_module(report.module_text))
-        result = effect_preview(self, module, text, tasks=tasks, examples=examples)
+        scenes: list[tuple[str, dict[str, Any], tuple[str, ...]]] = []
+        if row.origin == "answer":
+            from virf.authoring.learn import learned_of
+
+            learned = learned_of(row)
+            scenes.append(
+                (f"scene {learned.scene_name} (learned from)", row.draft["scene"], learned.plan)
+            )
+        result = effect_preview(
+            self,
+            module,
+            text,
+            tasks=tasks,
+            examples=examples,
+            scenes=scenes,
+            kb_test=row.origin == "answer",
+        )
         self.store.add_preview(cid, text, result.model_dump(mode="json"))
         return result
 
@@ -702,9 +757,7 @@ class Workspace:
                 + (f": {' '.join(reason.split())}" if reason and reason.strip() else ""),
                 "decidedOn": decided_at[:10],
             }
-            report = self._check(
-                row.id, row.rule, row.draft, row.evidence, final, row.drafter, provenance
-            )
+            report = self._check_row(row, final, provenance)
             self.store.add_check(cid, final, report.passed, report.model_dump(mode="json"))
             if not report.passed:
                 failed = next(i for i in report.items if i.severity == "error")
@@ -782,6 +835,7 @@ class Workspace:
             created_at=row.created_at,
             status=status,  # type: ignore[arg-type]
             passed=None if latest is None else bool(latest["passed"]),
+            origin=row.origin,  # type: ignore[arg-type]
         )
 
     def summary(self, cid: int) -> CandidateSummary:
@@ -800,6 +854,11 @@ class Workspace:
         preview = self.store.latest_preview(cid)
         decision = self.store.decision(cid)
         status = status_of(decision.decision if decision else None)
+        learned = None
+        if row.origin == "answer":
+            from virf.authoring.learn import learned_of
+
+            learned = learned_of(row)
         return CandidateView(
             summary=self._summary(row, status, check),
             rule=RuleDraft(**row.rule),
@@ -809,6 +868,7 @@ class Workspace:
             check=CheckReport.model_validate(check) if check else None,
             preview=Preview.model_validate(preview) if preview else None,
             decision=_decision_view(decision) if decision else None,
+            learned=learned,
         )
 
     def export(self, iri: str = EXPORT_IRI, label: str | None = None) -> str:

@@ -90,19 +90,52 @@ def _print_check(report: CheckReport) -> None:
 
 def _print_preview(preview: Preview) -> None:
     where = f" and {preview.tasks} tasks of {preview.tasks_file}" if preview.tasks_file else ""
+    scenes = f" and {preview.scenes} scene(s)" if preview.scenes else ""
     typer.echo(
-        f"  preview over {preview.examples} examples{where}: {len(preview.changes)} change(s)"
+        f"  preview over {preview.examples} examples{where}{scenes}: "
+        f"{len(preview.changes)} change(s)"
     )
     for c in preview.changes:
         typer.echo(
             f"    {c.item}: {c.before} -> {c.after}"
             + (f"  {c.instruction}" if c.instruction else "")
         )
+    if preview.kb_test:
+        typer.echo(f"  {preview.kb_test}")
+    for failure in preview.kb_test_failures:
+        typer.echo(f"    new failure: {failure}")
+
+
+def _print_learned(view: CandidateView) -> None:
+    learned = view.learned
+    assert learned is not None
+    typer.echo(
+        f"  a class learned from answers by {learned.who} at {learned.when} about "
+        f"{', '.join(learned.instances)} in scene {learned.scene_name} "
+        f"(sha256 {learned.scene_sha256})"
+    )
+    typer.echo(f"  written in the scene as {', '.join(learned.words)}; {learned.reading}")
+    typer.echo("  axioms, as learned:")
+    for axiom in learned.axioms:
+        typer.echo(f"    {axiom}")
+    typer.echo("  evidence (the answers):")
+    for a in learned.answers:
+        typer.echo(f"    '{a.question}' ({a.key}) -> {a.answer}: {a.effect}")
+    for what in learned.unconfirmed:
+        typer.echo(f"    not confirmed: {what}")
 
 
 def _print_candidate(view: CandidateView) -> None:
     s, r = view.summary, view.rule
     typer.echo(f"Candidate {s.id}: {r.name}  [{s.status}]")
+    if view.learned is not None:
+        _print_learned(view)
+        if view.check is not None:
+            _print_check(view.check)
+        if view.preview is not None:
+            _print_preview(view.preview)
+        _print_decision(view)
+        return
     typer.echo(
         f"  drafted by {s.drafter} at {s.created_at}" + (f" for: {s.query}" if s.query else "")
     )
@@ -125,6 +158,10 @@ def _print_candidate(view: CandidateView) -> None:
         _print_check(view.check)
     if view.preview is not None:
         _print_preview(view.preview)
+    _print_decision(view)
+
+
+def _print_decision(view: CandidateView) -> None:
     if view.decision is not None:
         d = view.decision
         typer.echo(

@@ -21,6 +21,15 @@ from virf.cli.app import (
     check_writable,
     write_output,
 )
+from virf.cli.learning import (
+    LearnOpt,
+    StrictVocabularyOpt,
+    WhoOpt,
+    learn_lines,
+    learning_kb,
+    open_workspace,
+    who_of,
+)
 from virf.cli.perceive import (
     BboxUnitsOpt,
     DetectionsOpt,
@@ -124,6 +133,9 @@ def plan(
         Path | None,
         typer.Option("--scene-out", help="With --images: write the perceived scene here."),
     ] = None,
+    learn: LearnOpt = None,
+    who: WhoOpt = None,
+    strict_vocabulary: StrictVocabularyOpt = False,
 ) -> None:
     """Let the apprentice plan and the tutor verify until a plan is approved (Algorithm 1).
 
@@ -158,6 +170,11 @@ def plan(
     chosen = get_method(method)
     if scene_out is not None:
         check_writable(scene_out, "--scene-out")
+    if who is not None and learn is None:
+        raise VirfError("--who names who answered, for --learn; give --learn WORKSPACE too")
+    kb = learning_kb(kb, learn)
+    who = who_of(who)
+    workspace = open_workspace(learn) if learn is not None else None
     run_log: Any = None
     try:
         # Started first: the deadline bounds the whole run, loading included.
@@ -166,7 +183,8 @@ def plan(
         vocab = tutor.tbox.vocabulary
         if scene is not None:
             data = load_scene_data(scene)
-            build_scene(data, vocab)  # bad scenes fail here, before any model call
+            # Bad scenes fail here, before any model call.
+            build_scene(data, vocab, strict_vocabulary=strict_vocabulary)
         policy = (
             answers_file(answers)
             if answers is not None
@@ -221,7 +239,7 @@ def plan(
                 data,
                 apprentice,
                 tutor.verifier,
-                lambda d: build_scene(d, vocab, name=name),
+                lambda d: build_scene(d, vocab, name=name, strict_vocabulary=strict_vocabulary),
                 vocab,
                 max_iter=max_iter,
                 answer=policy,
@@ -231,6 +249,12 @@ def plan(
     finally:
         if run_log is not None:
             run_log.close()
+    learned: list[str] = []
+    if workspace is not None:
+        from virf.authoring.learn import answered_from_transcript
+
+        answered, asked_about = answered_from_transcript(result.transcript, vocab)
+        learned = learn_lines(workspace, name, data, asked_about, answered, who, learn)
     if as_json:
         typer.echo(result.to_json())
     else:
@@ -240,6 +264,8 @@ def plan(
                 f"Not verified: the method '{chosen.name}' did not have the Logic Tutor "
                 "check this plan (exit 5)."
             )
+    for line in learned:
+        typer.echo(line, err=True)
     codes = {"APPROVED": 0, "TASK_REJECTED": 1, "APPROVED_UNVERIFIED": 5}
     raise typer.Exit(codes[result.outcome])
 

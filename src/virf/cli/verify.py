@@ -3,12 +3,25 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
 from virf.cli.app import EXIT, EngineOpt, KbOpt, ScenarioOpt, _fail
+from virf.cli.learning import (
+    LearnOpt,
+    StrictVocabularyOpt,
+    WhoOpt,
+    learn_lines,
+    learning_kb,
+    open_workspace,
+    warn_unused,
+    who_of,
+)
 from virf.errors import VirfError
+
+if TYPE_CHECKING:
+    from virf.schema import Report
 
 # The render and world modules are imported inside the commands: `virf --help`
 # stays fast, and tests can replace what a command calls.
@@ -44,26 +57,76 @@ def verify(
             "(pays off with the reference engine; the report is the same).",
         ),
     ] = 1,
+    answers: Annotated[
+        Path | None,
+        typer.Option(
+            "--answers",
+            help="JSON answers to the report's questions ({key: answer}, as 'virf plan' reads): "
+            "the scene is updated with them and the plan verified again.",
+        ),
+    ] = None,
+    learn: LearnOpt = None,
+    who: WhoOpt = None,
+    strict_vocabulary: StrictVocabularyOpt = False,
 ) -> None:
-    """Verify PLAN in SCENE.  Exit 0 SAFE, 1 UNSAFE, 3 UNKNOWN, 4 ERROR, 2 bad input."""
+    """Verify PLAN in SCENE.  Exit 0 SAFE, 1 UNSAFE, 3 UNKNOWN, 4 ERROR, 2 bad input.
+
+    With --answers, the answers settle the report's questions and the plan is
+    verified again (while they settle new ones); the last report is printed.
+    With --learn, what they confirm about objects of classes the knowledge base
+    lacks becomes candidate classes in that workspace, for a person to review."""
     from virf.api import LogicTutor, check_timeout
     from virf.render.feedback import feedback_prompt
     from virf.render.text import render_report
     from virf.world.plan import load_plan_file
-    from virf.world.scene import load_scene_file
+    from virf.world.scene import build_scene, load_scene_data
 
     # The options and the plan are checked before the knowledge base loads.
     check_timeout(timeout, "--timeout")
+    if learn is not None and answers is None:
+        raise VirfError("--learn needs --answers FILE: what is learned is what the answers confirm")
+    if who is not None and learn is None:
+        raise VirfError("--who names who answered, for --learn; give --learn WORKSPACE too")
+    kb = learning_kb(kb, learn)
+    who = who_of(who)
     steps = load_plan_file(plan)
+    given = None
+    if answers is not None:
+        from virf.planner.questions import read_answers
+
+        given = read_answers(answers)
+    workspace = open_workspace(learn) if learn is not None else None
     tutor = LogicTutor(scenario=scenario, engine=engine, timeout_s=timeout, workers=workers, kb=kb)
-    sc = load_scene_file(scene, tutor.tbox.vocabulary)
-    report = tutor.verifier.verify(sc, steps)
+    vocab = tutor.tbox.vocabulary
+    data = load_scene_data(scene)
+    name = scene.stem if scene.stem != "scene" else scene.parent.name
+
+    def check(d: Any) -> Report:
+        sc = build_scene(d, vocab, name=name, strict_vocabulary=strict_vocabulary)
+        return tutor.verifier.verify(sc, steps)
+
+    learned: list[str] = []
+    if given is None:
+        report = check(data)
+    else:
+        from virf.planner.questions import settle
+
+        settled = settle(data, check, given, vocab)
+        report = settled.report
+        for key in settled.unused(given):
+            warn_unused(key, settled.asked)
+        if workspace is not None:
+            learned = learn_lines(
+                workspace, name, data, [s.text for s in steps], settled.answered, who, learn
+            )
     if as_json:
         typer.echo(report.to_json())
     else:
         typer.echo(render_report(report, title=f"{scene} + {plan}"), nl=False)
         if feedback and report.status != "SAFE":
             typer.echo("\n" + feedback_prompt(report), nl=False)
+    for line in learned:
+        typer.echo(line, err=True)
     raise typer.Exit(EXIT[report.status])
 
 

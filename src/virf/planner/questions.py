@@ -48,7 +48,7 @@ from pydantic import ConfigDict, TypeAdapter, ValidationError
 
 from virf.errors import InputError, clip, closest, read_json_file
 from virf.ontology.tbox import Vocabulary
-from virf.schema import Fact, Provenance, Question, QuestionKind, Triple
+from virf.schema import Fact, Provenance, Question, QuestionKind, Report, Triple
 from virf.verify.questions import materials, parse_triple_text
 from virf.world.scene import build_scene
 
@@ -57,11 +57,14 @@ __all__ = [
     "AnswerPolicy",
     "Answers",
     "Question",
+    "Settled",
     "Update",
     "answers_file",
     "apply_answers",
     "check_answer",
     "deny",
+    "read_answers",
+    "settle",
 ]
 
 YES = {"yes", "y", "true", "confirm", "confirmed", "filled", "full"}
@@ -87,16 +90,21 @@ def deny(questions: Sequence[Question]) -> Answers:
 _ANSWERS: Final = TypeAdapter(dict[str, str], config=ConfigDict(strict=True))
 
 
-def answers_file(path: str | Path) -> AnswerPolicy:
-    """A policy reading ``{key: answer}`` from a JSON file (keys as above)."""
+def read_answers(path: str | Path) -> dict[str, str]:
+    """The ``{key: answer}`` object of an answers file."""
     p = Path(path)
     data = read_json_file(p, "answers")
     try:
-        fixed = _ANSWERS.validate_python(data)
+        return _ANSWERS.validate_python(data)
     except ValidationError:
         raise InputError(
             f'answers file {p} must be a JSON object of strings, e.g. {{"fill:Pot_1": "no"}}'
         ) from None
+
+
+def answers_file(path: str | Path) -> AnswerPolicy:
+    """A policy reading ``{key: answer}`` from a JSON file (keys as above)."""
+    fixed = read_answers(path)
 
     def policy(questions: Sequence[Question]) -> Answers:
         return {q.key: fixed[q.key] for q in questions if q.key in fixed}
@@ -190,6 +198,70 @@ def apply_answers(
         else:
             unsettled.append(q.key)
     return Update(data, tuple(applied), tuple(unsettled))
+
+
+# Every round applies all the answers the open questions have, so another
+# round is needed only when an answer brings up a new question; the planner's
+# loop has the same bound (virf.planner.loop.MAX_ROUNDS).
+MAX_SETTLE_ROUNDS: Final = 8
+
+
+@dataclass(frozen=True)
+class Settled:
+    """A plan verified with a fixed set of answers (``virf verify --answers``)."""
+
+    report: Report  # the last verification: of ``scene``
+    scene: dict[str, Any]  # the scene data with every settling answer written in
+    # Each question an answer settled, with the answer in canonical form
+    # ('yes', 'no', 'Plastic'), in the order they were settled.
+    answered: tuple[tuple[Question, str], ...]
+    asked: frozenset[str]  # every question key a report asked
+    rounds: int
+
+    def unused(self, answers: Mapping[str, str]) -> list[str]:
+        """Keys of ``answers`` that no report asked."""
+        return [k for k in answers if k not in self.asked]
+
+
+def settle(
+    scene: Mapping[str, Any],
+    verify: Callable[[Mapping[str, Any]], Report],
+    answers: Answers,
+    vocab: Vocabulary,
+) -> Settled:
+    """Verify ``scene``, apply the answers its questions have, verify again,
+    and so on while the answers settle new questions (at most
+    ``MAX_SETTLE_ROUNDS`` rounds; a question is settled at most once).  An
+    answer that cannot be used is an InputError naming the closest choices;
+    a question without an answer stays open (fail closed)."""
+    data: dict[str, Any] = copy.deepcopy(dict(scene))
+    report = verify(data)
+    answered: list[tuple[Question, str]] = []
+    asked: set[str] = {q.key for q in report.questions}
+    done: set[str] = set()
+    rounds = 0
+    while report.status == "UNKNOWN" and rounds < MAX_SETTLE_ROUNDS:
+        open_ = [
+            q
+            for q in report.questions
+            if q.kind in SETTLEABLE and q.key not in done and q.key in answers
+        ]
+        if not open_:
+            break
+        update = apply_answers(data, open_, answers, vocab)
+        if not update.applied:
+            break
+        rounds += 1
+        for q in open_:
+            if q.key in update.applied:
+                value = check_answer(q, answers[q.key], vocab)
+                assert value is not None  # it settled the question
+                answered.append((q, value))
+                done.add(q.key)
+        data = update.scene
+        report = verify(data)
+        asked.update(q.key for q in report.questions)
+    return Settled(report, data, tuple(answered), frozenset(asked), rounds)
 
 
 def _settle(data: dict[str, Any], q: Question, value: str, vocab: Vocabulary) -> bool:

@@ -51,6 +51,9 @@ class VerifyRequest(BaseModel):
     plan: list[str] | str
     scenario: str | None = None
     engine: str | None = None
+    # As `virf verify --strict-vocabulary`: a class the knowledge base lacks
+    # is refused instead of read as an open-world object.
+    strict_vocabulary: bool = False
 
 
 class HttpNotFound(Exception):
@@ -61,7 +64,11 @@ def _keys_of(request: Request) -> str:
     """The keys the body of this request's endpoint takes."""
     path = request.url.path
     model: type[BaseModel] = VerifyRequest
-    if path == "/v1/plan":
+    if path == "/v1/learn":
+        from virf.service.learning import LearnRequest
+
+        model = LearnRequest
+    elif path == "/v1/plan":
         model = PlanRequest
     elif path.startswith("/v1/runs/"):
         model = AnswersRequest
@@ -73,11 +80,14 @@ def _problem(status: int, message: str, kind: str = "BAD_INPUT") -> JSONResponse
 
 
 class Tutors:
-    """One warm tutor per (scenario, engine), each verifying one request at a time."""
+    """One warm tutor per (scenario, engine), each verifying one request at a
+    time.  With a knowledge workspace (``kb``), a tutor is made again when the
+    workspace's modules change (a reviewer accepted a rule or a learned
+    class), so the next request verifies with what was accepted."""
 
     def __init__(self, scenario: str, engine: str, kb: Path | None, timeout_s: float) -> None:
         self.scenario, self.engine, self.kb, self.timeout_s = scenario, engine, kb, timeout_s
-        self._tutors: dict[tuple[str, str], tuple[LogicTutor, threading.Lock]] = {}
+        self._tutors: dict[tuple[str, str], tuple[LogicTutor, threading.Lock, object]] = {}
         self._lock = threading.Lock()
 
     def prepare(
@@ -86,6 +96,8 @@ class Tutors:
         plan: list[str] | str,
         scenario: str | None,
         engine: str | None,
+        *,
+        strict_vocabulary: bool = False,
     ) -> tuple[LogicTutor, threading.Lock, Scene, tuple[PlanStep, ...]]:
         """A request's tutor, scene and plan, read as ``virf verify`` reads them
         (a plan is a list of lines or a plan file's text)."""
@@ -93,16 +105,31 @@ class Tutors:
         if not steps:
             raise InputError("plan has no actions (only blank lines or comments)")
         tutor, lock = self.get(scenario, engine)
-        return tutor, lock, tutor.scene(scene), tuple(steps)
+        return tutor, lock, tutor.scene(scene, strict_vocabulary=strict_vocabulary), tuple(steps)
+
+    def _stamp(self) -> object:
+        """What identifies the workspace's modules as they are now."""
+        if self.kb is None:
+            return None
+        from virf.ontology.workspace import open_layout
+
+        try:
+            return tuple(
+                (p.name, p.stat().st_mtime_ns, p.stat().st_size)
+                for p in open_layout(self.kb).modules()
+            )
+        except OSError:
+            return None  # loading the tutor says what is wrong
 
     def get(self, scenario: str | None, engine: str | None) -> tuple[LogicTutor, threading.Lock]:
         key = (scenario or self.scenario, engine or self.engine)
+        stamp = self._stamp()
         with self._lock:
             found = self._tutors.get(key)
-            if found is None:
+            if found is None or found[2] != stamp:
                 tutor = LogicTutor(key[0], key[1], timeout_s=self.timeout_s, kb=self.kb)
-                found = self._tutors[key] = (tutor, threading.Lock())
-            return found
+                found = self._tutors[key] = (tutor, threading.Lock(), stamp)
+            return found[0], found[1]
 
 
 def create_app(
@@ -183,7 +210,11 @@ def create_app(
     def verify(body: VerifyRequest) -> Response:
         """Verify a plan in a scene: the report ``virf verify --json`` prints."""
         tutor, lock, scene, steps = tutors.prepare(
-            body.scene, body.plan, body.scenario, body.engine
+            body.scene,
+            body.plan,
+            body.scenario,
+            body.engine,
+            strict_vocabulary=body.strict_vocabulary,
         )
         with lock:
             report = tutor.verifier.verify(scene, steps)
@@ -206,6 +237,8 @@ def create_app(
             "knowledge": tbox.source,
             "kb": str(kb) if kb is not None else None,
             "review": "/review/" if workspace is not None else None,
+            # Answers about open-world objects can be sent to be learned.
+            "learn": "/v1/learn" if workspace is not None else None,
             "worker": os.getpid(),  # which process answered (several with --workers)
             "run_log": shown(run_log) if run_log is not None else None,
         }
@@ -246,18 +279,24 @@ def create_app(
         runs.answer(run, body.answers)
         return {"id": run.id, "accepted": sorted(body.answers)}
 
+    from virf.service.learning import add_learning  # these import this module
+    from virf.service.pages import add_pages
+
     if workspace is not None:
         from virf.authoring.review import create_app as review_app
         from virf.authoring.workspace import Workspace
 
+        ws = Workspace.open(workspace)
         # The review page's own guards stay: it answers on this machine only.
-        app.mount("/review", review_app(Workspace.open(workspace), reviewer))
+        app.mount("/review", review_app(ws, reviewer))
 
         @app.get("/review", include_in_schema=False)
         def review_root() -> RedirectResponse:
             return RedirectResponse("/review/")
 
-    from virf.service.pages import add_pages  # pages imports this module
+        add_learning(app, tutors, ws)
+    else:
+        add_learning(app, tutors, None)
 
     add_pages(app, tutors)
     return app

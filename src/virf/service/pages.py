@@ -15,8 +15,10 @@ verifies a scene and plan through ``POST /v1/verify`` and reads the rules from
   report's triple notation, so triggering facts match them by equality;
 * ``POST /v1/apply-answers`` ``{scene, plan, answers, scenario?, engine?}``: the
   scene with the answers to the report's questions written into it (the
-  same code ``virf plan`` applies answers with), and which questions they
-  settled; the page then verifies the new scene.
+  same code ``virf plan`` applies answers with), which questions they
+  settled, and the scene's open-world objects (``open_world``: instance ->
+  the class as written), whose answers ``POST /v1/learn`` can keep; the page
+  then verifies the new scene.
 
 All are under ``/v1/``, so the service's API key guards them as it guards
 verification.
@@ -205,6 +207,9 @@ def add_pages(app: FastAPI, tutors: Tutors, *, examples: Path | None = None) -> 
             "scene": update.scene,
             "applied": list(update.applied),
             "unsettled": list(update.unsettled),
+            # The scene's objects of classes the knowledge base lacks (instance
+            # -> the class as written): answers about them can be learned.
+            "open_world": dict(scene.open_world),
         }
 
     app.mount("/assets", StaticFiles(directory=STATIC_DIR), name="assets")

@@ -140,6 +140,7 @@
           { class: "qmeta" },
           badge(c.status),
           passBadge(c.passed),
+          c.origin === "answer" ? el("span", { class: "badge learned", "data-testid": "learned-badge", text: "learned from an answer" }) : null,
           el("span", { text: c.category }),
           el("span", { text: `· ${c.drafter}` }),
         ),
@@ -195,8 +196,15 @@
     status.className = `badge ${view.summary.status}`;
     status.textContent = view.summary.status;
 
-    renderFacts(view);
-    renderEvidence(view.evidence);
+    const learned = view.learned;
+    $("rule-heading").textContent = learned ? "Learned class" : "Rule";
+    $("axiom-hint").textContent = learned
+      ? `the superclasses of ${learned.class_name} (${learned.class_name} SubClassOf …), Manchester syntax`
+      : "Manchester syntax";
+    if (learned) renderLearned(view);
+    else renderFacts(view);
+    if (learned) renderAnswers(learned);
+    else renderEvidence(view.evidence);
     renderDecision(view.decision);
 
     const axiom = $("axiom");
@@ -241,6 +249,46 @@
       list.append(
         el("dt", { text: label }),
         el("dd", { class: cls || null, "data-testid": `rule-${key}`, text: value || "—" }),
+      );
+    }
+  }
+
+  // A class learned from a user's answers about an object the knowledge base
+  // did not know: what was learned, and from which answers.
+  function renderLearned(view) {
+    const l = view.learned;
+    const rows = [
+      ["learned class", l.class_name],
+      ["written in the scene as", l.words.join(", ")],
+      ["what WordNet suggested", l.reading],
+      ["axioms as learned", l.axioms.join("\n"), "mono"],
+      ["learned from", `answers by ${l.who} on ${when(l.when)} about ${l.instances.join(", ")} in scene ${l.scene_name} (SHA-256 ${l.scene_sha256.slice(0, 16)}…)`],
+      ["plan", l.plan.join("; ")],
+      ["no longer assumed once accepted", l.unconfirmed.join("; ")],
+    ];
+    const list = $("rule-facts");
+    list.replaceChildren();
+    for (const [label, value, cls] of rows) {
+      const key = label.replaceAll(" ", "-");
+      list.append(
+        el("dt", { text: label }),
+        el("dd", { class: cls || null, "data-testid": `learned-${key}`, text: value || "—" }),
+      );
+    }
+  }
+
+  function renderAnswers(learned) {
+    const list = $("evidence");
+    list.replaceChildren();
+    for (const a of learned.answers) {
+      list.append(
+        el(
+          "li",
+          { "data-testid": "learned-answer", "data-key": a.key },
+          el("div", { class: "src" }, `${learned.who} was asked `, el("code", { text: `[${a.key}]` })),
+          el("blockquote", {}, a.question, " ", el("strong", { "data-testid": "learned-answer-value", text: a.answer })),
+          el("div", { class: "small", "data-testid": "learned-answer-effect", text: a.effect }),
+        ),
       );
     }
   }
@@ -445,9 +493,16 @@
     const box = $("preview");
     box.replaceChildren();
     if (!preview) return;
-    const head = `Computed ${when(preview.computed_at)} for ${preview.examples} example(s) and ${preview.tasks} task(s)` +
+    const scenes = preview.scenes ? `, ${preview.scenes} scene(s) it was learned from` : "";
+    const head = `Computed ${when(preview.computed_at)} for ${preview.examples} example(s)${scenes} and ${preview.tasks} task(s)` +
       (preview.tasks_file ? ` from ${preview.tasks_file}` : "") + ".";
     box.append(el("p", { class: "muted", text: head }));
+    if (preview.kb_test) {
+      box.append(el("p", { "data-testid": "preview-kb-test", text: preview.kb_test }));
+      for (const f of preview.kb_test_failures || []) {
+        box.append(el("p", { class: "check-summary fail", "data-testid": "preview-kb-test-failure", text: `New failure: ${f}` }));
+      }
+    }
     if (preview.error) {
       box.append(el("p", { class: "check-summary fail", "data-testid": "preview-error", text: preview.error }));
     }

@@ -18,6 +18,13 @@
   // question must use these, not whatever the text boxes hold by now.
   let current = null;
   let rules = null;
+  // The service's health: whether it can learn from answers (a workspace).
+  let service = null;
+  // Answers about objects the knowledge base does not know, that can be
+  // kept for later scenes: the scene and plan they were given for (before
+  // any answer), the answers that settled questions, and the scene's
+  // open-world objects (instance -> the class as written).
+  let learning = null;
   let ruleShown = null;
   // Responses that arrive after a newer request was sent are dropped.
   let verifySeq = 0;
@@ -178,7 +185,13 @@
 
   async function verify(keepNotice) {
     clearError();
-    if (!keepNotice) byId("answers-notice").hidden = true;
+    if (!keepNotice) {
+      byId("answers-notice").hidden = true;
+      // A new scene or plan: earlier answers are not about it.
+      learning = null;
+      byId("learn-box").hidden = true;
+      byId("learn-result").hidden = true;
+    }
     let input;
     try {
       input = readInputs();
@@ -219,6 +232,7 @@
     verdict.dataset.status = report.status;
     byId("reason").textContent = report.reason;
     renderTrace(report);
+    renderNotes(report);
     renderQuestions(report);
     renderViolations(report);
     const suggestion = report.suggestion || "";
@@ -338,6 +352,15 @@
     });
   }
 
+  // How the scene and plan were read where not word for word: an object of a
+  // class the knowledge base does not know, a plan line in everyday words.
+  function renderNotes(report) {
+    const notes = report.notes || [];
+    const list = byId("notes-list");
+    list.replaceChildren(...notes.map((n) => el("li", { "data-testid": "note", text: n })));
+    byId("notes").hidden = notes.length === 0;
+  }
+
   // ------------------------------------------------------------ questions
   function renderQuestions(report) {
     const section = byId("questions");
@@ -391,8 +414,18 @@
       return;
     }
     busy(true);
+    const asked = current.report.questions;
+    if (!learning) learning = { scene: current.scene, plan: current.plan, answers: {}, openWorld: null, about: new Set(), sent: false };
     try {
       const update = await api("POST", "/v1/apply-answers", { scene: current.scene, plan: current.plan, answers });
+      // The first answers' scene is the one as given: its open-world objects.
+      if (learning.openWorld === null) learning.openWorld = update.open_world || {};
+      for (const key of update.applied) {
+        learning.answers[key] = answers[key];
+        const q = asked.find((x) => x.key === key);
+        const subject = q && (q.fact ? q.fact.subject : q.subject);
+        if (subject && subject in learning.openWorld) learning.about.add(subject);
+      }
       byId("scene-input").value = JSON.stringify(update.scene, null, 2);
       byId("plan-input").value = current.plan;
       const notice = byId("answers-notice");
@@ -407,6 +440,69 @@
     }
     busy(false);
     await verify(true);
+    offerLearning();
+  }
+
+  // ------------------------------------------------------------ learning
+  // Answers about objects the knowledge base does not know can be kept for
+  // later scenes when the service has a knowledge workspace.
+  function offerLearning() {
+    const box = byId("learn-box");
+    if (!learning || !learning.about.size || !(service && service.learn)) {
+      box.hidden = true;
+      return;
+    }
+    const objects = [...learning.about].sort().map((o) => `${o} (a '${learning.openWorld[o]}')`);
+    const kinds = [...new Set([...learning.about].map((o) => learning.openWorld[o]))].join(", ");
+    byId("learn-text").textContent =
+      `Your answers were about ${objects.length === 1 ? "an object" : "objects"} the knowledge base does not know: ${objects.join(", ")}. ` +
+      `Remembered, they become proposed knowledge about every ${kinds}: a reviewer checks it on the Review page, and only then do later scenes use it.`;
+    byId("learn-button").disabled = learning.sent;
+    box.hidden = false;
+  }
+
+  async function sendLearning() {
+    clearError();
+    if (!learning || learning.sent) return;
+    const who = byId("learn-who").value.trim();
+    if (!who) {
+      showError("say who you are (your name is kept with your answers)");
+      byId("learn-who").focus();
+      return;
+    }
+    const button = byId("learn-button");
+    button.disabled = true;
+    byId("learn-busy").hidden = false;
+    const result = byId("learn-result");
+    try {
+      const got = await api("POST", "/v1/learn", { scene: learning.scene, plan: learning.plan, answers: learning.answers, who });
+      learning.sent = true;
+      const items = got.candidates.map((c) => {
+        const state = c.passed ? "its checks pass" : `a check failed: ${c.problems[0] || "see the Review page"}`;
+        return el(
+          "li",
+          { "data-testid": "learned-candidate", "data-id": c.id, "data-name": c.class_name },
+          el("strong", { text: `#${c.id} ${c.class_name}` }),
+          `: ${c.axioms.join("; ")} (${state})`,
+        );
+      });
+      const review = el("a", { href: "review/", "data-testid": "learn-review-link", text: "Review page" });
+      const where = got.applies_here
+        ? ["Once a reviewer accepts it on the ", review, ", later scenes use it."]
+        : ["A reviewer can accept it on the ", review, "; this service verifies without that workspace, so its verdicts will not change (start it with --kb on the same folder)."];
+      result.replaceChildren(
+        el("div", { text: got.candidates.length ? "Sent for review:" : "Nothing to remember: the answers confirmed nothing about a kind of object." }),
+        el("ul", {}, ...items),
+        ...got.skipped.map((s) => el("div", { class: "small", text: `Not kept: ${s}` })),
+        got.candidates.length ? el("div", {}, ...where) : "",
+      );
+      result.hidden = false;
+    } catch (exc) {
+      showError(exc.message);
+      button.disabled = false;
+    } finally {
+      byId("learn-busy").hidden = true;
+    }
   }
 
   // ------------------------------------------------------------ scene graph
@@ -1039,6 +1135,7 @@
   async function health() {
     try {
       const h = await api("GET", "/v1/health");
+      service = h;
       byId("health").textContent = `${h.status} · scenario ${h.scenario} · ${h.engine} engine · ${h.rules} rules`;
       // The knowledge-acquisition review page, when the service has a workspace.
       byId("review-link").hidden = !h.review;
@@ -1067,6 +1164,7 @@
     byId("plan-file").addEventListener("change", (e) => readFileInto(e.target, "plan-input"));
     byId("verify-button").addEventListener("click", () => verify(false));
     byId("questions-form").addEventListener("submit", submitAnswers);
+    byId("learn-button").addEventListener("click", sendLearning);
     byId("rule-search").addEventListener("input", filterRules);
     byId("plan-start").addEventListener("click", startPlan);
     byId("plan-questions-form").addEventListener("submit", submitPlanAnswers);
