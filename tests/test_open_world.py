@@ -338,3 +338,24 @@ def test_without_wordnet_the_object_is_still_checked(
         assert any("WordNet is not installed" in n for n in report.notes)
     finally:
         lexicon.propose.cache_clear()
+
+
+def test_without_wordnet_every_hazard_is_asked_about(
+    tutor: LogicTutor, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Nothing can say a hair dryer is electrical: it must not pass as harmless.
+    monkeypatch.setattr(lexicon, "_wordnet", lambda: None)
+    lexicon.propose.cache_clear()
+    try:
+        report = _verify(tutor, HAZARDS[0][1], HAZARDS[0][2])
+        assert report.status == "UNKNOWN"
+        assert "Is X_1 an electrical appliance?" in [q.text for q in report.questions]
+    finally:
+        lexicon.propose.cache_clear()
+
+
+@pytest.mark.parametrize("spelled", ["stove knob", "stove_knob", "Stove-Knob", "STOVEKNOB"])
+def test_a_known_class_in_other_spellings_is_that_class(tutor: LogicTutor, spelled: str) -> None:
+    scene = tutor.scene({"instances": [{"class_name": spelled, "instance_name": "Knob_1"}]})
+    assert scene.objects["Knob_1"] == frozenset({"StoveKnob"})
+    assert scene.open_world == {}

@@ -246,6 +246,16 @@ TERM_CUES: dict[str, tuple[tuple[str, str], ...]] = {
     "ammonia": (("property", "Toxic"), ("material", "Ammonia")),
     "cleaner": (("property", "Toxic"), ("material", "Chemical")),
 }
+# What a word is assumed to possibly be when WordNet is not installed.
+UNREAD_PROPERTIES = (
+    "ElectricallyPowered",
+    "HeatSource",
+    "OpenFlame",
+    "Flammable",
+    "Fragile",
+    "Toxic",
+    "Sharp",
+)
 # Senses about things (not acts, feelings or quantities).
 PHYSICAL_LEXNAMES = frozenset(
     {
@@ -375,7 +385,10 @@ class Proposal:
 
     def describe(self) -> str:
         if not self.dictionary:
-            return f"WordNet is not installed, so nothing is proposed: {INSTALL_HINT}"
+            return (
+                "WordNet is not installed, so every hazard it could take part in is asked "
+                f"about: {INSTALL_HINT}"
+            )
         if not self.found:
             return f"'{self.word}' is not in WordNet"
         chain = " -> ".join((self.word, *self.path[:3]))
@@ -471,6 +484,12 @@ def propose(term: str) -> Proposal:
         if chains
         else ()
     )
+
+    if wn is None:
+        # Nothing can say what the word is: every hazard it could take part
+        # in is asked about where one would follow (fail closed).
+        for prop in UNREAD_PROPERTIES:
+            cues.setdefault(("property", prop), None)
 
     def of(kind: str) -> tuple[str, ...]:
         return tuple(sorted(term for k, term in cues if k == kind))

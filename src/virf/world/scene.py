@@ -289,6 +289,10 @@ def build_scene(
             )
         cls = vocab.canonical_class(cname)
         if cls is None:
+            # One class, many spellings: 'stove knob', 'stove_knob', 'Stove-Knob'.
+            hit = vocab.term_by_key(term_key(cname))
+            cls = vocab.canonical_class(hit) if hit is not None else None
+        if cls is None:
             _check_open_class(cname, vocab, strict_vocabulary)
         if iname not in classes:
             classes[iname] = set()
