@@ -359,3 +359,18 @@ def test_a_known_class_in_other_spellings_is_that_class(tutor: LogicTutor, spell
     scene = tutor.scene({"instances": [{"class_name": spelled, "instance_name": "Knob_1"}]})
     assert scene.objects["Knob_1"] == frozenset({"StoveKnob"})
     assert scene.open_world == {}
+
+
+def test_a_word_the_scene_lacks_is_answered_with_names_near_in_meaning(tutor: LogicTutor) -> None:
+    # Neither spelling nor the catalogue reads 'refrigerator' or 'cooker';
+    # the question offers the scene's names nearest in meaning, and the
+    # plan is not run on a guess.
+    for word, near in (("refrigerator", "Fridge_1"), ("cooker", "StoveBurner_1")):
+        report = _verify(
+            tutor,
+            "Fridge_1: Fridge; StoveBurner_1: StoveBurner; Apple_1: Apple",
+            f"find {word}",
+        )
+        assert report.status == "UNKNOWN"
+        (question,) = report.questions
+        assert question.kind == "where" and near in question.text, question.text

@@ -156,6 +156,11 @@ CUES: dict[str, tuple[tuple[str, str], ...]] = {
     "alcohol.n.01": (("property", "Flammable"), ("property", "Toxic")),
     "solvent.n.01": (("property", "Flammable"), ("property", "Toxic"), ("material", "Chemical")),
     "oil.n.01": (("property", "Flammable"),),
+    "gasoline.n.01": (("property", "Flammable"), ("property", "Toxic")),
+    "aerosol.n.01": (("property", "Pressurised"), ("property", "Flammable")),
+    "aerosol.n.02": (("property", "Pressurised"), ("property", "Flammable")),
+    "antifreeze.n.01": (("property", "Toxic"), ("material", "Chemical")),
+    "pill.n.01": (("property", "Toxic"),),
     "wax.n.01": (("property", "Flammable"), ("material", "Wax")),
     # fragile
     "glass.n.01": (("property", "Fragile"), ("material", "Glass")),
@@ -225,7 +230,7 @@ GLOSS_CUES: tuple[tuple[re.Pattern[str], tuple[str, str]], ...] = (
     ),
     (re.compile(r"\bflames?\b"), ("property", "OpenFlame")),
     (re.compile(r"\b(sharp|blades?|cutting edges?)\b"), ("property", "Sharp")),
-    (re.compile(r"\b(poison\w*|toxic|caustic|corrosive)\b"), ("property", "Toxic")),
+    (re.compile(r"\b(poison\w*|toxic|caustic|corrosive|medicated)\b"), ("property", "Toxic")),
     (re.compile(r"\b(flammable|inflammable|combustible)\b"), ("property", "Flammable")),
 )
 TERM_CUES: dict[str, tuple[tuple[str, str], ...]] = {
@@ -245,6 +250,10 @@ TERM_CUES: dict[str, tuple[tuple[str, str], ...]] = {
     "bleach": (("property", "Toxic"), ("material", "Bleach")),
     "ammonia": (("property", "Toxic"), ("material", "Ammonia")),
     "cleaner": (("property", "Toxic"), ("material", "Chemical")),
+    "sanitizer": (("property", "Toxic"), ("property", "Flammable")),
+    "gas": (("property", "Flammable"),),
+    "hot": (("property", "HeatSource"),),
+    "iron": (("property", "HeatSource"), ("property", "ElectricallyPowered")),
 }
 # What a word is assumed to possibly be when WordNet is not installed.
 UNREAD_PROPERTIES = (
@@ -464,8 +473,9 @@ def propose(term: str) -> Proposal:
     modifiers = words[: len(words) - len(read.split())] if synsets else []
     kept = _keep(synsets, modifiers) if synsets else []
     # A word before the name that names a stuff says what the thing is made
-    # of: a 'cardboard box', an 'oil lamp', a 'glass jar'.
-    for m in modifiers:
+    # of: a 'cardboard box', an 'oil lamp', a 'paper bag' (WordNet knows the
+    # whole name, and says it is a bag).
+    for m in words[:-1]:
         first = wn.synsets(m, pos="n")[:1] if wn is not None else []
         if first and first[0].lexname() == "noun.substance":
             kept.append(first[0])

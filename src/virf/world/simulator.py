@@ -11,10 +11,12 @@ to instances and runs one step.
 from __future__ import annotations
 
 import difflib
+import re
 from collections.abc import Iterable
 from types import MappingProxyType
 
-from virf.names import term_key
+from virf.errors import EnvironmentProblem
+from virf.names import name_words, term_key
 from virf.ontology.tbox import Vocabulary
 from virf.schema import Fact, FactKind, Provenance
 from virf.world.actions import (
@@ -212,7 +214,10 @@ class Simulator:
         for name in sorted(set(pool)):
             by_key.setdefault(term_key(name), name)
         hits = difflib.get_close_matches(term_key(term), list(by_key), n=n, cutoff=0.5)
-        return tuple(by_key[h] for h in hits)
+        found = [by_key[h] for h in hits]
+        if len(found) < n:
+            found += [m for m in _by_meaning(term, by_key.values()) if m not in found]
+        return tuple(found[:n])
 
     def resolve(self, state: WorldState, step: PlanStep) -> ResolvedStep | MissingObject:
         def need(term: str, prefer: str | None = None) -> str | MissingObject:
@@ -365,3 +370,28 @@ class Simulator:
             return failure
         heat(change)
         return change.result()
+
+
+# How near in meaning a scene's name must be to a plan's word to be offered
+# ('the sink' -> SinkBasin_1; 'hob' -> StoveBurner_1).
+MEANING_FLOOR = 0.5
+
+
+def _by_meaning(term: str, names: Iterable[str]) -> list[str]:
+    """Names of the scene nearest ``term`` in meaning (the bundled sentence
+    embedder), for a word neither spelling nor the catalogue resolves. Only
+    asked on that path: it loads the model."""
+    from virf.embed import default_embedder
+
+    pool = sorted(set(names))
+    if not pool or not re.search(r"[A-Za-z]{2}", term):
+        return []
+    try:
+        embedder = default_embedder()
+        vectors = embedder.encode([name_words(n) for n in pool])
+        query = embedder.encode([name_words(term)])[0]
+    except (EnvironmentProblem, OSError):  # no model: spelling alone
+        return []
+    scores = [round(float(v), 4) for v in (vectors @ query).tolist()]
+    ranked = sorted(zip(scores, pool, strict=True), key=lambda sp: (-sp[0], sp[1]))
+    return [name for score, name in ranked if score >= MEANING_FLOOR]
