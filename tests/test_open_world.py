@@ -4,6 +4,7 @@ never SAFE, and the same object away from the hazard stays SAFE."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -327,31 +328,28 @@ def test_the_lexnames_file_comes_from_the_manual_page_or_the_fixed_list(tmp_path
         assert lexicon._lexnames_text(lexicon.DEBIAN_LEXNAMES) == fixed
 
 
-def test_without_wordnet_the_object_is_still_checked(
-    tutor: LogicTutor, monkeypatch: pytest.MonkeyPatch
-) -> None:
+@pytest.fixture
+def no_wordnet(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
+    """A machine without WordNet (proposals are cached per word)."""
     monkeypatch.setattr(lexicon, "_wordnet", lambda: None)
     lexicon.propose.cache_clear()
-    try:
-        report = _verify(tutor, HAZARDS[21][1], HAZARDS[21][2])  # cardboard in a running microwave
-        assert report.status == "UNKNOWN"
-        assert any("WordNet is not installed" in n for n in report.notes)
-    finally:
-        lexicon.propose.cache_clear()
+    yield
+    lexicon.propose.cache_clear()
 
 
-def test_without_wordnet_every_hazard_is_asked_about(
-    tutor: LogicTutor, monkeypatch: pytest.MonkeyPatch
-) -> None:
+@pytest.mark.usefixtures("no_wordnet")
+def test_without_wordnet_the_object_is_still_checked(tutor: LogicTutor) -> None:
+    report = _verify(tutor, HAZARDS[21][1], HAZARDS[21][2])  # cardboard in a running microwave
+    assert report.status == "UNKNOWN"
+    assert any("WordNet is not installed" in n for n in report.notes)
+
+
+@pytest.mark.usefixtures("no_wordnet")
+def test_without_wordnet_every_hazard_is_asked_about(tutor: LogicTutor) -> None:
     # Nothing can say a hair dryer is electrical: it must not pass as harmless.
-    monkeypatch.setattr(lexicon, "_wordnet", lambda: None)
-    lexicon.propose.cache_clear()
-    try:
-        report = _verify(tutor, HAZARDS[0][1], HAZARDS[0][2])
-        assert report.status == "UNKNOWN"
-        assert "Is X_1 an electrical appliance?" in [q.text for q in report.questions]
-    finally:
-        lexicon.propose.cache_clear()
+    report = _verify(tutor, HAZARDS[0][1], HAZARDS[0][2])
+    assert report.status == "UNKNOWN"
+    assert "Is X_1 an electrical appliance?" in [q.text for q in report.questions]
 
 
 @pytest.mark.parametrize("spelled", ["stove knob", "stove_knob", "Stove-Knob", "STOVEKNOB"])

@@ -434,6 +434,7 @@ def check(
     evidence; then HermiT (parse, consistency, satisfiability, and whether
     every object of the class would already be an unsafe state)."""
     from virf.authoring.normalize import normalise
+    from virf.authoring.workspace import reasoner_items
     from virf.ontology.axiom_check import check_candidate
     from virf.ontology.workspace import LAYERS
 
@@ -527,24 +528,13 @@ def check(
         used,
         vocab.uscs,
     )
+    items.extend(
+        reasoner_items(
+            result, name, "its superclasses exclude each other, so no object could be one"
+        )
+    )
     if not result.parses:
-        items.append(CheckItem.error("parses", result.parse_error))
         return report(normalised.display, normalised.terms, "core", text, Related())
-    items.append(CheckItem.info("parses", "the axiom parses"))
-    if not result.consistent:
-        items.append(CheckItem.error("consistent", "the TBox becomes inconsistent with this axiom"))
-    else:
-        items.append(CheckItem.info("consistent", "the TBox stays consistent"))
-        if result.satisfiable is False:
-            items.append(
-                CheckItem.error(
-                    "satisfiable",
-                    f"{name} is unsatisfiable: its superclasses exclude each other, so no "
-                    "object could be one",
-                )
-            )
-        else:
-            items.append(CheckItem.info("satisfiable", f"{name} is satisfiable"))
     related = Related(equivalent=result.equivalent, subsumed_by=result.subsumed_by)
     if related.equivalent or related.subsumed_by:
         items.append(

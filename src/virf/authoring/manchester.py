@@ -147,14 +147,8 @@ def conjuncts(expression: str, prefix: str = "") -> list[str]:
     """The parts of a top-level conjunction, each on one line with names given
     ``prefix`` (``A and (p value v)`` -> ``['A', '(p value v)']``); the whole
     expression when it is not one."""
-    toks = tokens(expression)
     parts: list[list[Token]] = [[]]
-    depth = 0
-    for tok in toks:
-        if tok.kind == "punct" and tok.text in "({":
-            depth += 1
-        elif tok.kind == "punct" and tok.text in ")}":
-            depth -= 1
+    for tok, depth in _depths(tokens(expression)):
         if depth == 0 and tok.kind == "keyword" and tok.text == "and":
             parts.append([])
             continue

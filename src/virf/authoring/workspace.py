@@ -46,6 +46,7 @@ from virf.ontology.workspace import FORMAT, LAYERS, MARKER, KbLayout, open_layou
 
 if TYPE_CHECKING:
     from virf.authoring.corpus import Corpus
+    from virf.ontology.axiom_check import AxiomCheck
     from virf.planner.apprentices import Apprentice
 
 DEFAULT_WORKSPACE: Final = Path("virf-kb")
@@ -456,33 +457,17 @@ class Workspace:
             used,
             vocab.uscs,
         )
+        items.extend(reasoner_items(result, name, "no situation can ever fall under it"))
         if not result.parses:
-            items.append(CheckItem.error("parses", result.parse_error))
             return self._report(
                 axiom, normalised.display, items, normalised.terms, Related(), "core", block
             )
-        items.append(CheckItem.info("parses", "the axiom parses"))
-        if not result.consistent:
+        if result.consistent and result.every_state:
             items.append(
-                CheckItem.error("consistent", "the TBox becomes inconsistent with this axiom")
+                CheckItem.error(
+                    "trivial", f"{name} holds of everything: every state would be unsafe"
+                )
             )
-        else:
-            items.append(CheckItem.info("consistent", "the TBox stays consistent"))
-            if result.satisfiable is False:
-                items.append(
-                    CheckItem.error(
-                        "satisfiable",
-                        f"{name} is unsatisfiable: no situation can ever fall under it",
-                    )
-                )
-            else:
-                items.append(CheckItem.info("satisfiable", f"{name} is satisfiable"))
-            if result.every_state:
-                items.append(
-                    CheckItem.error(
-                        "trivial", f"{name} holds of everything: every state would be unsafe"
-                    )
-                )
         related = Related(
             equivalent=result.equivalent, subsumed_by=result.subsumed_by, subsumes=result.subsumes
         )
@@ -923,6 +908,24 @@ class Workspace:
                 )
             )
         return out
+
+
+def reasoner_items(result: AxiomCheck, name: str, unsatisfiable: str) -> list[CheckItem]:
+    """What HermiT said of a candidate, as check items: the axiom parses, the
+    TBox stays consistent with it, and ``name`` is satisfiable (else why
+    not: ``unsatisfiable``)."""
+    if not result.parses:
+        return [CheckItem.error("parses", result.parse_error)]
+    items = [CheckItem.info("parses", "the axiom parses")]
+    if not result.consistent:
+        items.append(CheckItem.error("consistent", "the TBox becomes inconsistent with this axiom"))
+        return items
+    items.append(CheckItem.info("consistent", "the TBox stays consistent"))
+    if result.satisfiable is False:
+        items.append(CheckItem.error("satisfiable", f"{name} is unsatisfiable: {unsatisfiable}"))
+    else:
+        items.append(CheckItem.info("satisfiable", f"{name} is satisfiable"))
+    return items
 
 
 def _append_block(module: str, block: str) -> str:

@@ -242,15 +242,7 @@
       ["drafted axiom", r.definition, "mono"],
       ["drafted by", `${s.drafter}${s.query ? ` for the query "${s.query}"` : ""}, ${when(s.created_at)}`],
     ];
-    const list = $("rule-facts");
-    list.replaceChildren();
-    for (const [label, value, cls] of rows) {
-      const key = label.replaceAll(" ", "-");
-      list.append(
-        el("dt", { text: label }),
-        el("dd", { class: cls || null, "data-testid": `rule-${key}`, text: value || "—" }),
-      );
-    }
+    showFacts(rows, "rule");
   }
 
   // A class learned from a user's answers about an object the knowledge base
@@ -266,13 +258,19 @@
       ["plan", l.plan.join("; ")],
       ["no longer assumed once accepted", l.unconfirmed.join("; ")],
     ];
+    showFacts(rows, "learned");
+  }
+
+  // The candidate's facts as a definition list: [label, value, class] rows,
+  // each value's test id named after its label.
+  function showFacts(rows, prefix) {
     const list = $("rule-facts");
     list.replaceChildren();
     for (const [label, value, cls] of rows) {
       const key = label.replaceAll(" ", "-");
       list.append(
         el("dt", { text: label }),
-        el("dd", { class: cls || null, "data-testid": `learned-${key}`, text: value || "—" }),
+        el("dd", { class: cls || null, "data-testid": `${prefix}-${key}`, text: value || "—" }),
       );
     }
   }
