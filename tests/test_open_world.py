@@ -372,3 +372,16 @@ def test_a_word_the_scene_lacks_is_answered_with_names_near_in_meaning(tutor: Lo
         assert report.status == "UNKNOWN"
         (question,) = report.questions
         assert question.kind == "where" and near in question.text, question.text
+
+
+def test_a_plan_names_an_open_world_object_by_its_class_words(tutor: LogicTutor) -> None:
+    # Board_1 is an 'IroningBoard': 'the ironing board' is it, as 'the
+    # counter top' is CounterTop_1.
+    world = "Board_1: IroningBoard; Iron_1: ClothesIron; Iron_1 isOn Board_1"
+    report = _verify(tutor, world, "go to the ironing board; switch on the clothes iron")
+    assert report.status == "UNKNOWN"
+    assert [t.step for t in report.trace][:2] == [1, 2]
+    assert report.dangerous_step == 2
+    assert "What is Board_1 made of? It touches a flame or a running heat source." in [
+        q.text for q in report.questions
+    ]

@@ -386,6 +386,10 @@ def test_phrasings_with_a_place(phrase: str) -> None:
         ("put_out(Candle_1)", "turn_off", ("Candle_1",)),
         ("set(Cup_1, Table_1)", "put", ("Cup_1", "Table_1")),
         ("2. Light the candle.", "turn_on", ("candle",)),
+        # Words of manner name nothing.
+        ("set the vinegar back on the shelf", "put", ("vinegar", "shelf")),
+        ("Then, grab the glass carefully", "pick", ("glass",)),
+        ("please blow out the candle", "turn_off", ("candle",)),
     ],
 )
 def test_everyday_lines(line: str, verb: str, args: tuple[str, ...]) -> None:

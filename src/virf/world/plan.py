@@ -320,6 +320,9 @@ _NUMBERING = re.compile(r"^\s*(?:step\s*)?\d+\s*[.):]\s*", re.IGNORECASE)
 _CALL = re.compile(r"^([A-Za-z_]+)\s*\((.*)\)\s*$")
 _CONNECTORS = {"in", "into", "inside", "on", "onto", "over", "to"}
 _ARTICLES = {"the", "a", "an"}
+# Words of manner in everyday lines ('put the vinegar back on the shelf',
+# 'carefully pick up the glass'): they name no object and change no action.
+_MANNER = {"back", "please", "carefully", "gently", "slowly", "quickly", "again", "then", "now"}
 # A word of an object name written in words ("dining", "Table", "watering-can").
 # Anything else (Apple_1, Mug2, "apple,") is a name on its own.
 _PLAIN_WORD = re.compile(r"^[A-Za-z]+(?:['-][A-Za-z]+)*$")
@@ -674,13 +677,18 @@ def parse_line(
         verb = found
     else:
         tokens = text.split()
+        # A line may open with a word of manner ('Please pick up the mug',
+        # 'Then go to the sink'), whatever its case.
+        while len(tokens) > 1 and tokens[0].lower().strip(",") in _MANNER:
+            tokens = tokens[1:]
         if not tokens:
             raise InputError(f"plan line {line_no}: empty action")
         m = _match(tokens)
         if m is None:
             raise _no_reading(tokens, text, line_no)
-        # Articles are dropped only in lower case: "A" may be an object's name.
-        words = [w for w in m.words if w not in _ARTICLES] or m.words
+        # Articles and manner words are dropped only in lower case: "A" or
+        # "Back" may be an object's name.
+        words = [w for w in m.words if w not in _ARTICLES and w not in _MANNER] or m.words
         verb, args, held, everyday = _read_words(m, words, text, line_no)
         cut = _place_cut(words)
         connector = words[cut].lower() if cut is not None else None

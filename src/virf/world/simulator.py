@@ -76,6 +76,7 @@ class Simulator:
             closed_world=scene.closed_world,
             unknown_contents=scene.unknown_contents,
             referents=scene.referents,
+            open_world=scene.open_world,
         )
 
     def _is_physical(self, classes: frozenset[str]) -> bool:

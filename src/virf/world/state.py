@@ -31,6 +31,9 @@ class WorldState:
     found: tuple[str, ...] = ()  # objects found so far, most recent last
     # The user's answers to ambiguity questions: term_key(word) -> instance.
     referents: Mapping[str, str] = field(default_factory=lambda: MappingProxyType({}))
+    # Open-world objects and the class names the scene wrote for them
+    # (Board_1 -> 'IroningBoard'): a plan may name one by that word.
+    open_world: Mapping[str, str] = field(default_factory=lambda: MappingProxyType({}))
 
     @property
     def last_found(self) -> str | None:
@@ -78,12 +81,17 @@ class WorldState:
             stem = _NUMBER.sub("", ind)
             if stem and stem != ind:
                 index.setdefault(term_key(stem), []).append(ind)
+            word = self.open_world.get(ind)
+            if word is not None and ind not in index.get(term_key(word), ()):
+                index.setdefault(term_key(word), []).append(ind)
         return index
 
     def named_stem(self, term: str) -> list[str]:
         """The numbered individuals whose name without its number ``term``
         spells: 'hair dryer' names HairDryer_1 and HairDryer_2, whatever
-        their classes (an object the knowledge base has no class for)."""
+        their classes (an object the knowledge base has no class for); and
+        the open-world objects of the class the scene wrote ('ironing board'
+        names Board_1, an 'IroningBoard')."""
         return list(self._by_stem.get(term_key(term), ()))
 
     def named(self, term: str) -> list[str]:
