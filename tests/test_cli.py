@@ -100,6 +100,7 @@ def test_kb_check(cli) -> None:
     result = cli("kb", "check")
     assert result.exit_code == 0, result.stdout
     assert "TBox consistent: yes" in result.stdout
+    assert "Compiled artifact: what the modules compile to" in result.stdout
     assert "Traceback" not in result.stderr
 
 

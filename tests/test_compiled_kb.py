@@ -125,3 +125,113 @@ def test_a_java_only_feature_without_java_names_what_to_install(tmp_path: Path) 
     lines = run.stderr.strip().splitlines()
     assert len(lines) == 1 and "openjdk-17-jre-headless" in lines[0], run.stderr
     assert "Traceback" not in run.stderr
+
+
+# ---------------------------------------------------------------------- a workspace's cache
+# A workspace's compiled artifact lives in its writable cache/ folder.  Its
+# digest names the modules it was compiled from, which anyone can copy into a
+# forged artifact; the cache is trusted only when this installation wrote it.
+
+
+def _workspace_artifact(root: Path) -> Path:
+    [path] = (root / "cache").glob("compiled-*.json")
+    return path
+
+
+def _without_rules(path: Path) -> None:
+    """Drop every Unsafe State Concept from a cached artifact, keeping its
+    digest (and whatever precedes the JSON document) as it was."""
+    text = path.read_text(encoding="utf-8")
+    start = text.index("{")
+    doc = json.loads(text[start:])
+    assert doc["vocabulary"]["uscs"]
+    doc["vocabulary"]["uscs"] = {}
+    path.write_text(text[:start] + json.dumps(doc), encoding="utf-8")
+
+
+def _walkthrough_status(kb: Path) -> str:
+    from virf.api import LogicTutor
+
+    tbox_module._load.cache_clear()  # a new process: the workspace is loaded again
+    report = LogicTutor(kb=kb).verify_files(WALKTHROUGH / "scene.json", WALKTHROUGH / "plan.txt")
+    return report.status
+
+
+@pytest.fixture
+def kitchen_workspace(tmp_path: Path) -> Path:
+    from virf.authoring.workspace import Workspace
+
+    ws = Workspace.init(tmp_path / "ws", "kitchen", starter=False)
+    ws.close()
+    return ws.root
+
+
+def test_a_tampered_workspace_cache_is_compiled_again(kitchen_workspace: Path, cli) -> None:
+    assert _walkthrough_status(kitchen_workspace) == "UNSAFE"
+    artifact = _workspace_artifact(kitchen_workspace)
+    # The cache this installation wrote is used: no Java on the next load.
+    tbox_module._load.cache_clear()
+    assert load_tbox(kb=kitchen_workspace).source == "artifact"
+    _without_rules(artifact)
+    assert _walkthrough_status(kitchen_workspace) == "UNSAFE"
+    assert load_tbox(kb=kitchen_workspace).source == "modules"
+    rules = len(load_tbox().vocabulary.uscs)
+    tbox_module._load.cache_clear()
+    _without_rules(artifact)
+    checked = cli("kb", "check", "--kb", kitchen_workspace, "--json")
+    assert checked.exit_code == 0, checked.output
+    assert json.loads(checked.output)["uscs"] == rules
+
+
+def test_a_workspace_cache_is_not_trusted_without_a_key_of_this_installation(
+    kitchen_workspace: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    blocked = tmp_path / "not-a-folder"
+    blocked.write_text("")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(blocked))  # no key can be kept there
+    assert _walkthrough_status(kitchen_workspace) == "UNSAFE"
+    tbox_module._load.cache_clear()
+    assert load_tbox(kb=kitchen_workspace).source == "modules"
+
+
+def test_kb_check_compares_the_artifact_with_the_modules(
+    cli, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import virf.ontology.check as check_module
+
+    doc = json.loads(kbc.artifact_path("paper").read_text(encoding="utf-8"))
+    doc["vocabulary"]["uscs"] = {}
+    forged = tbox_module.TBox(kbc.from_json(json.dumps(doc)))
+    monkeypatch.setattr(check_module, "load_tbox", lambda scenario=None, kb=None: forged)
+    checked = cli("kb", "check", "--scenario", "paper", "--json")
+    assert checked.exit_code == 1, checked.output
+    result = json.loads(checked.output)
+    assert result["artifact_matches_modules"] is False
+    assert result["artifact_differs_in"] == ["vocabulary.uscs"]
+    text = cli("kb", "check", "--scenario", "paper")
+    assert "Compiled artifact: DIFFERS from what the modules compile to, in vocabulary.uscs" in (
+        text.output
+    )
+
+
+def test_a_seal_opens_only_under_its_key_and_a_key_others_can_read_is_none(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from virf.ontology import seal
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    key = seal.local_key()
+    assert key is not None and seal.local_key() == key  # created once, then read
+    path = seal.key_path()
+    assert path == tmp_path / "virf" / "artifact.key"
+    assert oct(path.stat().st_mode & 0o777) == oct(0o600)
+    sealed = seal.seal('{"a": 1}\n', key)
+    assert seal.unseal(sealed, key) == '{"a": 1}\n'
+    assert seal.unseal(sealed.replace('"a": 1', '"a": 2'), key) is None
+    assert seal.unseal(sealed, bytes(32)) is None
+    assert seal.unseal('{"a": 1}\n', key) is None
+    path.chmod(0o644)  # others could read it, and forge seals
+    assert seal.local_key() is None
+    path.chmod(0o600)
+    path.write_bytes(b"short")
+    assert seal.local_key() is None

@@ -89,6 +89,17 @@ def kb_check(
             + (f": {', '.join(ev['without_evidence'][:8])}" if ev["neither"] else "")
             + ("…" if ev["neither"] > 8 else "")
         )
+        console.print(
+            "Compiled artifact: "
+            + (
+                "what the modules compile to"
+                if result["artifact_matches_modules"]
+                else "DIFFERS from what the modules compile to, in "
+                + ", ".join(result["artifact_differs_in"])
+                + " (rebuild it: 'make kb' for the built-in artifacts, delete the workspace's "
+                "cache folder for a workspace's)"
+            )
+        )
         console.print(f"Precondition definitions (simulator): {result['preconditions']}")
         console.print(f"Annotated background axioms: {result['background_axioms']}")
         fe = result["fast_engine"]
@@ -104,7 +115,12 @@ def kb_check(
                 "Fast engine: OUTSIDE its fragment, every question goes to the reference "
                 f"engine: {'; '.join(fe['problems'][:3])}"
             )
-    if not result["consistent"] or result["unsatisfiable_uscs"] or result["unsatisfiable_classes"]:
+    if (
+        not result["consistent"]
+        or result["unsatisfiable_uscs"]
+        or result["unsatisfiable_classes"]
+        or not result["artifact_matches_modules"]
+    ):
         raise typer.Exit(1)
 
 

@@ -4,18 +4,20 @@ the TBox is added by :func:`virf.api.check_knowledge_base`."""
 
 from __future__ import annotations
 
+import json
 from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
 from virf.ontology.owlapi import make_reasoner
-from virf.ontology.tbox import Vocabulary, load_tbox
+from virf.ontology.tbox import TBox, Vocabulary, load_tbox
 
 
 def check_tbox(scenario: str | None = None, kb: str | Path | None = None) -> dict[str, Any]:
     tbox = load_tbox(scenario, kb=kb)
     scenario = tbox.scenario
     owl = tbox.owl  # starts the JVM
+    artifact_differs = _artifact_differs(tbox)
     vocab = tbox.vocabulary
     reasoner = make_reasoner("hermit", owl.root)
     try:
@@ -69,7 +71,34 @@ def check_tbox(scenario: str | None = None, kb: str | Path | None = None) -> dic
         ],
         "usc_by_category": {k: dict(v) for k, v in sorted(by_category.items())},
         "evidence": evidence,
+        # What verification reads (the compiled artifact) is what the modules
+        # compile to; else the figures above describe modules no verdict uses.
+        "artifact_matches_modules": not artifact_differs,
+        "artifact_differs_in": artifact_differs,
     }
+
+
+def _artifact_differs(tbox: TBox) -> list[str]:
+    """The parts of the artifact ``tbox`` was loaded from that differ from
+    what its modules compile to now (none when it was compiled in this
+    process): a built-in artifact edited inside the installed package, or
+    one a stale build left behind."""
+    if tbox.source == "modules":
+        return []
+    from virf.ontology.compile import compile_kb, to_json
+
+    loaded = json.loads(to_json(tbox.compiled))
+    built = json.loads(to_json(compile_kb(tbox.owl, tbox.compiled.digest)))
+    out = []
+    for part in sorted(set(loaded) | set(built)):
+        a, b = loaded.get(part), built.get(part)
+        if a == b:
+            continue
+        if isinstance(a, dict) and isinstance(b, dict):
+            out += [f"{part}.{k}" for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
+        else:
+            out.append(part)
+    return out
 
 
 MODELLING_DECISION = "common-sense modelling decision"

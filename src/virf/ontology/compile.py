@@ -8,7 +8,10 @@ the TBox as fast-engine terms) is written to ``compiled/<scenario>.json``.
 
 The artifact names a digest of the module files it came from; a module edited
 since is noticed when the knowledge base loads, and the modules are compiled
-in-process instead (see :func:`virf.ontology.tbox.load_tbox`).
+in-process instead (see :func:`virf.ontology.tbox.load_tbox`).  The digest is
+a cache key, not a proof: a workspace's artifact, in a folder anyone with the
+workspace can write, is also sealed (:mod:`virf.ontology.seal`), and
+``virf kb check`` compiles the modules and compares.
 
     python -m virf.ontology.compile          # rewrite every artifact
     python -m virf.ontology.compile --check  # exit 1 when one is out of date

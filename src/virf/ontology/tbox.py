@@ -8,7 +8,10 @@ The OWLAPI ontology itself (:attr:`TBox.owl`) is loaded only when something
 asks for it: a reference engine, the fast engine's fallback, ``virf kb
 check``.  When a module was edited after the artifact was written, or extra
 modules are imported, the modules are compiled in-process instead, which
-needs Java; an answer is never built from an out-of-date artifact.
+needs Java; an answer is never built from an out-of-date artifact.  A
+workspace's compiled modules are cached in its folder under a seal of this
+user's key (:mod:`virf.ontology.seal`): a cache without a valid seal is
+compiled again, never trusted.
 """
 
 from __future__ import annotations
@@ -339,19 +342,29 @@ def _load(
     scenario: str, extras: tuple[str, ...], extras_digest: str, cache_dir: str | None
 ) -> TBox:
     from virf.ontology.compile import artifact_path, compile_kb, from_json, source_digest, to_json
+    from virf.ontology.seal import local_key, seal, unseal
 
     digest = source_digest()
+    # A workspace's artifact sits in its own writable cache folder, where its
+    # digest is no proof of anything: it is used only under a seal of this
+    # user's key (virf.ontology.seal), else compiled again.  The built-in
+    # artifacts ship inside the package, trusted like its code.
+    key: bytes | None = None
+    artifact: Path | None = artifact_path(scenario)
     if extras:
         digest = f"{digest}+{extras_digest}"
-        artifact = Path(cache_dir) / f"compiled-{scenario}.json" if cache_dir else None
-    else:
-        artifact = artifact_path(scenario)
+        key = local_key() if cache_dir is not None else None
+        artifact = None
+        if cache_dir is not None and key is not None:
+            artifact = Path(cache_dir) / f"compiled-{scenario}.json"
     if artifact is not None:
         try:
-            kb = from_json(artifact.read_text(encoding="utf-8"))
-        except (OSError, ValueError, KeyError, TypeError):
-            kb = None  # missing or unreadable: compile the modules instead
-        if kb is not None and kb.digest == digest:
+            text = artifact.read_text(encoding="utf-8")
+            opened = unseal(text, key) if key is not None else text
+            kb = from_json(opened) if opened is not None else None
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):
+            kb = None  # missing, unreadable or unsealed: compile the modules instead
+        if kb is not None and kb.digest == digest and kb.scenario == scenario:
             tbox = TBox(kb)
             tbox.extra_modules = extras
             return tbox
@@ -360,10 +373,10 @@ def _load(
     owl = OwlModules(scenario, ontology_dir(), extras)
     tbox = TBox(compile_kb(owl, digest), owl)
     tbox.extra_modules = extras
-    if extras and artifact is not None:
+    if key is not None and artifact is not None:
         try:
             artifact.parent.mkdir(parents=True, exist_ok=True)
-            write_atomically(artifact, to_json(tbox.compiled))
+            write_atomically(artifact, seal(to_json(tbox.compiled), key))
         except OSError:
             pass  # a cache: failing to write it only costs the next load a compile
     return tbox
