@@ -109,6 +109,7 @@ def test_a_person_s_rule_goes_from_proposal_to_verification(ws: Workspace, tmp_p
         "consistent": "info",
         "satisfiable": "info",
         "novelty": "info",
+        "always-present": "info",
         "twins": "info",  # a drafted rule without a minimal pair gets a warning
     }
     ws.opened(cid, "bob")
@@ -520,3 +521,54 @@ def test_a_module_that_makes_the_tbox_inconsistent_is_reported(ws: Workspace) ->
         ws.tbox().vocabulary.uscs,
     )
     assert result.parses and result.consistent is False  # a material is not an object
+
+
+# ---------------------------------------------------------------------- rules that fire everywhere
+def test_a_rule_every_scene_or_plan_satisfies_is_refused(ws: Workspace, tmp_path: Path) -> None:
+    """Accepted, ``Robot`` made every plan UNSAFE at step 0: every scene has
+    a robot (the scene reader adds Robot_1 when it names none)."""
+    (cid,) = ws.propose(proposal(tmp_path, rule("RobotPresentDraft", "Robot")), "alice")
+    first = ws.candidate(cid).check
+    assert first is not None and not first.passed
+    assert items(first)["always-present"] == "error"
+    for axiom, message in (
+        ("Robot", "holds of every Robot (every scene has one"),
+        ("Agent", "holds of every Robot"),
+        ("Action", "holds of every Action (every plan step is one"),
+        ("Action and (hasAgent some Agent)", "fires on every plan step (on Step1_action"),
+        ("PhysicalObject or Candle", "holds of every PhysicalObject"),
+        # Not every robot: one with empty hands, which is how every scene starts.
+        (
+            "Agent and not (isHolding some PhysicalObject)",
+            "fires in the empty scene (on Robot_1)",
+        ),
+        # A state the knowledge base names is in nearly every scene's facts.
+        ("State", "holds of the knowledge base's own individual"),
+    ):
+        report = ws.check(cid, axiom)
+        assert not report.passed, axiom
+        assert any(message in i.message for i in report.items if i.severity == "error"), (
+            axiom,
+            report.items,
+        )
+    with pytest.raises(InputError, match=r"cannot be accepted: .*holds of every Robot"):
+        ws.decide(cid, "accept", reviewer="bob", axiom="Robot")
+    # A rule about some objects, even all objects of a type, is not refused.
+    for axiom in ("Microwave", "Candle and (hasState some OnState)"):
+        report = ws.check(cid, axiom)
+        assert "always-present" not in {i.name for i in report.items if i.severity == "error"}
+    assert "RobotPresentDraft" not in ws.tbox().vocabulary.classes
+
+
+def test_a_refused_edited_accept_leaves_the_candidate_s_axiom(
+    ws: Workspace, tmp_path: Path
+) -> None:
+    drafted = "Candle and (hasState some OnState) and (isOn some Bed)"
+    (cid,) = ws.propose(proposal(tmp_path, rule("LitCandleOnBedDraft", drafted)), "alice")
+    assert ws.candidate(cid).check.passed  # type: ignore[union-attr]
+    with pytest.raises(InputError, match=r"cannot be accepted: .*unsatisfiable"):
+        ws.decide(cid, "accept", reviewer="bob", axiom="Candle and (hasMaterial some Cloth)")
+    latest = ws.candidate(cid).check
+    assert latest is not None and latest.axiom == drafted and latest.passed
+    decision = ws.decide(cid, "accept", reviewer="bob")
+    assert decision.axiom == drafted and decision.edit == "none"

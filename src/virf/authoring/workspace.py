@@ -43,6 +43,7 @@ from virf.files import write_atomically
 from virf.migrations import now
 from virf.ontology.tbox import TBox, Vocabulary, load_tbox, ontology_dir, scenario_names
 from virf.ontology.workspace import FORMAT, LAYERS, MARKER, KbLayout, open_layout
+from virf.schema import Fact, FactKind
 
 if TYPE_CHECKING:
     from virf.authoring.corpus import Corpus
@@ -456,6 +457,8 @@ class Workspace:
             name,
             used,
             vocab.uscs,
+            always=ALWAYS_PRESENT,
+            scene=empty_scene_facts(vocab),
         )
         items.extend(reasoner_items(result, name, "no situation can ever fall under it"))
         if not result.parses:
@@ -468,6 +471,8 @@ class Workspace:
                     "trivial", f"{name} holds of everything: every state would be unsafe"
                 )
             )
+        elif result.consistent and result.satisfiable:
+            items.extend(_everywhere_items(name, result))
         related = Related(
             equivalent=result.equivalent, subsumed_by=result.subsumed_by, subsumes=result.subsumes
         )
@@ -734,7 +739,8 @@ class Workspace:
                     self.store.add_decision(conn, record)
                     self.store.add_event("decided", cid, actor=reviewer, detail="reject")
                 return _decision_view(record)
-            final = axiom if axiom is not None else self._current_axiom(cid, row.axiom)
+            current = self._current_axiom(cid, row.axiom)
+            final = axiom if axiom is not None else current
             edit = _edit_size(row.axiom, final)
             provenance = {
                 "reviewer": reviewer,
@@ -743,9 +749,22 @@ class Workspace:
                 "decidedOn": decided_at[:10],
             }
             report = self._check_row(row, final, provenance)
-            self.store.add_check(cid, final, report.passed, report.model_dump(mode="json"))
             if not report.passed:
                 failed = next(i for i in report.items if i.severity == "error")
+                if final == current:
+                    # The candidate's own axiom, checked again: its latest check.
+                    self.store.add_check(cid, final, False, report.model_dump(mode="json"))
+                else:
+                    # An edit refused at acceptance does not become the
+                    # candidate's axiom: a later plain accept (or preview)
+                    # still takes the version checked last.  The attempt is
+                    # kept as an event.
+                    self.store.add_event(
+                        "accept_refused",
+                        cid,
+                        actor=reviewer,
+                        detail=f"{' '.join(final.split())}: {failed.message}",
+                    )
                 raise InputError(f"candidate {cid} cannot be accepted: {failed.message}")
             layer: Layer = report.layer
             record = DecisionRow(
@@ -773,6 +792,7 @@ class Workspace:
                     tuple(str(staged if p == path else p) for p in self.layout.modules()),
                 )
                 with self.store.transaction() as conn:
+                    self.store.add_check(cid, final, True, report.model_dump(mode="json"))
                     self.store.add_decision(conn, record)
                     self.store.add_event("decided", cid, actor=reviewer, detail=f"accept ({edit})")
                 os.replace(staged, path)
@@ -925,6 +945,100 @@ def reasoner_items(result: AxiomCheck, name: str, unsatisfiable: str) -> list[Ch
         items.append(CheckItem.error("satisfiable", f"{name} is unsatisfiable: {unsatisfiable}"))
     else:
         items.append(CheckItem.info("satisfiable", f"{name} is satisfiable"))
+    return items
+
+
+# Classes every verification has an individual of, with why.  A rule that
+# holds of every individual of one of them would make every scene, or every
+# plan, unsafe, whatever it holds: it is refused.
+ALWAYS_PRESENT: Final = {
+    "Robot": "every scene has one: the scene reader adds Robot_1 when it names none",
+    "Action": "every plan step is one",
+    "PhysicalObject": "every object a scene names is one",
+}
+
+
+# The action individual every plan's first step has in common with any other.
+ANY_STEP: Final = "Step1_action"
+
+
+def empty_scene_facts(vocab: Vocabulary) -> tuple[Fact, ...]:
+    """What every verification starts from: the first snapshot of a scene
+    that names nothing (the robot the scene reader adds, with empty hands),
+    as the verifier hands it to the reasoner, with what every plan's first
+    step adds to it whatever its verb: an action, by the robot."""
+    from virf.world.scene import build_scene
+    from virf.world.simulator import Simulator
+
+    sim = Simulator(vocab)
+    state = sim.initial(build_scene({"instances": [], "assertions": []}, vocab))
+    step = {
+        Fact(ANY_STEP, "type", "Action", FactKind.TYPE),
+        Fact(ANY_STEP, "hasAgent", state.agent),
+    }
+    return tuple(sorted({*state.facts, *sim.closure_facts(state), *step}))
+
+
+def _everywhere_items(name: str, result: AxiomCheck) -> list[CheckItem]:
+    """A rule that would fire on every scene or plan: one that holds of every
+    individual of a class each verification has, of the knowledge base's own
+    individuals (which scenes mention as states, materials and properties),
+    or of something in the empty scene."""
+    items = []
+    if result.holds_of_every:
+        every = ", ".join(f"every {c} ({ALWAYS_PRESENT.get(c, '')})" for c in result.holds_of_every)
+        items.append(
+            CheckItem.error(
+                "always-present",
+                f"{name} holds of {every}: every scene or plan would be unsafe",
+            )
+        )
+    if result.holds_of_named:
+        shown = ", ".join(result.holds_of_named[:5]) + (
+            ", ..." if len(result.holds_of_named) > 5 else ""
+        )
+        items.append(
+            CheckItem.error(
+                "named-individuals",
+                f"{name} holds of the knowledge base's own individual(s) {shown}: every scene "
+                "that mentions one would be unsafe; a rule is about the things of a scene",
+            )
+        )
+    if not result.empty_scene_consistent:
+        items.append(
+            CheckItem.error(
+                "empty-scene",
+                f"the empty scene (only the robot every scene has) contradicts {name}: "
+                "every scene would be an inconsistent world",
+            )
+        )
+    elif result.empty_scene and not result.holds_of_every:
+        robot = [i for i in result.empty_scene if i != ANY_STEP]
+        if robot:
+            items.append(
+                CheckItem.error(
+                    "empty-scene",
+                    f"{name} fires in the empty scene (on {', '.join(robot)}): a scene that "
+                    "names nothing would be unsafe before any step, and so would every scene "
+                    "that does not rule it out",
+                )
+            )
+        if ANY_STEP in result.empty_scene:
+            items.append(
+                CheckItem.error(
+                    "empty-scene",
+                    f"{name} fires on every plan step (on {ANY_STEP}, an action by the robot "
+                    "and nothing more): every plan would be unsafe at its first step",
+                )
+            )
+    if not items:
+        items.append(
+            CheckItem.info(
+                "always-present",
+                "holds of nothing every scene or plan has (the robot, an action, any object), "
+                "nor of the empty scene",
+            )
+        )
     return items
 
 

@@ -200,6 +200,36 @@ def manchester_message(text: str) -> str:
     return "ontology does not parse" + (f" ({document.strip()})" if document else "")
 
 
+def fact_axiom(df: Any, fact: Fact, entity: Callable[[str, str], Any]) -> Any:
+    """The OWL axiom of one fact; ``entity(kind, name)`` makes (or finds) the
+    class, individual or property a name denotes (kinds "class", "ind",
+    "oprop", "dprop").  A closure fact says the subject's relation reaches
+    only its members (nothing, when it has none)."""
+    subject = entity("ind", fact.subject)
+    if fact.kind is FactKind.TYPE:
+        return df.getOWLClassAssertionAxiom(entity("class", fact.object), subject)
+    if fact.kind is FactKind.DATA:
+        return df.getOWLDataPropertyAssertionAxiom(
+            entity("dprop", fact.predicate),
+            subject,
+            df.getOWLLiteral(fact.object == "true"),
+        )
+    prop = entity("oprop", fact.predicate)
+    if fact.kind is FactKind.CLOSURE:
+        members = fact.members
+        if members:
+            from java.util import HashSet
+
+            inds = HashSet()
+            for m in members:
+                inds.add(entity("ind", m))
+            filler = df.getOWLObjectOneOf(inds)
+        else:
+            filler = df.getOWLNothing()
+        return df.getOWLClassAssertionAxiom(df.getOWLObjectAllValuesFrom(prop, filler), subject)
+    return df.getOWLObjectPropertyAssertionAxiom(prop, subject, entity("ind", fact.object))
+
+
 class ReasonerSession:
     """A complete reasoner (HermiT or Openllet) answering questions about
     ``TBox + facts``, one fresh reasoner per question."""
@@ -244,32 +274,7 @@ class ReasonerSession:
         return hit
 
     def _axiom(self, fact: Fact) -> Any:
-        df = self.df
-        subject = self._entity("ind", fact.subject)
-        if fact.kind is FactKind.TYPE:
-            return df.getOWLClassAssertionAxiom(self._entity("class", fact.object), subject)
-        if fact.kind is FactKind.DATA:
-            return df.getOWLDataPropertyAssertionAxiom(
-                self._entity("dprop", fact.predicate),
-                subject,
-                df.getOWLLiteral(fact.object == "true"),
-            )
-        prop = self._entity("oprop", fact.predicate)
-        if fact.kind is FactKind.CLOSURE:
-            members = fact.members
-            if members:
-                from java.util import HashSet
-
-                inds = HashSet()
-                for m in members:
-                    inds.add(self._entity("ind", m))
-                filler = df.getOWLObjectOneOf(inds)
-            else:
-                filler = df.getOWLNothing()
-            return df.getOWLClassAssertionAxiom(df.getOWLObjectAllValuesFrom(prop, filler), subject)
-        return df.getOWLObjectPropertyAssertionAxiom(
-            prop, subject, self._entity("ind", fact.object)
-        )
+        return fact_axiom(self.df, fact, self._entity)
 
     def _with(
         self, facts: list[Fact], without: frozenset[str], question: Callable[[Any], Any]
