@@ -272,6 +272,26 @@ def test_html(tmp_path: Path) -> None:
         assert junk not in everything
 
 
+def test_only_a_web_address_is_kept_as_a_document_s_url(tmp_path: Path) -> None:
+    """A page's own canonical link is not the user's word: one that is not
+    an http(s) address is dropped, not refused.  A documents cache that
+    holds one is read again from the files."""
+    for href in ("javascript:alert(1)", "/candles", "JaVaScRiPt:alert(1)"):
+        page = HTML.replace("https://example.org/candles", href)
+        assert read_document(_write(tmp_path, "Candles.html", page)).url == ""
+    upper = read_document(_write(tmp_path, "k.md", KITCHEN.replace("https:", "HTTPS:")))
+    assert upper.url == "HTTPS://example.org/kitchen"
+    corpus = Corpus(tmp_path / "corpus", tmp_path / "cache")
+    corpus.add([_write(tmp_path, "kitchen.md", KITCHEN)])
+    assert [d.url for d in corpus.documents()] == ["https://example.org/kitchen"]  # cached
+    cache = tmp_path / "cache" / DOCUMENTS_CACHE
+    data = json.loads(cache.read_text("utf-8"))
+    data["documents"][0]["url"] = "javascript:alert(1)"
+    cache.write_text(json.dumps(data), "utf-8")
+    fresh = Corpus(tmp_path / "corpus", tmp_path / "cache")
+    assert [d.url for d in fresh.documents()] == ["https://example.org/kitchen"]
+
+
 def test_plain_text_headings_and_body(tmp_path: Path) -> None:
     doc = read_document(_write(tmp_path, "heaters.txt", TEXT))
     assert doc.title == "Space heater safety"
@@ -317,6 +337,13 @@ def test_ids_are_stable(tmp_path: Path) -> None:
         ),
         ("nested.md", b"---\ntopics\n---\n\ntext\n", "front matter takes 'key: value' lines"),
         ("badid.md", b"---\nid: Grease Fires\n---\n\nsome text\n", "e.g. 'grease-fires'"),
+        (
+            "script.md",
+            b"---\nurl: javascript:alert(document.cookie)\n---\n\nsome text\n",
+            "url 'javascript:alert(document.cookie)' is not a web address",
+        ),
+        ("data.md", b"---\nurl: data:text/html,hi\n---\n\nsome text\n", "not a web address"),
+        ("nohost.md", b"---\nurl: https:///path\n---\n\nsome text\n", "not a web address"),
         ("junk.pdf", b"%PDF-1.4\nnot really a pdf", "damaged or not a PDF"),
         ("blank.pdf", _pdf([[]]), "no extractable text"),
         ("blank.html", b"<html><body><nav>menu</nav></body></html>", "has no text to index"),

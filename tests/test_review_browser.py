@@ -214,3 +214,27 @@ def test_review_over_the_real_workspace(browser: Browser, tmp_path: Path) -> Non
     report = tutor.verify(scene, ["find StoveKnob", "turn_on StoveKnob"])
     assert report.status == "UNSAFE", report.reason
     assert [v.id for v in report.violations] == ["TowelOnLitBurnerDanger"]
+
+
+def test_only_web_addresses_become_links(browser: Browser) -> None:
+    """A document's url that is not http(s) (``javascript:`` would run in
+    the page when clicked, were it not for the CSP) is shown as text."""
+    from playwright.sync_api import expect
+    from test_review_api import FakeWorkspace, found
+
+    ws = FakeWorkspace()
+    hostile = ("javascript:alert(document.domain)", "data:text/html,hi", "//evil.example/x")
+    evidence = tuple(
+        found(f"nfpa-cooking-safety#{n}").model_copy(update={"url": url})
+        for n, url in enumerate((*hostile, "https://www.nfpa.org/cooking"), start=1)
+    )
+    ws.add("PaperTowelOnBurnerDanger", evidence=evidence)
+    with serving(ws, "ana") as url, page_at(browser, url) as page:
+        items = page.get_by_test_id("evidence-item")
+        expect(items).to_have_count(4)
+        for n in range(3):
+            expect(items.nth(n)).to_contain_text("Cooking safety")
+            expect(items.nth(n).locator("a")).to_have_count(0)
+        link = items.nth(3).locator("a")
+        expect(link).to_have_attribute("href", "https://www.nfpa.org/cooking")
+        expect(link).to_have_text("Cooking safety")

@@ -56,6 +56,7 @@ from virf.authoring.documents import (
     read_document,
     read_document_bytes,
     shown,
+    web_address,
 )
 from virf.errors import InputError, clip
 
@@ -591,11 +592,14 @@ def _document_from(data: dict[str, Any], folder: Path) -> Document:
     name = str(data["path"])
     if "/" in name or "\\" in name or name.startswith("."):
         raise ValueError("not a corpus file name")
+    url = str(data["url"])
+    if url and not web_address(url):
+        raise ValueError("not a web address")  # not what reading the file gives: read it again
     return Document(
         id=str(data["id"]),
         title=str(data["title"]),
         publisher=str(data["publisher"]),
-        url=str(data["url"]),
+        url=url,
         kind=str(data["kind"]),
         path=str(folder / name),
         rooms=tuple(str(r) for r in data["rooms"]),

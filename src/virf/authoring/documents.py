@@ -27,6 +27,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
+from urllib.parse import urlsplit
 
 from virf.errors import (
     MAX_FILE_BYTES,
@@ -107,6 +108,17 @@ def shown(path: Path | str, limit: int = 80) -> str:
     return text if len(text) <= limit else "..." + text[-(limit - 3) :]
 
 
+def web_address(url: str) -> bool:
+    """Whether ``url`` is an absolute http(s) address with a host: the only
+    kind of address a document may give (a ``javascript:`` or ``data:`` one
+    would run in the review page were it a link)."""
+    try:
+        parts = urlsplit(url)
+    except ValueError:
+        return False
+    return parts.scheme.lower() in ("http", "https") and bool(parts.hostname)
+
+
 def document_id_for(path: Path) -> str:
     """The id of a document without front matter: its file stem as a slug."""
     return slug(path.stem) or "document-" + hashlib.sha256(path.stem.encode()).hexdigest()[:8]
@@ -126,6 +138,14 @@ def read_document(path: Path) -> Document:
     }[kind]
     parsed = reader(path)
     meta = parsed.meta
+    given = _one_line(meta.get("url", ""))
+    if given and not web_address(given):
+        # Shown as a link on the review page and written into every rule's
+        # :source that cites the document: only a page's address.
+        raise InputError(
+            f"document {shown(path)}: url '{clip(given)}' is not a web address; give the "
+            "page's http:// or https:// address, or leave url out"
+        )
     doc_id = meta.get("id") or document_id_for(path)
     passages = _passages(doc_id, parsed.blocks)
     if not passages:
@@ -341,7 +361,10 @@ def _read_html(path: Path) -> _Parsed:
     soup = BeautifulSoup(raw, "html.parser")
     title = _one_line(soup.title.get_text(" ")) if soup.title else ""
     publisher = _meta(soup, "og:site_name") or _meta(soup, "author")
-    url = _link_canonical(soup) or _meta(soup, "og:url")
+    # The page's own address, when it states one that is a web address (a
+    # relative or "javascript:" one is dropped: the page's markup is not the
+    # user's word, as a front matter's url is).
+    url = next((u for u in (_link_canonical(soup), _meta(soup, "og:url")) if web_address(u)), "")
     for tag in soup.find_all(list(_DROP)):
         tag.decompose()
     root = soup.find("main") or soup.find("article") or soup.find("body") or soup

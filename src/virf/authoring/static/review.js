@@ -88,6 +88,20 @@
     return node;
   }
 
+  // The address of a web page, or null: only an absolute http(s) URL becomes
+  // a link (a "javascript:" or "data:" one would run in the page's origin).
+  function webAddress(url) {
+    if (typeof url !== "string" || !url) return null;
+    try {
+      const parsed = new URL(url);
+      return (parsed.protocol === "http:" || parsed.protocol === "https:") && parsed.host
+        ? parsed.href
+        : null;
+    } catch {
+      return null; // relative or malformed: no base to resolve it against
+    }
+  }
+
   function badge(status) {
     return el("span", { class: `badge ${status}`, "data-testid": "status-badge", text: status });
   }
@@ -310,8 +324,9 @@
         );
         continue;
       }
-      const title = e.url
-        ? el("a", { href: e.url, rel: "noreferrer noopener", target: "_blank", text: e.document_title || e.document_id })
+      const href = webAddress(e.url);
+      const title = href
+        ? el("a", { href, rel: "noreferrer noopener", target: "_blank", text: e.document_title || e.document_id })
         : el("strong", { text: e.document_title || e.document_id });
       list.append(
         el(
