@@ -158,8 +158,11 @@ def _walkthrough_status(kb: Path) -> str:
 
 
 @pytest.fixture
-def kitchen_workspace(tmp_path: Path) -> Path:
+def kitchen_workspace(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     from virf.authoring.workspace import Workspace
+
+    # This user's sealing key, kept apart from the one of whoever runs the tests.
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "user-cache"))
 
     ws = Workspace.init(tmp_path / "ws", "kitchen", starter=False)
     ws.close()
