@@ -23,6 +23,9 @@ from virf.database import shown
 from virf.errors import EnvironmentProblem
 from virf.planner import MIGRATIONS, Migration, RunLog
 
+# A service without a key answers to this machine's names only.
+LOCAL = "http://127.0.0.1"
+
 # A migration every dialect reads: what a later VIRF might add.
 LATER = Migration(
     "0099_test_notes",
@@ -177,7 +180,7 @@ def test_service_runs_are_recorded_in_the_shared_log(pg: str) -> None:
 
     app = create_app(planner=f"replay:{ROOT / 'examples/dialogue/replay.jsonl'}", run_log=pg)
     scene = json.loads((ROOT / "examples/dialogue/scene.json").read_text())
-    with TestClient(app) as client:
+    with TestClient(app, base_url=LOCAL) as client:
         started = client.post(
             "/v1/plan",
             json={
@@ -222,7 +225,7 @@ def test_any_worker_shows_streams_and_answers_a_run(target: str, tmp_path: Path)
     # rules also find the answered bowl of liquid left heating at the plan's end).
     one = create_app(scenario="paper", planner=f"replay:{replay}", run_log=target)
     two = create_app(scenario="paper", planner=f"replay:{replay}", run_log=target)
-    with TestClient(one) as first, TestClient(two) as second:
+    with TestClient(one, base_url=LOCAL) as first, TestClient(two, base_url=LOCAL) as second:
         started = first.post(
             "/v1/plan",
             json={
@@ -249,7 +252,7 @@ def test_any_worker_shows_streams_and_answers_a_run(target: str, tmp_path: Path)
         there = second.get(f"/v1/runs/{run_id}").json()
         assert there == first.get(f"/v1/runs/{run_id}").json()
         assert there["state"] == "done" and there["result"]["outcome"] == "APPROVED", there
-    with TestClient(create_app(run_log=target)) as third:
+    with TestClient(create_app(run_log=target), base_url=LOCAL) as third:
         assert third.get("/v1/runs/nothing").status_code == 404
 
 

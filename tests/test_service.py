@@ -16,17 +16,19 @@ from fastapi.testclient import TestClient
 from virf.service.app import MAX_REQUEST_BYTES, create_app
 
 WALK = EXAMPLES_DIR / "walkthrough"
+# A service without a key answers to this machine's names only.
+LOCAL = "http://127.0.0.1"
 
 
 @pytest.fixture(scope="module")
 def client() -> TestClient:
-    return TestClient(create_app())
+    return TestClient(create_app(), base_url=LOCAL)
 
 
 @pytest.fixture(scope="module")
 def paper_client() -> TestClient:
     """The service on the paper's rules (scenario ``paper``), for the paper's examples."""
-    return TestClient(create_app(scenario="paper"))
+    return TestClient(create_app(scenario="paper"), base_url=LOCAL)
 
 
 def body(case: Path, **extra: object) -> dict[str, object]:
@@ -102,7 +104,7 @@ def test_limits(client: TestClient) -> None:
 
 
 def test_a_failed_verification_is_an_error_report_never_safe() -> None:
-    slow = TestClient(create_app(timeout_s=1e-9))
+    slow = TestClient(create_app(timeout_s=1e-9), base_url=LOCAL)
     report = slow.post("/v1/verify", json=body(WALK)).json()
     assert report["status"] == "ERROR" and "timed out" in report["reason"]
 
