@@ -6,6 +6,8 @@ planners a client may name, who may reach it, and the shape of every error.
   never verified as whichever value came last.
 * The body limit counts the bytes read, whatever the framing: a small
   Content-Length over a chunked body changes nothing.
+* A client names only planners the server was started with; the path of a
+  replay it names is never opened.
 * A keyless service answers only to this machine's names (Host, Origin).
 * Every 4xx is ``{"status": "BAD_INPUT", "error": one line}``, FastAPI's own
   404 and 405 included; an Authorization header without ``Bearer`` is no key.
@@ -15,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import re
 import select
 import socket
 from collections.abc import Callable, Iterator
@@ -30,6 +33,8 @@ from fastapi.testclient import TestClient
 from virf.service.app import MAX_REQUEST_BYTES, create_app
 
 LOCAL = "http://127.0.0.1"
+DIALOGUE = EXAMPLES_DIR / "dialogue"
+DIALOGUE_REPLAY = f"replay:{DIALOGUE / 'replay.jsonl'}"
 
 # A fork inside a running toaster: UNSAFE at step 0, whatever the plan does.
 DANGER: list[dict[str, str]] = [
@@ -214,7 +219,68 @@ def test_a_real_server_stops_reading_a_chunked_body_at_the_limit() -> None:
     assert json.loads(body) == {"status": "BAD_INPUT", "error": "request body larger than 8 MiB"}
 
 
-# ------------------------------------------------------------------ 5. hosts
+# ------------------------------------------------------------ 5. planners, hosts
+@pytest.fixture
+def no_apprentice(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Fail any attempt to make an apprentice: the path must not be touched."""
+
+    def refuse(*args: object, **kwargs: object) -> None:
+        raise AssertionError(f"make_apprentice was called with {args}")
+
+    monkeypatch.setattr("virf.service.runs.make_apprentice", refuse)
+
+
+def plan_body(planner: str) -> dict[str, object]:
+    scene = json.loads((DIALOGUE / "scene.json").read_text())
+    return {"scene": scene, "instruction": "Go.", "planner": planner, "task_id": "x"}
+
+
+def test_a_client_cannot_name_a_path_for_the_server_to_open(
+    client: TestClient, tmp_path: Path, no_apprentice: None
+) -> None:
+    secret = tmp_path / "secret.json"
+    secret.write_text(json.dumps({"password_hash": "x"}))
+    answers = []
+    for path in (secret, tmp_path, tmp_path / "missing.jsonl", Path("/etc/passwd")):
+        got = client.post("/v1/plan", json=plan_body(f"replay:{path}"))
+        answers.append(re.sub(r"'[^']*'", "'...'", error_of(got, 403), count=1))
+    assert len(set(answers)) == 1, answers  # nothing tells the paths apart
+    assert "password_hash" not in answers[0]
+    assert "--planner" in answers[0]
+
+
+def test_only_the_planners_the_server_runs_may_be_named(tmp_path: Path) -> None:
+    other = tmp_path / "other.jsonl"
+    app = create_app(planners=[DIALOGUE_REPLAY, "openai:gpt-4o-mini"])
+    local = TestClient(app, base_url=LOCAL)
+    refused = error_of(local.post("/v1/plan", json=plan_body(f"replay:{other}")), 403)
+    assert DIALOGUE_REPLAY in refused and "openai:gpt-4o-mini" in refused
+    assert error_of(local.post("/v1/plan", json=plan_body("openai:gpt-5")), 403)
+    named = local.post("/v1/plan", json=plan_body(DIALOGUE_REPLAY))
+    assert named.status_code == 202, named.text
+    # The first is the default of a run that names none.
+    body = plan_body(DIALOGUE_REPLAY)
+    del body["planner"]
+    assert local.post("/v1/plan", json=body).status_code == 202
+    assert local.get("/v1/health").json()["planners"] == [DIALOGUE_REPLAY, "openai:gpt-4o-mini"]
+
+
+def test_serve_takes_several_planners(
+    monkeypatch: pytest.MonkeyPatch, cli: Callable[..., Result]
+) -> None:
+    seen: dict[str, Any] = {}
+
+    def fake_create_app(**options: Any) -> object:
+        seen.update(options)
+        return object()
+
+    monkeypatch.setattr("virf.service.app.create_app", fake_create_app)
+    monkeypatch.setattr("uvicorn.run", lambda *a, **k: None)
+    got = cli("serve", "--planner", DIALOGUE_REPLAY, "--planner", "openai:gpt-4o-mini")
+    assert got.exit_code == 0, got.output
+    assert seen["planners"] == [DIALOGUE_REPLAY, "openai:gpt-4o-mini"]
+
+
 def test_a_keyless_service_answers_only_to_this_machines_names(client: TestClient) -> None:
     foreign = client.get("/v1/health", headers={"host": "evil.example:8000"})
     assert "127.0.0.1" in error_of(foreign, 403)

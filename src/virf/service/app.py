@@ -19,7 +19,7 @@ from __future__ import annotations
 import hmac
 import os
 import threading
-from collections.abc import Awaitable, Callable, Mapping
+from collections.abc import Awaitable, Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final
 
@@ -32,7 +32,7 @@ from virf.api import LogicTutor
 from virf.database import shown
 from virf.errors import InputError
 from virf.ontology.tbox import DEFAULT_SCENARIO
-from virf.service.runs import AnswersRequest, PlanRequest, Runs
+from virf.service.runs import AnswersRequest, PlannerRefused, PlanRequest, Runs
 from virf.web import (
     LOCAL_HOSTS,
     MAX_BODY_BYTES,
@@ -155,20 +155,21 @@ def create_app(
     kb: Path | None = None,
     api_key: str | None = None,
     timeout_s: float = 120.0,
-    planner: str | None = None,
+    planners: Sequence[str] = (),
     run_log: str | Path | None = None,
     answer_wait_s: float = 600.0,
     workspace: Path | None = None,
     reviewer: str = "reviewer",
 ) -> FastAPI:
     """The service; the default tutor loads here, so a bad option fails at start.
-    ``planner`` is the apprentice runs use unless a request names one;
+    ``planners`` are the apprentices a run may name (``virf serve --planner``,
+    as written there); the first is the one of runs that name none.
     ``run_log`` records their model calls.  With a knowledge ``workspace``,
     its review page is a section of the app at ``/review/`` (decisions
     recorded as ``reviewer``'s).  Without an ``api_key`` the service answers
     only requests that name this machine (Host, Origin)."""
     tutors = Tutors(scenario, engine, kb, timeout_s)
-    runs = Runs(tutors, planner=planner, run_log=run_log, answer_wait_s=answer_wait_s)
+    runs = Runs(tutors, planners=planners, run_log=run_log, answer_wait_s=answer_wait_s)
     default, _ = tutors.get(None, None)
     app = FastAPI(
         title="VIRF Logic Tutor",
@@ -218,6 +219,10 @@ def create_app(
     async def not_found(request: Request, exc: HttpNotFound) -> JSONResponse:
         return problem(404, str(exc))
 
+    @app.exception_handler(PlannerRefused)
+    async def planner_refused(request: Request, exc: PlannerRefused) -> JSONResponse:
+        return problem(403, str(exc))
+
     @app.exception_handler(Exception)
     async def internal(request: Request, exc: Exception) -> JSONResponse:
         return problem(500, f"internal error: {type(exc).__name__}")
@@ -257,6 +262,8 @@ def create_app(
             "learn": "/v1/learn" if workspace is not None else None,
             "worker": os.getpid(),  # which process answered (several with --workers)
             "run_log": shown(run_log) if run_log is not None else None,
+            # The planners a run may name; the first is the default.
+            "planners": list(runs.planners),
         }
 
     def known_run(run_id: str) -> Any:
@@ -323,7 +330,7 @@ def app_from_environment() -> FastAPI:
     command left in the environment (uvicorn starts workers by import path)."""
     import ast
 
-    scenario, engine, kb, api_key, planner, run_log, workspace, reviewer = ast.literal_eval(
+    scenario, engine, kb, api_key, planners, run_log, workspace, reviewer = ast.literal_eval(
         os.environ["VIRF_SERVE_SETTINGS"]
     )
     return create_app(
@@ -331,7 +338,7 @@ def app_from_environment() -> FastAPI:
         engine=engine,
         kb=Path(kb) if kb else None,
         api_key=api_key,
-        planner=planner,
+        planners=planners,
         run_log=run_log,
         workspace=Path(workspace) if workspace else None,
         reviewer=reviewer,
