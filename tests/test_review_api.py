@@ -289,8 +289,10 @@ def client(ws: FakeWorkspace) -> TestClient:
 def one_line_error(response: Any, status: int) -> str:
     assert response.status_code == status, response.text
     body = response.json()
-    assert set(body) == {"detail"}, body
-    detail = body["detail"]
+    # The service's documented error shape (the review page is its /review/ section).
+    assert set(body) == {"status", "error"}, body
+    assert body["status"] == ("BAD_INPUT" if status < 500 else "ERROR"), body
+    detail = body["error"]
     assert isinstance(detail, str) and detail and "\n" not in detail
     return detail
 
@@ -402,7 +404,7 @@ def test_a_body_that_is_not_json_is_refused(client: TestClient) -> None:
         content=b"{axiom: nope",
         headers={"Content-Type": "application/json"},
     )
-    assert one_line_error(bad, 400) == "the request body is not valid JSON"
+    assert one_line_error(bad, 400).startswith("the request body is not valid JSON: ")
     # A form post (what another site's page could send) is not JSON.
     form = client.post("/api/candidates/1/check", data={"axiom": DRAFT})
     assert "must be JSON" in one_line_error(form, 400)

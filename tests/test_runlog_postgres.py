@@ -23,6 +23,9 @@ from virf.database import shown
 from virf.errors import EnvironmentProblem
 from virf.planner import MIGRATIONS, Migration, RunLog
 
+# A service without a key answers to this machine's names only.
+LOCAL = "http://127.0.0.1"
+
 # A migration every dialect reads: what a later VIRF might add.
 LATER = Migration(
     "0099_test_notes",
@@ -175,9 +178,9 @@ def test_virf_plan_with_an_unreachable_log_says_so_in_one_line() -> None:
 def test_service_runs_are_recorded_in_the_shared_log(pg: str) -> None:
     from virf.service.app import create_app
 
-    app = create_app(planner=f"replay:{ROOT / 'examples/dialogue/replay.jsonl'}", run_log=pg)
+    app = create_app(planners=[f"replay:{ROOT / 'examples/dialogue/replay.jsonl'}"], run_log=pg)
     scene = json.loads((ROOT / "examples/dialogue/scene.json").read_text())
-    with TestClient(app) as client:
+    with TestClient(app, base_url=LOCAL) as client:
         started = client.post(
             "/v1/plan",
             json={
@@ -220,9 +223,9 @@ def test_any_worker_shows_streams_and_answers_a_run(target: str, tmp_path: Path)
     replay.write_text(json.dumps({"task_id": "q", "iteration": 0, "text": "\n".join(plan)}) + "\n")
     # The paper's USC-Uncertainty example, on the paper's rules (the household
     # rules also find the answered bowl of liquid left heating at the plan's end).
-    one = create_app(scenario="paper", planner=f"replay:{replay}", run_log=target)
-    two = create_app(scenario="paper", planner=f"replay:{replay}", run_log=target)
-    with TestClient(one) as first, TestClient(two) as second:
+    one = create_app(scenario="paper", planners=[f"replay:{replay}"], run_log=target)
+    two = create_app(scenario="paper", planners=[f"replay:{replay}"], run_log=target)
+    with TestClient(one, base_url=LOCAL) as first, TestClient(two, base_url=LOCAL) as second:
         started = first.post(
             "/v1/plan",
             json={
@@ -249,7 +252,7 @@ def test_any_worker_shows_streams_and_answers_a_run(target: str, tmp_path: Path)
         there = second.get(f"/v1/runs/{run_id}").json()
         assert there == first.get(f"/v1/runs/{run_id}").json()
         assert there["state"] == "done" and there["result"]["outcome"] == "APPROVED", there
-    with TestClient(create_app(run_log=target)) as third:
+    with TestClient(create_app(run_log=target), base_url=LOCAL) as third:
         assert third.get("/v1/runs/nothing").status_code == 404
 
 

@@ -16,17 +16,20 @@ from fastapi.testclient import TestClient
 from virf.service.app import MAX_REQUEST_BYTES, create_app
 
 WALK = EXAMPLES_DIR / "walkthrough"
+# A service without a key answers to this machine's names only.
+LOCAL = "http://127.0.0.1"
+DIALOGUE_REPLAY = f"replay:{EXAMPLES_DIR / 'dialogue' / 'replay.jsonl'}"
 
 
 @pytest.fixture(scope="module")
 def client() -> TestClient:
-    return TestClient(create_app())
+    return TestClient(create_app(), base_url=LOCAL)
 
 
 @pytest.fixture(scope="module")
-def paper_client() -> TestClient:
-    """The service on the paper's rules (scenario ``paper``), for the paper's examples."""
-    return TestClient(create_app(scenario="paper"))
+def dialogue_client() -> TestClient:
+    """A service whose runs may name the dialogue example's replay (its default)."""
+    return TestClient(create_app(planners=[DIALOGUE_REPLAY]), base_url=LOCAL)
 
 
 def body(case: Path, **extra: object) -> dict[str, object]:
@@ -102,7 +105,7 @@ def test_limits(client: TestClient) -> None:
 
 
 def test_a_failed_verification_is_an_error_report_never_safe() -> None:
-    slow = TestClient(create_app(timeout_s=1e-9))
+    slow = TestClient(create_app(timeout_s=1e-9), base_url=LOCAL)
     report = slow.post("/v1/verify", json=body(WALK)).json()
     assert report["status"] == "ERROR" and "timed out" in report["reason"]
 
@@ -170,14 +173,15 @@ def _wait(client: TestClient, run_id: str, state: str) -> dict[str, object]:
     raise AssertionError(f"run {run_id} is {got['state']}, not {state}: {got['error']}")
 
 
-def test_a_run_streams_its_dialogue(client: TestClient) -> None:
+def test_a_run_streams_its_dialogue(dialogue_client: TestClient) -> None:
+    client = dialogue_client
     folder = EXAMPLES_DIR / "dialogue"
     started = client.post(
         "/v1/plan",
         json={
             "scene": json.loads((folder / "scene.json").read_text()),
             "instruction": (folder / "instruction.txt").read_text(),
-            "planner": f"replay:{folder / 'replay.jsonl'}",
+            "planner": DIALOGUE_REPLAY,
             "task_id": "demo-fridge",
         },
     )
@@ -198,14 +202,15 @@ def test_a_run_streams_its_dialogue(client: TestClient) -> None:
     assert client.get(run["run"]).json()["state"] == "done"
 
 
-def test_a_run_waits_for_answers_and_goes_on(paper_client: TestClient, tmp_path: Path) -> None:
+def test_a_run_waits_for_answers_and_goes_on(tmp_path: Path) -> None:
     # The paper's USC-Uncertainty example, on the paper's rules (the household
     # rules also find the answered bowl of liquid left heating at the plan's end).
-    client = paper_client
     folder = EXAMPLES_DIR / "unknown-material-microwave"
     plan = json.loads((folder / "plan.txt").read_text())
     replay = tmp_path / "replay.jsonl"
     replay.write_text(json.dumps({"task_id": "q", "iteration": 0, "text": "\n".join(plan)}) + "\n")
+    app = create_app(scenario="paper", planners=[f"replay:{replay}"])
+    client = TestClient(app, base_url=LOCAL)
     run = client.post(
         "/v1/plan",
         json={
@@ -236,23 +241,23 @@ def test_a_run_waits_for_answers_and_goes_on(paper_client: TestClient, tmp_path:
     assert late.status_code == 400 and "not waiting for answers" in late.text
 
 
-def test_run_requests_are_checked(client: TestClient) -> None:
+def test_run_requests_are_checked(client: TestClient, dialogue_client: TestClient) -> None:
     scene = json.loads((EXAMPLES_DIR / "dialogue" / "scene.json").read_text())
     nobody = client.post("/v1/plan", json={"scene": scene, "instruction": "Go."})
     assert nobody.status_code == 400 and "no planner" in nobody.json()["error"]
     bad = client.post(
         "/v1/plan", json={"scene": scene, "instruction": "Go.", "planner": "oracle:x"}
     )
-    assert bad.status_code == 400 and "unknown planner" in bad.json()["error"]
+    assert bad.status_code == 403 and "not one this service runs" in bad.json()["error"]
     assert client.get("/v1/runs/nope").status_code == 404
+    client = dialogue_client
     extra = client.post("/v1/plan", json={"scene": scene, "instruction": "Go.", "model": "x"})
     assert extra.json()["error"] == (
         "unknown key 'model'; expected scene, instruction, planner, method, max_iter, task_id"
     )
-    replay = EXAMPLES_DIR / "dialogue" / "replay.jsonl"
     lost = client.post(
         "/v1/plan",
-        json={"scene": scene, "instruction": "Go.", "planner": f"replay:{replay}", "task_id": "x"},
+        json={"scene": scene, "instruction": "Go.", "planner": DIALOGUE_REPLAY, "task_id": "x"},
     ).json()
     failed = _wait(client, lost["id"], "failed")
     assert "has no proposal for task x" in str(failed["error"])

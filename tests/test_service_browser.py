@@ -38,17 +38,31 @@ def browser() -> Iterator[Browser]:
         yield launched
 
 
+DIALOGUE_REPLAY = f"replay:{EXAMPLES_DIR / 'dialogue' / 'replay.jsonl'}"
+# The plan of the paper's USC-Uncertainty example, as a recorded model reply.
+UNCERTAIN = EXAMPLES_DIR / "unknown-material-microwave"
+
+
 @pytest.fixture(scope="module")
 def url() -> Iterator[str]:
-    with serving(create_app()) as address:
+    """A server whose runs may name the dialogue example's replay (and no other)."""
+    with serving(create_app(planners=[DIALOGUE_REPLAY])) as address:
         yield address
 
 
 @pytest.fixture(scope="module")
-def paper_url() -> Iterator[str]:
+def uncertain_replay(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    plan = json.loads((UNCERTAIN / "plan.txt").read_text())
+    replay = tmp_path_factory.mktemp("replay") / "replay.jsonl"
+    replay.write_text(json.dumps({"task_id": "q", "iteration": 0, "text": "\n".join(plan)}) + "\n")
+    return replay
+
+
+@pytest.fixture(scope="module")
+def paper_url(uncertain_replay: Path) -> Iterator[str]:
     """A server on the paper's rules (scenario ``paper``): the page verifies on
     the server's scenario, and the paper's examples reproduce the paper there."""
-    with serving(create_app(scenario="paper")) as address:
+    with serving(create_app(scenario="paper", planners=[f"replay:{uncertain_replay}"])) as address:
         yield address
 
 
@@ -291,19 +305,20 @@ def test_a_plan_run_streams_its_dialogue_to_approval(browser: Browser, url: str)
     with page_at(browser, url) as page:
         page.get_by_test_id("tab-plan").click()
         expect(page.get_by_test_id("plan-task-id")).to_have_value("task")
-        # This server has no default planner: the one-line 400 reaches the banner.
+        # A planner this server does not run: the one-line 403 reaches the banner.
         page.get_by_test_id("plan-instruction").fill("Go.")
         page.get_by_test_id("plan-scene-file").set_input_files(str(folder / "scene.json"))
         expect(page.get_by_test_id("plan-scene")).to_have_value(re.compile("Fridge_1"))
+        page.get_by_test_id("plan-planner").fill("replay:/etc/passwd")
         page.get_by_test_id("plan-start").click()
-        expect(page.get_by_test_id("error-text")).to_contain_text("no planner")
+        expect(page.get_by_test_id("error-text")).to_contain_text("not one this service runs")
         expect(page.get_by_test_id("plan-run")).to_be_hidden()
 
         start_run(
             page,
             folder / "scene.json",
             (folder / "instruction.txt").read_text(),
-            f"replay:{folder / 'replay.jsonl'}",
+            DIALOGUE_REPLAY,
             "demo-fridge",
         )
         expect(page.get_by_test_id("error-banner")).to_be_hidden()
@@ -347,17 +362,15 @@ def test_a_plan_run_streams_its_dialogue_to_approval(browser: Browser, url: str)
 
 
 def test_a_plan_run_asks_and_goes_on_with_the_answers(
-    browser: Browser, paper_url: str, tmp_path: Path
+    browser: Browser, paper_url: str, uncertain_replay: Path
 ) -> None:
     from playwright.sync_api import expect
 
-    folder = EXAMPLES_DIR / "unknown-material-microwave"
+    folder = UNCERTAIN
     plan = json.loads((folder / "plan.txt").read_text())
-    replay = tmp_path / "replay.jsonl"
-    replay.write_text(json.dumps({"task_id": "q", "iteration": 0, "text": "\n".join(plan)}) + "\n")
     # The paper's example on the paper's rules, as in the test above.
     with page_at(browser, paper_url) as page:
-        start_run(page, folder / "scene.json", "Heat the bowl.", f"replay:{replay}", "q")
+        start_run(page, folder / "scene.json", "Heat the bowl.", f"replay:{uncertain_replay}", "q")
         expect(page.get_by_test_id("plan-state")).to_have_text("waiting")
         questions = page.get_by_test_id("plan-question")
         expect(questions).to_have_count(4)

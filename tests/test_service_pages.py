@@ -25,7 +25,7 @@ UNKNOWN = EXAMPLES_DIR / "unknown-material-microwave"
 
 @pytest.fixture(scope="module")
 def client() -> TestClient:
-    return TestClient(create_app())
+    return TestClient(create_app(), base_url="http://127.0.0.1")  # no key: this machine only
 
 
 def case(folder: Path) -> dict[str, Any]:

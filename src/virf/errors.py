@@ -100,14 +100,19 @@ def read_input_bytes(path: str | Path, what: str, limit: int = MAX_FILE_BYTES) -
     return raw
 
 
-def read_input_file(path: str | Path, what: str, limit: int = MAX_FILE_BYTES) -> str:
-    """Read a user's text file (UTF-8) with :func:`read_input_bytes`' checks."""
-    raw = read_input_bytes(path, what, limit)
+def text_of(raw: bytes, what: str) -> str:
+    """``raw`` as UTF-8 text; ``what`` names it in the error line."""
     try:
         # utf-8-sig: a byte-order mark (Windows editors write one) is not text.
         return raw.decode("utf-8-sig")
     except UnicodeDecodeError:
-        raise InputError(f"{what} file {printable(str(path))} is not UTF-8 text") from None
+        raise InputError(f"{what} is not UTF-8 text") from None
+
+
+def read_input_file(path: str | Path, what: str, limit: int = MAX_FILE_BYTES) -> str:
+    """Read a user's text file (UTF-8) with :func:`read_input_bytes`' checks."""
+    raw = read_input_bytes(path, what, limit)
+    return text_of(raw, f"{what} file {printable(str(path))}")
 
 
 def _no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
@@ -139,10 +144,18 @@ def parse_json(text: str, what: str) -> Any:
         raise InputError(f"{what} is not valid JSON (nested too deeply or malformed)") from None
 
 
+def json_of(raw: bytes, what: str) -> Any:
+    """The one reader of JSON bytes a user sends: the CLI's files
+    (:func:`read_json_file`) and the service's request bodies (:mod:`virf.web`).
+    UTF-8 (a byte-order mark dropped), then strict JSON (:func:`parse_json`);
+    every failure is one line naming ``what``."""
+    return parse_json(text_of(raw, what), what)
+
+
 def read_json_file(path: str | Path, what: str) -> Any:
     """Read and parse a user's JSON file; every failure is a one-line input error."""
     p = Path(path)
-    return parse_json(read_input_file(p, what), f"{what} {p}")
+    return json_of(read_input_bytes(p, what), f"{what} {printable(str(p))}")
 
 
 # ---------------------------------------------------------------------------

@@ -21,7 +21,6 @@ import sys
 from collections.abc import Awaitable, Callable, Sequence
 from pathlib import Path
 from typing import Annotated, Final, Protocol
-from urllib.parse import urlsplit
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
@@ -40,15 +39,22 @@ from virf.authoring.models import (
     Preview,
     Status,
 )
-from virf.errors import EnvironmentProblem, InputError, Record, Says, VirfError, clip, printable
+from virf.errors import EnvironmentProblem, InputError, Record, Says, clip
+from virf.web import (
+    LOCAL_HOSTS,
+    BodyLimit,
+    StrictJsonRoute,
+    add_error_shape,
+    foreign,
+    problem,
+)
 
 STATIC_DIR: Final = Path(__file__).resolve().parent / "static"
 STATUS_FILTERS: Final = ("pending", "accepted", "rejected", "all")
 # Far above any reason a person writes; far below what would make the store choke.
 MAX_REASON_CHARS: Final = 4_000
-# Hosts a browser on this machine names the server by.  Anything else in a
-# Host header is a DNS-rebinding page trying to reach the loopback server.
-LOCAL_HOSTS: Final = ("127.0.0.1", "localhost", "::1")
+# Far above any body the page sends (an axiom, a reason).
+MAX_BODY_BYTES: Final = 1024 * 1024
 
 
 class ReviewWorkspace(Protocol):
@@ -128,16 +134,12 @@ _BODIES: Final[dict[str, type[Body]]] = {
 
 
 class HttpProblem(Exception):
-    """An error answered with ``status`` and ``{"detail": message}``."""
+    """An error answered with ``status`` and ``{"status": "BAD_INPUT", "error": message}``."""
 
     def __init__(self, status: int, message: str) -> None:
         super().__init__(message)
         self.status = status
         self.message = message
-
-
-def _detail(status: int, message: str) -> JSONResponse:
-    return JSONResponse({"detail": printable(message)}, status_code=status)
 
 
 def create_app(
@@ -163,13 +165,10 @@ def create_app(
         redoc_url=None,
         openapi_url=None,
     )
-    hosts = {h.lower().strip("[]") for h in allowed_hosts}
-
-    def host_allowed(netloc: str) -> bool:
-        if "*" in hosts:
-            return True
-        name = urlsplit(f"//{netloc}").hostname
-        return name is not None and name.lower() in hosts
+    # Bodies are read as the CLI reads files, and counted as they arrive (virf.web).
+    app.router.route_class = StrictJsonRoute
+    app.add_middleware(BodyLimit, limit=MAX_BODY_BYTES)
+    hosts = tuple(allowed_hosts)
 
     @app.middleware("http")
     async def local_only(
@@ -178,21 +177,9 @@ def create_app(
         # The server acts on a person's behalf with no login: only pages it
         # served itself may drive it.  A foreign Host is DNS rebinding; a
         # foreign Origin on a POST is another site's form or script.
-        if not host_allowed(request.headers.get("host", "")):
-            return _detail(403, "this review server answers only to 127.0.0.1 and localhost")
-        origin = request.headers.get("origin")
-        if (
-            request.method != "GET"
-            and origin is not None
-            and (origin == "null" or not host_allowed(urlsplit(origin).netloc))
-        ):
-            return _detail(403, f"requests from {clip(origin)} are not accepted")
-        if request.method == "POST":
-            kind = request.headers.get("content-type", "").split(";")[0].strip().lower()
-            if kind != "application/json":
-                return _detail(
-                    400, "the request body must be JSON (Content-Type: application/json)"
-                )
+        refused = foreign(request, hosts)
+        if refused is not None:
+            return refused
         response = await call_next(request)
         # Everything the page uses is served from here; nothing else may load.
         response.headers["Content-Security-Policy"] = (
@@ -202,27 +189,21 @@ def create_app(
         response.headers["Cache-Control"] = "no-store"
         return response
 
+    add_error_shape(app)  # Starlette's own errors, VirfError (400) and EnvironmentProblem (503)
+
     @app.exception_handler(HttpProblem)
     def on_problem(request: Request, exc: HttpProblem) -> JSONResponse:
-        return _detail(exc.status, exc.message)
-
-    @app.exception_handler(EnvironmentProblem)
-    def on_environment(request: Request, exc: EnvironmentProblem) -> JSONResponse:
-        return _detail(503, str(exc))
-
-    @app.exception_handler(VirfError)
-    def on_input(request: Request, exc: VirfError) -> JSONResponse:
-        return _detail(400, str(exc))
+        return problem(exc.status, exc.message)
 
     @app.exception_handler(RequestValidationError)
     def on_invalid(request: Request, exc: RequestValidationError) -> JSONResponse:
-        return _detail(400, _request_problem(request, exc))
+        return problem(400, _request_problem(request, exc))
 
     @app.exception_handler(Exception)
     def on_bug(request: Request, exc: Exception) -> JSONResponse:
         # uvicorn logs the traceback on the server's terminal, where the
         # person who started it can report it; the page gets one line.
-        return _detail(500, f"internal error: {type(exc).__name__}: {exc}")
+        return problem(500, f"internal error: {type(exc).__name__}: {exc}")
 
     def known(cid: int) -> CandidateSummary:
         """The candidate's queue entry; 404 with the workspace's own words if there is none."""

@@ -10,8 +10,7 @@ import typer
 
 from virf.cli.app import EngineOpt, KbOpt, ScenarioOpt, default_reviewer
 from virf.errors import InputError
-
-LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
+from virf.web import LOCAL_HOSTS
 
 
 def serve(
@@ -24,9 +23,11 @@ def serve(
     engine: EngineOpt = "fast",
     kb: KbOpt = None,
     planner: Annotated[
-        str | None,
+        list[str] | None,
         typer.Option(
-            help="Apprentice for POST /v1/plan runs that name none (openai:MODEL, replay:FILE)."
+            help="A planner POST /v1/plan runs may name (openai:MODEL, local:NAME, "
+            "replay:FILE), written as runs name it; repeat it for several. The first is "
+            "the planner of runs that name none. A run naming any other is refused (403).",
         ),
     ] = None,
     run_log: Annotated[
@@ -74,6 +75,10 @@ def serve(
             "worker that started it; give --run-log to share runs between workers",
             err=True,
         )
+    planners = [p.strip() for p in planner or ()]
+    empty = [p for p in planners if not p]
+    if empty:
+        raise InputError("--planner must not be empty; e.g. --planner openai:gpt-4o-mini")
     from virf.ontology.tbox import resolve_scenario
 
     scenario = resolve_scenario(scenario, kb)
@@ -87,7 +92,7 @@ def serve(
         engine,
         str(kb) if kb else None,
         api_key,
-        planner,
+        planners,
         run_log,
         str(workspace) if workspace else None,
         reviewer or default_reviewer(),
@@ -101,7 +106,7 @@ def serve(
             engine=engine,
             kb=kb,
             api_key=api_key,
-            planner=planner,
+            planners=planners,
             run_log=run_log,
             workspace=workspace,
             reviewer=reviewer or default_reviewer(),

@@ -19,7 +19,7 @@ from __future__ import annotations
 import hmac
 import os
 import threading
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final
 
@@ -30,14 +30,23 @@ from pydantic import BaseModel, ConfigDict
 
 from virf.api import LogicTutor
 from virf.database import shown
-from virf.errors import EnvironmentProblem, InputError, VirfError
+from virf.errors import InputError
 from virf.ontology.tbox import DEFAULT_SCENARIO
-from virf.service.runs import AnswersRequest, PlanRequest, Runs
+from virf.service.runs import AnswersRequest, PlannerRefused, PlanRequest, Runs
+from virf.web import (
+    LOCAL_HOSTS,
+    MAX_BODY_BYTES,
+    BodyLimit,
+    StrictJsonRoute,
+    add_error_shape,
+    foreign,
+    problem,
+)
 from virf.world.plan import PlanStep, parse_plan, parse_plan_text
 from virf.world.scene import Scene
 
 # A scene of MAX_INSTANCES objects with their relations is far below this.
-MAX_REQUEST_BYTES: Final = 8 * 1024 * 1024
+MAX_REQUEST_BYTES: Final = MAX_BODY_BYTES
 API_KEY_HEADER: Final = "x-api-key"
 
 
@@ -75,8 +84,15 @@ def _keys_of(request: Request) -> str:
     return ", ".join(model.model_fields)
 
 
-def _problem(status: int, message: str, kind: str = "BAD_INPUT") -> JSONResponse:
-    return JSONResponse({"status": kind, "error": message}, status_code=status)
+def key_sent(headers: Mapping[str, str]) -> str | None:
+    """The API key a request carries: ``X-API-Key: KEY`` or ``Authorization:
+    Bearer KEY`` (the scheme in any case, RFC 9110); an Authorization header
+    of another scheme, or none, carries no key."""
+    key = headers.get(API_KEY_HEADER)
+    if key is not None:
+        return key
+    scheme, _, token = headers.get("authorization", "").strip().partition(" ")
+    return (token.strip() or None) if scheme.lower() == "bearer" else None
 
 
 class Tutors:
@@ -139,72 +155,77 @@ def create_app(
     kb: Path | None = None,
     api_key: str | None = None,
     timeout_s: float = 120.0,
-    planner: str | None = None,
+    planners: Sequence[str] = (),
     run_log: str | Path | None = None,
     answer_wait_s: float = 600.0,
     workspace: Path | None = None,
     reviewer: str = "reviewer",
 ) -> FastAPI:
     """The service; the default tutor loads here, so a bad option fails at start.
-    ``planner`` is the apprentice runs use unless a request names one;
+    ``planners`` are the apprentices a run may name (``virf serve --planner``,
+    as written there); the first is the one of runs that name none.
     ``run_log`` records their model calls.  With a knowledge ``workspace``,
     its review page is a section of the app at ``/review/`` (decisions
-    recorded as ``reviewer``'s)."""
+    recorded as ``reviewer``'s).  Without an ``api_key`` the service answers
+    only requests that name this machine (Host, Origin)."""
     tutors = Tutors(scenario, engine, kb, timeout_s)
-    runs = Runs(tutors, planner=planner, run_log=run_log, answer_wait_s=answer_wait_s)
+    runs = Runs(tutors, planners=planners, run_log=run_log, answer_wait_s=answer_wait_s)
     default, _ = tutors.get(None, None)
     app = FastAPI(
         title="VIRF Logic Tutor",
         summary="Verify robot task plans against an OWL 2 DL safety ontology.",
         version="1",
     )
+    # Every JSON body is read as the CLI reads a file (virf.web).
+    app.router.route_class = StrictJsonRoute
+    # Added first, so the guard below runs before it: a request without its
+    # key is refused before its body is counted.
+    app.add_middleware(BodyLimit, limit=MAX_REQUEST_BYTES)
 
     @app.middleware("http")
     async def guard(
         request: Request, call_next: Callable[[Request], Awaitable[Response]]
     ) -> Response:
-        guarded = request.url.path.startswith(("/v1/", "/review/api/"))
-        if api_key is not None and guarded:
-            given = request.headers.get(API_KEY_HEADER) or request.headers.get(
-                "authorization", ""
-            ).removeprefix("Bearer ")
-            if not hmac.compare_digest(given.encode(), api_key.encode()):
-                return _problem(
-                    401, f"missing or wrong API key: send it in the {API_KEY_HEADER} header"
+        if api_key is None:
+            # No key: as the review page, it answers to this machine only.
+            refused = foreign(request, LOCAL_HOSTS)
+            if refused is not None:
+                return refused
+        elif request.url.path.startswith(("/v1/", "/review/api/")):
+            given = key_sent(request.headers)
+            if given is None or not hmac.compare_digest(given.encode(), api_key.encode()):
+                return problem(
+                    401,
+                    f"missing or wrong API key: send it in the {API_KEY_HEADER} header "
+                    "or as 'Authorization: Bearer KEY'",
                 )
-        if request.method == "POST":
-            length = request.headers.get("content-length")
-            if length is None:
-                return _problem(411, "send the request with a Content-Length header")
-            if not length.isdigit() or int(length) > MAX_REQUEST_BYTES:
-                return _problem(413, f"request body larger than {MAX_REQUEST_BYTES // 2**20} MiB")
         return await call_next(request)
+
+    add_error_shape(app)
 
     @app.exception_handler(RequestValidationError)
     async def bad_body(request: Request, exc: RequestValidationError) -> JSONResponse:
         first = exc.errors()[0]
         where = ".".join(str(p) for p in first["loc"] if p != "body") or "the request body"
         if first["type"] == "json_invalid":
-            return _problem(400, "the request body is not valid JSON")
+            return problem(400, "the request body is not valid JSON")
         if first["type"] == "missing":
-            return _problem(400, f"the request body needs '{where}'")
+            return problem(400, f"the request body needs '{where}'")
         if first["type"] == "extra_forbidden":
-            return _problem(400, f"unknown key '{where}'; expected {_keys_of(request)}")
-        return _problem(400, f"{where}: {first['msg']}")
+            return problem(400, f"unknown key '{where}'; expected {_keys_of(request)}")
+        return problem(400, f"{where}: {first['msg']}")
 
     @app.exception_handler(HttpNotFound)
     async def not_found(request: Request, exc: HttpNotFound) -> JSONResponse:
-        return _problem(404, str(exc))
+        return problem(404, str(exc))
 
-    @app.exception_handler(VirfError)
-    async def virf_error(request: Request, exc: VirfError) -> JSONResponse:
-        if isinstance(exc, EnvironmentProblem):
-            return _problem(503, str(exc), "ERROR")
-        return _problem(400, str(exc))
+    @app.exception_handler(PlannerRefused)
+    async def planner_refused(request: Request, exc: PlannerRefused) -> JSONResponse:
+        return problem(403, str(exc))
 
     @app.exception_handler(Exception)
     async def internal(request: Request, exc: Exception) -> JSONResponse:
-        return _problem(500, f"internal error: {type(exc).__name__}", "ERROR")
+        return problem(500, f"internal error: {type(exc).__name__}")
 
     @app.post("/v1/verify")
     def verify(body: VerifyRequest) -> Response:
@@ -241,6 +262,8 @@ def create_app(
             "learn": "/v1/learn" if workspace is not None else None,
             "worker": os.getpid(),  # which process answered (several with --workers)
             "run_log": shown(run_log) if run_log is not None else None,
+            # The planners a run may name; the first is the default.
+            "planners": list(runs.planners),
         }
 
     def known_run(run_id: str) -> Any:
@@ -307,7 +330,7 @@ def app_from_environment() -> FastAPI:
     command left in the environment (uvicorn starts workers by import path)."""
     import ast
 
-    scenario, engine, kb, api_key, planner, run_log, workspace, reviewer = ast.literal_eval(
+    scenario, engine, kb, api_key, planners, run_log, workspace, reviewer = ast.literal_eval(
         os.environ["VIRF_SERVE_SETTINGS"]
     )
     return create_app(
@@ -315,7 +338,7 @@ def app_from_environment() -> FastAPI:
         engine=engine,
         kb=Path(kb) if kb else None,
         api_key=api_key,
-        planner=planner,
+        planners=planners,
         run_log=run_log,
         workspace=Path(workspace) if workspace else None,
         reviewer=reviewer,

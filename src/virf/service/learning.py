@@ -26,6 +26,7 @@ from pydantic import Field
 from virf.errors import InputError, clip, closest
 from virf.service.app import Tutors
 from virf.service.pages import _Body, checkout_examples
+from virf.web import problem
 
 if TYPE_CHECKING:
     from virf.authoring.learn import Outcome
@@ -77,7 +78,7 @@ def add_learning(app: FastAPI, tutors: Tutors, workspace: Workspace | None) -> N
         from virf.planner.questions import settle
 
         if workspace is None:
-            return JSONResponse({"status": "BAD_INPUT", "error": NO_WORKSPACE}, 409)
+            return problem(409, NO_WORKSPACE)
         who = " ".join(body.who.split())
         if not who:
             raise InputError("'who' must name who answered (it is kept as evidence)")

@@ -26,7 +26,6 @@ verification.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any, Final
 
@@ -37,9 +36,10 @@ from pydantic import BaseModel, ConfigDict, model_validator
 from pydantic_core import PydanticCustomError
 
 import virf
-from virf.errors import InputError, clip, closest
+from virf.errors import InputError, clip, closest, read_input_file, read_json_file
 from virf.planner.questions import apply_answers
 from virf.service.app import Tutors
+from virf.web import problem
 
 STATIC_DIR: Final = Path(__file__).resolve().parent / "static"
 
@@ -117,15 +117,11 @@ def add_pages(app: FastAPI, tutors: Tutors, *, examples: Path | None = None) -> 
         if name not in names or folder is None:
             near = closest(name, names) or names[:8]
             listed = f"; choose from {', '.join(near)}" if near else "; this server has none"
-            return JSONResponse(
-                {"status": "BAD_INPUT", "error": f"no example '{clip(name)}'{listed}"}, 404
-            )
+            return problem(404, f"no example '{clip(name)}'{listed}")
         case = folder / name
-        try:
-            scene = json.loads((case / "scene.json").read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            raise InputError(f"example '{name}' has an unreadable scene.json: {exc}") from None
-        plan = (case / "plan.txt").read_text(encoding="utf-8")
+        # Read as the CLI reads them: strict JSON, the same limits.
+        scene = read_json_file(case / "scene.json", f"example '{name}' scene")
+        plan = read_input_file(case / "plan.txt", f"example '{name}' plan")
         return {"name": name, "description": _description(scene), "scene": scene, "plan": plan}
 
     @app.get("/", include_in_schema=False)
@@ -139,8 +135,8 @@ def add_pages(app: FastAPI, tutors: Tutors, *, examples: Path | None = None) -> 
         for name in _example_names(folder):
             assert folder is not None
             try:
-                scene = json.loads((folder / name / "scene.json").read_text(encoding="utf-8"))
-            except (OSError, ValueError):
+                scene = read_json_file(folder / name / "scene.json", "example scene")
+            except InputError:
                 scene = None  # listed anyway: opening it names the problem
             out.append({"name": name, "description": _description(scene)})
         return out

@@ -47,10 +47,14 @@ class PlanRequest(BaseModel):
 
     scene: dict[str, Any]
     instruction: str = Field(min_length=1, max_length=2000)
-    planner: str | None = None  # openai:MODEL, replay:FILE; default: the server's
+    planner: str | None = None  # one of the server's --planner; default: its first
     method: str = "virf"
     max_iter: int = Field(default=5, ge=1, le=20)
     task_id: str = Field(default="task", min_length=1, max_length=200)
+
+
+class PlannerRefused(InputError):
+    """A run named a planner the server was not started with (403)."""
 
 
 class AnswersRequest(BaseModel):
@@ -182,24 +186,46 @@ class Runs:
         self,
         tutors: Any,
         *,
-        planner: str | None,
+        planners: Sequence[str] = (),
         run_log: str | Path | None,
         answer_wait_s: float = 600.0,
     ) -> None:
-        self.tutors, self.planner, self.run_log = tutors, planner, run_log
+        self.tutors, self.run_log = tutors, run_log
+        # The planners a run may name, as the server's --planner options wrote them.
+        self.planners = tuple(dict.fromkeys(p.strip() for p in planners))
         self.answer_wait_s = answer_wait_s
         self._runs: dict[str, Run] = {}
         self._lock = threading.Lock()
         # The runs' own record: what lets another worker show a run.
         self.store = RunLog(run_log, run_id="service") if run_log is not None else None
 
-    def start(self, request: PlanRequest) -> Run:
-        spec = request.planner or self.planner
-        if spec is None:
-            raise InputError(
-                "no planner: give 'planner' (openai:MODEL or replay:FILE) or start the "
-                "service with --planner"
+    def planner(self, named: str | None) -> str:
+        """The planner of a run that names ``named`` (None: the server's first).
+
+        A client names only a planner the server was started with: anything
+        else is refused before it is read, so a path a client writes
+        (``replay:/etc/...``, ``local:/...gguf``) is never opened, and no
+        answer tells whether it exists."""
+        if named is None:
+            if not self.planners:
+                raise InputError(
+                    "no planner: this service was started without --planner, so it runs none"
+                )
+            return self.planners[0]
+        if named.strip() in self.planners:
+            return named.strip()
+        if not self.planners:
+            raise PlannerRefused(
+                f"planner '{clip(named)}' is not one this service runs: it runs none "
+                "(start it with --planner SPEC, once per planner a run may name)"
             )
+        raise PlannerRefused(
+            f"planner '{clip(named)}' is not one this service runs; "
+            f"choose from {', '.join(self.planners)}"
+        )
+
+    def start(self, request: PlanRequest) -> Run:
+        spec = self.planner(request.planner)
         method = get_method(request.method)
         tutor, lock = self.tutors.get(None, None)
         vocab = tutor.tbox.vocabulary

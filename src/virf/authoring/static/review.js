@@ -47,8 +47,9 @@
       data = null;
     }
     if (!response.ok) {
-      const detail = data && typeof data.detail === "string" ? data.detail : response.statusText;
-      const err = new Error(detail || `HTTP ${response.status}`);
+      // {"status": "BAD_INPUT" | "ERROR", "error": "one line"}, as the service answers.
+      const said = data && typeof data.error === "string" ? data.error : response.statusText;
+      const err = new Error(said || `HTTP ${response.status}`);
       err.status = response.status;
       throw err;
     }

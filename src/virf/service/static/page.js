@@ -89,7 +89,7 @@
       data = null;
     }
     if (!response.ok) {
-      const said = data && (data.error || (typeof data.detail === "string" ? data.detail : null));
+      const said = data && typeof data.error === "string" ? data.error : null;
       throw new ApiError(said || `${response.status} ${response.statusText} from ${path}`);
     }
     return data;
