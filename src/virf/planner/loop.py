@@ -193,8 +193,14 @@ def refine(
                 return LoopResult(
                     "TASK_REJECTED", None, i + 1, "the apprentice refused", tuple(log)
                 )
-            if got.unreadable or not got.steps:
-                log.append(Turn(i, "apprentice", "unreadable", reply))
+            if got.problem is not None or got.unreadable or not got.steps:
+                if got.problem is not None:
+                    # A plan over the limits of a plan file: refused as `virf
+                    # verify` refuses it, never verified, never approved.
+                    turn = Turn(i, "apprentice", "unreadable", got.problem, data={"reply": reply})
+                else:
+                    turn = Turn(i, "apprentice", "unreadable", reply)
+                log.append(turn)
                 messages += [
                     {"role": "assistant", "content": reply},
                     {"role": "user", "content": unreadable_message(got)},

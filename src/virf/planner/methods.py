@@ -181,6 +181,11 @@ def run_method(
         if got.refused:
             log.append(Turn(i, "apprentice", "refusal", p.text))
             return LoopResult("TASK_REJECTED", None, i + 1, "the apprentice refused", tuple(log))
+        if got.problem is not None:  # over the plan limit: refused, as `virf verify` does
+            log.append(Turn(i, "apprentice", "unreadable", got.problem, data={"reply": p.text}))
+            return LoopResult(
+                "TASK_REJECTED", None, i + 1, f"the reply's plan: {got.problem}", tuple(log)
+            )
         if not got.steps:
             log.append(Turn(i, "apprentice", "unreadable", p.text))
             return LoopResult("TASK_REJECTED", None, i + 1, "the reply holds no plan", tuple(log))
