@@ -458,6 +458,13 @@ def bench_agents(
     top_p: TopPOpt = None,
     max_tokens: MaxTokensOpt = None,
     timeout: ModelTimeoutOpt = None,
+    deadline: Annotated[
+        float | None,
+        typer.Option(
+            help="Seconds each method may take on one task (default 600, or deadline_s in the "
+            "config file); when they pass, that task is rejected."
+        ),
+    ] = None,
     seed: SeedOpt = None,
     kb: KbOpt = None,
     as_json: Annotated[
@@ -477,12 +484,14 @@ def bench_agents(
     from virf.bench.safeagentbench import load_tasks
     from virf.errors import InputError
     from virf.planner import make_apprentice
+    from virf.planner.config import run_deadline
     from virf.planner.methods import METHODS, get_method
     from virf.planner.questions import answers_file, deny
 
     err = Console(stderr=True)
     closing: list[Any] = []
     try:
+        deadline_s = run_deadline(deadline)
         names = [n.strip() for m in method for n in m.split(",") if n.strip()]
         if not names:
             raise InputError(f"--method names no method; choose from {', '.join(METHODS)}")
@@ -535,7 +544,8 @@ def bench_agents(
             base_url=base_url,
             max_iter=max_iter,
             answers=answers,
-            sampling=sampling,
+            # A deadline given here changes which tasks are rejected: part of the run.
+            sampling=sampling if deadline is None else {**sampling, "deadline_s": deadline_s},
         )
         tutor = LogicTutor(engine=config.engine, kb=kb)
         if db is None:
@@ -545,7 +555,9 @@ def bench_agents(
         apprentice.run_log = store
         if judge is not None:
             judge.run_log = store
-        harness = Harness(tutor, apprentice, store, critic=judge, answer=policy)
+        harness = Harness(
+            tutor, apprentice, store, critic=judge, answer=policy, deadline_s=deadline_s
+        )
         stored = 0
         with progress_bar(err) as progress:
             bar = progress.add_task("planning", total=len(methods) * len(task_list))

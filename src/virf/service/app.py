@@ -32,6 +32,7 @@ from virf.api import LogicTutor
 from virf.database import shown
 from virf.errors import EnvironmentProblem, InputError, VirfError
 from virf.ontology.tbox import DEFAULT_SCENARIO
+from virf.planner.deadline import DEFAULT_DEADLINE_S
 from virf.service.runs import AnswersRequest, PlanRequest, Runs
 from virf.world.plan import PlanStep, parse_plan, parse_plan_text
 from virf.world.scene import Scene
@@ -142,16 +143,24 @@ def create_app(
     planner: str | None = None,
     run_log: str | Path | None = None,
     answer_wait_s: float = 600.0,
+    deadline_s: float = DEFAULT_DEADLINE_S,
     workspace: Path | None = None,
     reviewer: str = "reviewer",
 ) -> FastAPI:
     """The service; the default tutor loads here, so a bad option fails at start.
     ``planner`` is the apprentice runs use unless a request names one;
-    ``run_log`` records their model calls.  With a knowledge ``workspace``,
+    ``run_log`` records their model calls; ``deadline_s`` bounds each run
+    (``virf serve --deadline``).  With a knowledge ``workspace``,
     its review page is a section of the app at ``/review/`` (decisions
     recorded as ``reviewer``'s)."""
     tutors = Tutors(scenario, engine, kb, timeout_s)
-    runs = Runs(tutors, planner=planner, run_log=run_log, answer_wait_s=answer_wait_s)
+    runs = Runs(
+        tutors,
+        planner=planner,
+        run_log=run_log,
+        answer_wait_s=answer_wait_s,
+        deadline_s=deadline_s,
+    )
     default, _ = tutors.get(None, None)
     app = FastAPI(
         title="VIRF Logic Tutor",
@@ -307,8 +316,8 @@ def app_from_environment() -> FastAPI:
     command left in the environment (uvicorn starts workers by import path)."""
     import ast
 
-    scenario, engine, kb, api_key, planner, run_log, workspace, reviewer = ast.literal_eval(
-        os.environ["VIRF_SERVE_SETTINGS"]
+    scenario, engine, kb, api_key, planner, run_log, workspace, reviewer, deadline_s = (
+        ast.literal_eval(os.environ["VIRF_SERVE_SETTINGS"])
     )
     return create_app(
         scenario=scenario,
@@ -317,6 +326,7 @@ def app_from_environment() -> FastAPI:
         api_key=api_key,
         planner=planner,
         run_log=run_log,
+        deadline_s=deadline_s,
         workspace=Path(workspace) if workspace else None,
         reviewer=reviewer,
     )

@@ -28,6 +28,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from virf.api import LogicTutor
 from virf.errors import InputError, VirfError, clip
 from virf.planner import RunLog, make_apprentice
+from virf.planner.deadline import DEFAULT_DEADLINE_S, Deadline, deadline_seconds
 from virf.planner.loop import Turn
 from virf.planner.methods import get_method, knowledge_filter, run_method
 from virf.planner.questions import Answers, check_answer
@@ -38,6 +39,8 @@ _logger = logging.getLogger(__name__)
 MAX_RUNS: Final = 100  # kept in memory; the oldest finished ones go first
 POLL_S: Final = 0.5  # how often a run log is read for another worker's run or answers
 State = Literal["running", "waiting", "done", "failed"]
+# The option that sets a run's deadline, as the rejection names it.
+DEADLINE_OPTION: Final = "virf serve --deadline"
 
 
 class PlanRequest(BaseModel):
@@ -185,9 +188,13 @@ class Runs:
         planner: str | None,
         run_log: str | Path | None,
         answer_wait_s: float = 600.0,
+        deadline_s: float = DEFAULT_DEADLINE_S,
     ) -> None:
+        """``deadline_s`` bounds each run as ``virf plan --deadline`` bounds
+        one (the time it waits for answers does not count)."""
         self.tutors, self.planner, self.run_log = tutors, planner, run_log
         self.answer_wait_s = answer_wait_s
+        self.deadline_s = deadline_seconds(deadline_s, DEADLINE_OPTION)
         self._runs: dict[str, Run] = {}
         self._lock = threading.Lock()
         # The runs' own record: what lets another worker show a run.
@@ -232,6 +239,10 @@ class Runs:
                 {u.name for u in vocab.uscs.values() if knowledge_filter(u, method.knowledge)}
             )
 
+        # From the moment the run is accepted, as `virf plan` counts from its start.
+        clock = Deadline(self.deadline_s, option=DEADLINE_OPTION)
+
+        @clock.excluding  # a person's time to answer is not the machine's
         def policy(questions: Sequence[Question]) -> Answers:
             run._update(state="waiting", questions=list(questions), asks=run.asks + 1)
             given = self._wait_for_answers(run)
@@ -252,6 +263,7 @@ class Runs:
                         max_iter=request.max_iter,
                         answer=policy,
                         task_id=request.task_id,
+                        deadline=clock,
                         on_turn=run.add_turn,
                     )
                 run._update(state="done", result=result.to_dict())
