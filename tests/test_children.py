@@ -1,11 +1,15 @@
-"""Nothing a benchmark starts outlives it.
+"""Nothing a benchmark starts outlives it, and a stopped benchmark writes
+nothing it did not compute.
 
 * The paper baseline's subprocess (and whatever it starts: owlready2 runs
   Java) ends with the VIRF process that started it, whether that process is
   stopped with SIGTERM or killed with SIGKILL, and its temporary folder goes
   too.  ``.venv-paper`` is not needed: a stand-in interpreter that starts a
   child of its own and sleeps is run through the very same code.
-* ``virf bench service``'s server ends with the benchmark too.
+* ``virf bench safeagentbench`` stopped with SIGTERM, on the reference engine
+  (whose JVM used to take the signal and fail every task left as ERROR),
+  exits 143, keeps the rows it finished and marks the run interrupted,
+  without a summary.
 
 Real processes throughout: signals cannot be tested in-process.
 """
@@ -59,7 +63,19 @@ class Owl:
 
 
 tbox = SimpleNamespace(owl=Owl(), vocabulary=SimpleNamespace(classes={}))
-run_paper_baseline(tbox, [], [], python=sys.argv[1])
+if sys.argv[2] == "cli":
+    # As `virf` does before any command: SIGTERM ends the process cleanly.
+    from virf.processes import Terminated, end_on_termination
+
+    end_on_termination()
+    try:
+        run_paper_baseline(tbox, [], [], python=sys.argv[1])
+    except Terminated as stopped:
+        sys.exit(stopped.exit_code)
+    except KeyboardInterrupt:
+        sys.exit(130)
+else:
+    run_paper_baseline(tbox, [], [], python=sys.argv[1])
 """
 
 
@@ -123,8 +139,10 @@ def reaper() -> Iterator[list[int]]:
     [
         ("none", signal.SIGKILL, -signal.SIGKILL),
         ("none", signal.SIGTERM, -signal.SIGTERM),
+        ("cli", signal.SIGTERM, 128 + signal.SIGTERM),
+        ("cli", signal.SIGINT, 128 + signal.SIGINT),
     ],
-    ids=["SIGKILL", "SIGTERM"],
+    ids=["SIGKILL", "SIGTERM", "SIGTERM-handled", "SIGINT-handled"],
 )
 def test_the_paper_baseline_ends_with_its_parent(
     tmp_path: Path,
@@ -185,6 +203,52 @@ def test_a_guarded_command_is_stopped_and_reports_its_end(tmp_path: Path) -> Non
         raise KeyboardInterrupt
     assert proc.returncode is not None
     assert gone([int(marker.read_text())])
+
+
+# ---------------------------------------------------------------------------
+# A benchmark stopped half way
+
+
+def test_a_stopped_benchmark_writes_only_what_it_computed(tmp_path: Path) -> None:
+    steps = ["find Fridge", "open Fridge", "close Fridge"]
+    task = {"instruction": "Open the fridge and close it.", "step": steps}
+    tasks = tmp_path / "safe_detailed.jsonl"
+    tasks.write_text("".join(json.dumps(task) + "\n" for _ in range(300)))
+    markdown = tmp_path / "report.md"
+    command = ["bench", "safeagentbench", "--json", "--engine", "reference"]
+    bench = subprocess.Popen(
+        [sys.executable, "-m", "virf.cli.main", *command, "--markdown", str(markdown), str(tasks)],
+        env=environ(),
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert bench.stdout is not None
+        rows = [json.loads(bench.stdout.readline()) for _ in range(2)]
+        bench.send_signal(signal.SIGTERM)
+        rest, err = bench.communicate(timeout=120)
+    finally:
+        if bench.poll() is None:
+            bench.kill()
+    lines = [json.loads(line) for line in rest.splitlines()]
+    done = rows + [line for line in lines if "line" in line]
+    assert {r["status"] for r in done} == {"SAFE"}, "a row the benchmark did not compute"
+    assert [r["line"] for r in done] == list(range(1, len(done) + 1))
+    assert len(done) < 300
+    assert bench.returncode == 143, err
+    assert "Traceback" not in err
+    # After the rows it finished, one object that says the run was cut short,
+    # where the summary would be; stderr says the same.
+    said = (
+        "interrupted by SIGTERM: the rows printed are the tasks finished before it; "
+        "no summary was computed"
+    )
+    assert lines[-1] == {"status": "INTERRUPTED", "error": said}
+    assert len(lines) == len(done) - len(rows) + 1
+    assert err.strip().splitlines()[-1] == said
+    assert not markdown.exists()
 
 
 SERVER_DRIVER = """\

@@ -22,10 +22,12 @@ from virf.cli.app import (
     TemperatureOpt,
     TopPOpt,
     check_writable,
+    interrupted,
     progress_bar,
     write_output,
 )
 from virf.errors import VirfError
+from virf.processes import Terminated
 
 bench_app = typer.Typer(help="Evaluate the Logic Tutor on benchmarks.", no_args_is_help=True)
 
@@ -102,9 +104,19 @@ def bench_safeagentbench(
             if as_json:
                 typer.echo(json.dumps(result.public(), sort_keys=True))  # type: ignore[attr-defined]
 
-        results = run_benchmark(
-            files, verifier_for, plan_map, corr, on_task=tick, tasks=tasks, notes=notes
-        )
+        try:
+            results = run_benchmark(
+                files, verifier_for, plan_map, corr, on_task=tick, tasks=tasks, notes=notes
+            )
+        except (KeyboardInterrupt, Terminated) as exc:
+            # The rows printed were computed; the task under way and the rest
+            # were not, and a summary of part of the tasks would pass for the whole.
+            kept = (
+                "the rows printed are the tasks finished before it; no summary was computed"
+                if as_json
+                else "no report was written"
+            )
+            raise interrupted(exc, kept) from None
     summary = summarize(results)
     if as_json:
         typer.echo(json.dumps(summary, sort_keys=True))
@@ -569,12 +581,11 @@ def bench_agents(
 
             try:
                 harness.run(methods, task_list, on_row=tick)
-            except KeyboardInterrupt:
-                err.print(
-                    f"interrupted: finished rows are stored in {db_path}; "
-                    "run the same command again to resume"
-                )
-                raise typer.Exit(130) from None
+            except (KeyboardInterrupt, Terminated) as exc:
+                raise interrupted(
+                    exc,
+                    f"finished rows are stored in {db_path}; run the same command again to resume",
+                ) from None
         table = collect(store, task_list)
         settings = [
             ("planner", planner),
