@@ -153,7 +153,7 @@ class Run:
         self.asks = 0  # times the run has waited for answers
         # Held only while the run's fields are read or set, never during I/O:
         # an event stream takes it on the event loop.
-        self.changed: Any = threading.Lock()
+        self.lock: Any = threading.Lock()
         self.changes = _Changes()
         # Answers with the wait they answer (``asks``): answers that come too
         # late for one wait must not answer the next one's questions.
@@ -163,11 +163,11 @@ class Run:
             store.save_run(self.id, self.state, self.asks, self.public())
 
     def public(self) -> dict[str, Any]:
-        with self.changed:
+        with self.lock:
             return _public(self)
 
     def view(self) -> _View:
-        with self.changed:
+        with self.lock:
             return _View(
                 self.state,
                 tuple(self.turns),
@@ -181,9 +181,10 @@ class Run:
         await self.changes.wait(seen, timeout)
 
     def _changed(self, body: dict[str, Any]) -> None:
-        """After a change: record it (outside the lock: the log may be slow)
-        and wake the streams.  Only the run's own thread changes a run, so the
-        records keep their order."""
+        """After a change: record it for the other workers (outside the lock:
+        the log may be slow), then wake this worker's streams, so that what a
+        stream has told, every worker shows.  Only the run's own thread
+        changes a run, so the records keep their order."""
         if self._store is not None:
             try:
                 self._store.save_run(self.id, body["state"], body["asks"], body)
@@ -193,14 +194,14 @@ class Run:
         self.changes.bump()
 
     def _update(self, **changes: Any) -> None:
-        with self.changed:
+        with self.lock:
             for key, value in changes.items():
                 setattr(self, key, value)
             body = _public(self)
         self._changed(body)
 
     def add_turn(self, turn: Turn) -> None:
-        with self.changed:
+        with self.lock:
             self.turns.append(asdict(turn))
             body = _public(self)
         self._changed(body)
@@ -238,7 +239,7 @@ class SharedRun:
     def __init__(self, run_id: str, store: RunLog, body: Mapping[str, Any]) -> None:
         self.id = run_id
         self._store = store
-        self.changed = contextlib.nullcontext()
+        self.lock = contextlib.nullcontext()  # its state is the log's, as last read
         self.changes = _Changes()
         self._read(body)
 
@@ -429,7 +430,7 @@ class Runs:
         return SharedRun(run_id, self.store, body)
 
     def answer(self, run: Run | SharedRun, answers: Mapping[str, str]) -> None:
-        with run.changed:
+        with run.lock:
             if run.state != "waiting":
                 raise InputError(f"run {run.id} is {run.state}, not waiting for answers")
             asked = {q.key: q for q in run.questions}
@@ -448,7 +449,7 @@ class Runs:
             if canonical is not None:
                 settled[key] = canonical
         if isinstance(run, Run):
-            with run.changed:
+            with run.lock:
                 if run.state != "waiting" or run.asks != asks:
                     raise InputError(f"run {run.id} stopped waiting for these answers")
                 run.answers.put((asks, settled))
