@@ -19,7 +19,7 @@ from virf.ontology.tbox import TBox, load_tbox
 from virf.reasoning import Engine, make_engine
 from virf.schema import Report
 from virf.verify.verifier import Verifier
-from virf.world.plan import MAX_PLAN_STEPS, PlanStep, load_plan_file, parse_plan
+from virf.world.plan import PlanStep, check_plan_size, load_plan_file, parse_plan
 from virf.world.scene import Scene, build_scene, load_scene_data, load_scene_file
 
 DEFAULT_ENGINE = "fast"
@@ -163,8 +163,7 @@ class LogicTutor:
         items = list(plan)
         if all(isinstance(p, PlanStep) for p in items):
             steps = tuple(items)
-            if len(steps) > MAX_PLAN_STEPS:
-                raise InputError(f"plan has more than {MAX_PLAN_STEPS} actions (the limit)")
+            check_plan_size(len(steps))
         else:
             steps = parse_plan(items)
         if not steps:

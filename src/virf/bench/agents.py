@@ -70,6 +70,7 @@ from virf.errors import EnvironmentProblem, InputError
 from virf.migrations import Migration
 from virf.planner.apprentices import Apprentice, Proposal, ProposalRequest
 from virf.planner.config import planner_settings
+from virf.planner.deadline import DEFAULT_DEADLINE_S, deadline_seconds
 from virf.planner.loop import Tutor
 from virf.planner.methods import Knowledge, Method, knowledge_filter, run_method
 from virf.planner.questions import AnswerPolicy, deny
@@ -445,6 +446,7 @@ class TimedCritic(Apprentice):
                 task_id=request.task_id,
                 iteration=request.iteration,
                 method=request.method,
+                deadline=request.deadline,  # the run's: a silent critic cannot outlive it
             )
         finally:
             self.calls += 1
@@ -483,7 +485,11 @@ class Harness:
         *,
         critic: Apprentice | None = None,
         answer: AnswerPolicy = deny,
+        deadline_s: float = DEFAULT_DEADLINE_S,
     ) -> None:
+        """``deadline_s`` bounds each (method, task) run, as ``virf plan
+        --deadline`` bounds one: when it passes, the task is rejected."""
+        self.deadline_s = deadline_seconds(deadline_s)
         self.tutor = tutor
         self.vocab = tutor.tbox.vocabulary
         self.apprentice = apprentice
@@ -553,6 +559,7 @@ class Harness:
             answer=self.answer,
             task_id=tid,
             critic=critic,
+            deadline=self.deadline_s,
         )
         verifications, verifier_ms = (
             (critic.calls, critic.ms) if critic is not None else (timed.calls, timed.ms)

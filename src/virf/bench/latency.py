@@ -490,13 +490,10 @@ def run_latency(
 
         paper_cases = sample(cases, paper_sample)
         small = [c for c, n in zip(synthetic, sizes, strict=True) if n <= paper_max_objects]
-        with tempfile.TemporaryDirectory(prefix="virf-paper-") as work:
-            result = run_paper_baseline(
-                tbox,
-                _paper_plans(vf, paper_cases + small),
-                sorted(tbox.vocabulary.uscs),
-                work,
-            )
+        # In a temporary folder of its own, removed whatever happens.
+        result = run_paper_baseline(
+            tbox, _paper_plans(vf, paper_cases + small), sorted(tbox.vocabulary.uscs)
+        )
         for plan in result["plans"]:
             paper_rows[plan["id"]] = _paper_plan_ms(plan)
         per_plan = [paper_rows[c.name] for c in paper_cases]

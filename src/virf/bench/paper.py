@@ -16,6 +16,7 @@ import json
 import shutil
 import subprocess
 import sys
+import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -23,6 +24,7 @@ from typing import Any
 from virf.errors import EnvironmentProblem, InputError, VirfError
 from virf.ontology.iri import NS
 from virf.ontology.tbox import TBox
+from virf.processes import guarded
 from virf.schema import Fact, FactKind
 
 # TBox individuals move here in the export: every one of them is punned with
@@ -130,7 +132,7 @@ def run_paper_baseline(
     tbox: TBox,
     plans: Sequence[PaperPlan],
     concepts: Sequence[str],
-    workdir: str | Path,
+    workdir: str | Path | None = None,
     python: str | Path | None = None,
     call_timeout_s: float | None = PAPER_CALL_TIMEOUT_S,
 ) -> dict[str, Any]:
@@ -142,13 +144,36 @@ def run_paper_baseline(
     per plan ``step_ms``, ``total_ms``, ``findings`` and ``consistent`` per
     snapshot (a snapshot that failed in Java, or whose reasoner call took
     more than ``call_timeout_s``, is ``{"error": ...}`` instead).
+
+    The files go to ``workdir``, or to a temporary folder removed at the end,
+    however it comes (an error, Ctrl-C, SIGTERM; after SIGKILL, by the
+    script's guard).  The script, and the JVMs it starts, end with this
+    process (:func:`virf.processes.guarded`).
     """
     unknown = [c for c in concepts if c not in tbox.vocabulary.classes]
     if unknown:
         raise InputError(f"unknown concept '{unknown[0]}'")
     if python is None:
         python = ensure_paper_env(_checkout_root())
-    work = Path(workdir).resolve()
+    if workdir is not None:
+        return _run_in(tbox, plans, concepts, Path(workdir).resolve(), python, call_timeout_s)
+    work = Path(tempfile.mkdtemp(prefix="virf-paper-"))
+    try:
+        return _run_in(tbox, plans, concepts, work, python, call_timeout_s, temporary=True)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def _run_in(
+    tbox: TBox,
+    plans: Sequence[PaperPlan],
+    concepts: Sequence[str],
+    work: Path,
+    python: str | Path,
+    call_timeout_s: float | None,
+    *,
+    temporary: bool = False,
+) -> dict[str, Any]:
     work.mkdir(parents=True, exist_ok=True)
     tbox_path = work / "tbox.owl"
     export_tbox(tbox, tbox_path)
@@ -166,27 +191,34 @@ def run_paper_baseline(
     job_path, out_path = work / "job.json", work / "out.json"
     job_path.write_text(json.dumps(job, indent=1), encoding="utf-8")
     out_path.unlink(missing_ok=True)
-    last = _stream([str(python), str(SCRIPT), str(job_path), str(out_path)])
+    last = _stream(
+        [str(python), str(SCRIPT), str(job_path), str(out_path)], work if temporary else None
+    )
     if last is not None:
         raise EnvironmentProblem(f"paper baseline failed: {last.removeprefix('error: ')}")
     result: dict[str, Any] = json.loads(out_path.read_text(encoding="utf-8"))
     return result
 
 
-def _stream(cmd: list[str]) -> str | None:
-    """Run ``cmd``, echoing its progress lines; its last line if it failed."""
+def _stream(cmd: list[str], temporary: Path | None = None) -> str | None:
+    """Run ``cmd``, echoing its progress lines; its last line if it failed.
+
+    The command and all it starts end with this process, however it ends;
+    ``temporary`` is its folder, removed by the guard if this process dies
+    first (:func:`virf.processes.guarded`)."""
+    last = ""
     try:
-        proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True)
+        with guarded(cmd, remove=temporary, stderr=subprocess.PIPE, text=True) as proc:
+            assert proc.stderr is not None
+            for line in proc.stderr:
+                sys.stderr.write(line)
+                last = line.strip() or last
+            code = proc.wait()
     except OSError as exc:
         return f"cannot start {cmd[0]}: {exc.strerror}"
-    last = ""
-    assert proc.stderr is not None
-    for line in proc.stderr:
-        sys.stderr.write(line)
-        last = line.strip() or last
-    if proc.wait() == 0:
+    if code == 0:
         return None
-    return last or f"exit code {proc.returncode}"
+    return last or f"exit code {code}"
 
 
 def _checkout_root() -> Path:

@@ -9,7 +9,10 @@ Exit codes of ``virf plan``:
 Every command: 2 bad input or usage, 4 an environment problem (Java, memory,
 a model that cannot be reached) or an internal error, each as one line on
 stderr and, when ``--json`` was given, one JSON error object on stdout
-(docs/reliability.md).
+(docs/reliability.md).  Ctrl-C, SIGTERM and SIGHUP end a command cleanly
+(``finally`` blocks run: child processes stopped, temporary folders
+removed) with 128 + the signal's number and one line saying so
+(:func:`interrupted`).
 
 Commands do not catch errors to report them: whatever a command raises ends
 in :func:`_exit_for`, the one place that maps an error to its exit code.
@@ -34,6 +37,7 @@ import typer
 from typer.core import TyperGroup
 
 from virf.errors import EnvironmentProblem, VirfError, printable
+from virf.processes import Terminated, end_on_termination
 
 EXIT = {"SAFE": 0, "UNSAFE": 1, "UNKNOWN": 3, "ERROR": 4}
 EXIT_BAD_INPUT = 2
@@ -225,13 +229,33 @@ def _exit_for(exc: BaseException) -> BaseException:
     return _fail(f"internal error: {detail}; please report{where}", EXIT["ERROR"])
 
 
+def interrupted(exc: BaseException | None = None, what: str = "") -> typer.Exit:
+    """The end of a command stopped by Ctrl-C (``exc`` a KeyboardInterrupt or
+    None) or by SIGTERM or SIGHUP (a :class:`Terminated`): one line on
+    stderr, ``what`` saying what was kept, and under ``--json`` one object
+    ``{"status": "INTERRUPTED", "error": ...}`` on stdout; exit 128 + the
+    signal's number (130, 143, 129)."""
+    if isinstance(exc, Terminated):
+        line, code = f"interrupted by {exc.name}", exc.exit_code
+    else:
+        line, code = "interrupted (Ctrl-C)", 130
+    if what:
+        line += f": {what}"
+    # A terminal that hung up takes no more output; the exit code still tells.
+    with contextlib.suppress(OSError, ValueError):
+        typer.echo(line, err=True)
+        if _JSON_ERRORS.get():
+            typer.echo(json.dumps({"status": "INTERRUPTED", "error": line}))
+    return typer.Exit(code)
+
+
 def main() -> None:
     """Run the root command; :mod:`virf.cli.main` registers the commands first."""
+    end_on_termination()
     try:
         code = app(standalone_mode=False)
-    except KeyboardInterrupt:
-        typer.echo("interrupted", err=True)
-        sys.exit(130)
+    except (KeyboardInterrupt, Terminated) as exc:
+        sys.exit(interrupted(exc).exit_code)
     except Exception as exc:
         # Errors before a command runs (the root's own options, no command at
         # all) and anything the root group let through take the same road.
@@ -239,8 +263,7 @@ def main() -> None:
         if isinstance(ending, typer.Exit):
             sys.exit(ending.exit_code)
         if "Abort" in {c.__name__ for c in type(ending).__mro__}:
-            typer.echo("interrupted", err=True)
-            sys.exit(130)
+            sys.exit(interrupted().exit_code)
         exit_code = getattr(ending, "exit_code", EXIT["ERROR"])
         sys.exit(exit_code if isinstance(exit_code, int) else EXIT["ERROR"])
     sys.exit(code if isinstance(code, int) else 0)

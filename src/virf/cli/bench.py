@@ -22,10 +22,12 @@ from virf.cli.app import (
     TemperatureOpt,
     TopPOpt,
     check_writable,
+    interrupted,
     progress_bar,
     write_output,
 )
 from virf.errors import VirfError
+from virf.processes import Terminated
 
 bench_app = typer.Typer(help="Evaluate the Logic Tutor on benchmarks.", no_args_is_help=True)
 
@@ -102,9 +104,19 @@ def bench_safeagentbench(
             if as_json:
                 typer.echo(json.dumps(result.public(), sort_keys=True))  # type: ignore[attr-defined]
 
-        results = run_benchmark(
-            files, verifier_for, plan_map, corr, on_task=tick, tasks=tasks, notes=notes
-        )
+        try:
+            results = run_benchmark(
+                files, verifier_for, plan_map, corr, on_task=tick, tasks=tasks, notes=notes
+            )
+        except (KeyboardInterrupt, Terminated) as exc:
+            # The rows printed were computed; the task under way and the rest
+            # were not, and a summary of part of the tasks would pass for the whole.
+            kept = (
+                "the rows printed are the tasks finished before it; no summary was computed"
+                if as_json
+                else "no report was written"
+            )
+            raise interrupted(exc, kept) from None
     summary = summarize(results)
     if as_json:
         typer.echo(json.dumps(summary, sort_keys=True))
@@ -458,6 +470,13 @@ def bench_agents(
     top_p: TopPOpt = None,
     max_tokens: MaxTokensOpt = None,
     timeout: ModelTimeoutOpt = None,
+    deadline: Annotated[
+        float | None,
+        typer.Option(
+            help="Seconds each method may take on one task (default 600, or deadline_s in the "
+            "config file); when they pass, that task is rejected."
+        ),
+    ] = None,
     seed: SeedOpt = None,
     kb: KbOpt = None,
     as_json: Annotated[
@@ -477,12 +496,14 @@ def bench_agents(
     from virf.bench.safeagentbench import load_tasks
     from virf.errors import InputError
     from virf.planner import make_apprentice
+    from virf.planner.config import run_deadline
     from virf.planner.methods import METHODS, get_method
     from virf.planner.questions import answers_file, deny
 
     err = Console(stderr=True)
     closing: list[Any] = []
     try:
+        deadline_s = run_deadline(deadline)
         names = [n.strip() for m in method for n in m.split(",") if n.strip()]
         if not names:
             raise InputError(f"--method names no method; choose from {', '.join(METHODS)}")
@@ -535,7 +556,8 @@ def bench_agents(
             base_url=base_url,
             max_iter=max_iter,
             answers=answers,
-            sampling=sampling,
+            # A deadline given here changes which tasks are rejected: part of the run.
+            sampling=sampling if deadline is None else {**sampling, "deadline_s": deadline_s},
         )
         tutor = LogicTutor(engine=config.engine, kb=kb)
         if db is None:
@@ -545,7 +567,9 @@ def bench_agents(
         apprentice.run_log = store
         if judge is not None:
             judge.run_log = store
-        harness = Harness(tutor, apprentice, store, critic=judge, answer=policy)
+        harness = Harness(
+            tutor, apprentice, store, critic=judge, answer=policy, deadline_s=deadline_s
+        )
         stored = 0
         with progress_bar(err) as progress:
             bar = progress.add_task("planning", total=len(methods) * len(task_list))
@@ -557,12 +581,11 @@ def bench_agents(
 
             try:
                 harness.run(methods, task_list, on_row=tick)
-            except KeyboardInterrupt:
-                err.print(
-                    f"interrupted: finished rows are stored in {db_path}; "
-                    "run the same command again to resume"
-                )
-                raise typer.Exit(130) from None
+            except (KeyboardInterrupt, Terminated) as exc:
+                raise interrupted(
+                    exc,
+                    f"finished rows are stored in {db_path}; run the same command again to resume",
+                ) from None
         table = collect(store, task_list)
         settings = [
             ("planner", planner),

@@ -37,6 +37,13 @@ def serve(
             "postgresql:// URL that several service machines share."
         ),
     ] = None,
+    deadline: Annotated[
+        float | None,
+        typer.Option(
+            help="Seconds each /v1/plan run may take, waits for answers not counted "
+            "(default 600, or deadline_s in the config file); a run past it is rejected."
+        ),
+    ] = None,
     workspace: Annotated[
         Path | None,
         typer.Option(
@@ -67,6 +74,9 @@ def serve(
             f"--host {host} without an API key would let anyone verify through this machine; "
             "set --api-key or VIRF_API_KEY, or keep --host 127.0.0.1"
         )
+    from virf.planner.config import run_deadline
+
+    deadline_s = run_deadline(deadline)  # a bad value fails now, not at the first run
     if api_key is None:
         typer.echo("no API key: listening on this machine only", err=True)
     if workers > 1 and run_log is None:
@@ -96,6 +106,7 @@ def serve(
         run_log,
         str(workspace) if workspace else None,
         reviewer or default_reviewer(),
+        deadline_s,
     )
     os.environ["VIRF_SERVE_SETTINGS"] = repr(settings)
     if workers == 1:
@@ -108,6 +119,7 @@ def serve(
             api_key=api_key,
             planners=planners,
             run_log=run_log,
+            deadline_s=deadline_s,
             workspace=workspace,
             reviewer=reviewer or default_reviewer(),
         )

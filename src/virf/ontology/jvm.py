@@ -24,9 +24,15 @@ from pathlib import Path
 from virf.errors import EnvironmentProblem, clip
 
 _lock = threading.Lock()
-# Quiet slf4j-simple: HermiT and Openllet log at INFO otherwise.
+# Quiet slf4j-simple: HermiT and Openllet log at INFO otherwise.  -Xrs: the
+# JVM installs no handlers for SIGINT, SIGTERM and SIGHUP.  Its own would
+# take them from Python and shut the JVM down under a running command
+# (every verification left would fail as ERROR, and `finally` blocks would
+# not run); without them Ctrl-C is Python's KeyboardInterrupt and SIGTERM
+# ends the command cleanly (virf.processes).
 JVM_OPTIONS = (
     "-Xss8m",
+    "-Xrs",
     "-Dorg.slf4j.simpleLogger.defaultLogLevel=error",
     "-Djava.awt.headless=true",
 )

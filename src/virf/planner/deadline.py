@@ -49,6 +49,12 @@ class Deadline:
         self.option = option
         self._expires = time.monotonic() + self.seconds
 
+    @classmethod
+    def of(cls, deadline: Deadline | float) -> Deadline:
+        """A run's deadline: ``deadline`` itself, or one of that many seconds
+        from now (an input error when it is no deadline: 0, NaN, a month)."""
+        return deadline if isinstance(deadline, Deadline) else cls(deadline)
+
     def remaining(self) -> float:
         """Seconds left, never negative."""
         return max(0.0, self._expires - time.monotonic())

@@ -18,7 +18,9 @@ The apprentice proposes a plan and the tutor verifies it:
 Each proposal uses one of ``max_iter`` iterations. When they run out, the
 outcome is ``TASK_REJECTED``; so it is when the run's deadline passes
 (:mod:`virf.planner.deadline`), checked before every proposal and every round
-of questions.  The baselines of :mod:`virf.planner.methods` that do not have
+of questions.  Every run has one: a caller that gives none gets
+``DEFAULT_DEADLINE_S``, the default of ``virf plan --deadline``.  The
+baselines of :mod:`virf.planner.methods` that do not have
 the tutor verify their final plan end ``APPROVED_UNVERIFIED`` instead of
 ``APPROVED``.
 
@@ -38,7 +40,7 @@ from typing import Any, Literal, Protocol
 from virf.errors import clip
 from virf.ontology.tbox import Vocabulary
 from virf.planner.apprentices import Apprentice
-from virf.planner.deadline import Deadline
+from virf.planner.deadline import DEFAULT_DEADLINE_S, Deadline
 from virf.planner.prompting import ReadPlan, apprentice_prompt, read_plan, unreadable_message
 from virf.planner.questions import SETTLEABLE, AnswerPolicy, Answers, apply_answers, deny
 from virf.render.feedback import feedback_prompt
@@ -141,7 +143,7 @@ def refine(
     prompt_suffix: str = "",
     feedback: Callable[[Report], str] = feedback_prompt,
     read: Callable[[str], ReadPlan] = read_plan,
-    deadline: Deadline | None = None,
+    deadline: Deadline | float = DEFAULT_DEADLINE_S,
     on_turn: Callable[[Turn], None] | None = None,
 ) -> LoopResult:
     """Run Algorithm 1 for one instruction in one scene.
@@ -150,10 +152,13 @@ def refine(
     (the paper's diagnostic template by default; VIRF-Reject's generic
     message for that ablation). ``prompt_suffix`` and ``read`` let a method
     ask for reasoning before the plan and read the plan after it.
-    ``deadline`` bounds the run: when it passes, the task is rejected.
+    ``deadline`` bounds the run: when it passes, the task is rejected.  A
+    number of seconds starts it now; a :class:`Deadline` started earlier
+    (before loading, as ``virf plan`` does) counts from then.
     ``on_turn`` sees each turn of the transcript as it is added."""
     if max_iter < 1:
         raise ValueError("max_iter must be at least 1")
+    deadline = Deadline.of(deadline)
     data = dict(scene_data)
     scene = build_scene(data)
     prompt = apprentice_prompt(instruction, scene, rules) + prompt_suffix
@@ -165,7 +170,7 @@ def refine(
     plan: tuple[PlanStep, ...] | None = None  # the plan under verification
     reply = ""
     for i in range(max_iter):
-        if deadline is not None and deadline.expired():
+        if deadline.expired():
             return LoopResult(
                 "TASK_REJECTED",
                 None,
@@ -193,8 +198,14 @@ def refine(
                 return LoopResult(
                     "TASK_REJECTED", None, i + 1, "the apprentice refused", tuple(log)
                 )
-            if got.unreadable or not got.steps:
-                log.append(Turn(i, "apprentice", "unreadable", reply))
+            if got.problem is not None or got.unreadable or not got.steps:
+                if got.problem is not None:
+                    # A plan over the limits of a plan file: refused as `virf
+                    # verify` refuses it, never verified, never approved.
+                    turn = Turn(i, "apprentice", "unreadable", got.problem, data={"reply": reply})
+                else:
+                    turn = Turn(i, "apprentice", "unreadable", reply)
+                log.append(turn)
                 messages += [
                     {"role": "assistant", "content": reply},
                     {"role": "user", "content": unreadable_message(got)},
@@ -222,7 +233,7 @@ def refine(
         given: dict[str, str] = {}
         rounds = 0
         while report.status == "UNKNOWN":
-            if deadline is not None and deadline.expired():
+            if deadline.expired():
                 log.append(_unsettled(i, report.questions, asked, given))
                 return LoopResult(
                     "TASK_REJECTED",

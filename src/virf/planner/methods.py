@@ -34,7 +34,7 @@ from typing import Any, Literal
 from virf.errors import InputError, closest
 from virf.ontology.tbox import UnsafeStateConcept, Vocabulary
 from virf.planner.apprentices import Apprentice
-from virf.planner.deadline import Deadline
+from virf.planner.deadline import DEFAULT_DEADLINE_S, Deadline
 from virf.planner.loop import SYSTEM, LoopResult, Outcome, Transcript, Turn, Tutor, refine
 from virf.planner.prompting import (
     REFUSAL,
@@ -124,12 +124,14 @@ def run_method(
     answer: AnswerPolicy = deny,
     task_id: str = "task",
     critic: Apprentice | None = None,
-    deadline: Deadline | None = None,
+    deadline: Deadline | float = DEFAULT_DEADLINE_S,
     on_turn: Callable[[Turn], None] | None = None,
 ) -> LoopResult:
     """Plan with ``method``; ``tutor`` must already hold the method's knowledge.
 
-    ``deadline`` bounds the whole run: when it passes, the task is rejected."""
+    ``deadline`` bounds the whole run: when it passes, the task is rejected.
+    Seconds start it now; a :class:`Deadline` counts from when it was made."""
+    deadline = Deadline.of(deadline)
     rules = render_rules(vocab) if method.rules else ""
     suffix = "\n" + template("thinker") if method.thinker else ""
     read = read_after_plan_marker if method.thinker else read_plan
@@ -161,7 +163,7 @@ def run_method(
     log: list[Turn] = Transcript(Turn(0, "user", "instruction", instruction), on_turn)
 
     def out_of_time(i: int) -> LoopResult | None:
-        if deadline is None or not deadline.expired():
+        if not deadline.expired():
             return None
         return LoopResult("TASK_REJECTED", None, i, deadline.reason(), tuple(log))
 
@@ -181,6 +183,11 @@ def run_method(
         if got.refused:
             log.append(Turn(i, "apprentice", "refusal", p.text))
             return LoopResult("TASK_REJECTED", None, i + 1, "the apprentice refused", tuple(log))
+        if got.problem is not None:  # over the plan limit: refused, as `virf verify` does
+            log.append(Turn(i, "apprentice", "unreadable", got.problem, data={"reply": p.text}))
+            return LoopResult(
+                "TASK_REJECTED", None, i + 1, f"the reply's plan: {got.problem}", tuple(log)
+            )
         if not got.steps:
             log.append(Turn(i, "apprentice", "unreadable", p.text))
             return LoopResult("TASK_REJECTED", None, i + 1, "the reply holds no plan", tuple(log))

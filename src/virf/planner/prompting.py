@@ -14,7 +14,7 @@ from importlib import resources
 
 from virf.errors import InputError
 from virf.ontology.tbox import Vocabulary
-from virf.world.plan import ACTION_WORDS, PlanStep, parse_line
+from virf.world.plan import ACTION_WORDS, PlanStep, check_plan_size, parse_line
 from virf.world.scene import Scene
 
 REFUSAL = "TASK_ABORT"
@@ -50,11 +50,15 @@ def apprentice_prompt(instruction: str, scene: Scene, rules: str = "") -> str:
 
 @dataclass(frozen=True)
 class ReadPlan:
-    """What a reply contains: plan steps, lines that are not actions, a refusal."""
+    """What a reply contains: plan steps, lines that are not actions, a refusal,
+    and ``problem``: why the plan as a whole cannot be used (it breaks a plan
+    limit, :func:`virf.world.plan.check_plan_size`), in the words ``virf
+    verify`` uses for a plan file; its steps are then dropped."""
 
     steps: tuple[PlanStep, ...]
     unreadable: tuple[str, ...]
     refused: bool
+    problem: str | None = None
 
 
 _FENCE = re.compile(r"^\s*```")
@@ -74,6 +78,8 @@ def read_plan(reply: str) -> ReadPlan:
       then such lines are reported, so the apprentice learns what failed.
     * A line that is ``TASK_ABORT`` refuses the task, whatever else the reply
       says (fail closed).
+    * A plan over the limits of a plan file (more than ``MAX_PLAN_STEPS``
+      actions) is no plan: no step is kept, and ``problem`` says why.
     """
     listed_json = _json_plan(reply)
     if listed_json is not None:
@@ -83,6 +89,7 @@ def read_plan(reply: str) -> ReadPlan:
     unreadable: list[str] = []
     attempts: list[str] = []
     in_code = False
+    problem: str | None = None
     for raw in reply.splitlines():
         if _FENCE.match(raw):
             in_code = not in_code
@@ -94,18 +101,29 @@ def read_plan(reply: str) -> ReadPlan:
         if line.strip('"') == REFUSAL:
             refused = True
             continue
+        if problem is not None:
+            continue  # only a refusal still counts
         first = line.split()[0].lower().split("(")[0].replace("-", "_")
         try:
             if first not in ACTION_WORDS:
                 raise InputError("not an action")
             previous = steps[-1] if steps else None
-            steps.append(parse_line(line, len(steps) + 1, len(steps) + 1, previous))
+            step = parse_line(line, len(steps) + 1, len(steps) + 1, previous)
         except InputError as exc:
             why = f"{line}: {str(exc).split(': ', 1)[-1]}"
             if in_code or listed:
                 unreadable.append(why)
             elif first in ACTION_WORDS:
                 attempts.append(why)  # prose, unless the reply holds no plan at all
+            continue
+        try:
+            check_plan_size(len(steps) + 1)
+        except InputError as exc:
+            problem = str(exc)
+            continue
+        steps.append(step)
+    if problem is not None:
+        return ReadPlan((), (), refused, problem)
     if not steps:
         unreadable += attempts
     return ReadPlan(tuple(steps), tuple(unreadable), refused)
@@ -137,7 +155,9 @@ def read_after_plan_marker(reply: str) -> ReadPlan:
 
 
 def unreadable_message(read: ReadPlan) -> str:
-    if read.unreadable:
+    if read.problem is not None:
+        problem = f"Your plan cannot be used: {read.problem}.\n"
+    elif read.unreadable:
         listed = "\n".join(f"- {u}" for u in read.unreadable)
         problem = f"Your reply contains lines that are not executable actions:\n{listed}\n"
     else:

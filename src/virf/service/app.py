@@ -32,6 +32,7 @@ from virf.api import LogicTutor
 from virf.database import shown
 from virf.errors import InputError
 from virf.ontology.tbox import DEFAULT_SCENARIO
+from virf.planner.deadline import DEFAULT_DEADLINE_S
 from virf.service.runs import AnswersRequest, PlannerRefused, PlanRequest, Runs
 from virf.web import (
     LOCAL_HOSTS,
@@ -158,6 +159,7 @@ def create_app(
     planners: Sequence[str] = (),
     run_log: str | Path | None = None,
     answer_wait_s: float = 600.0,
+    deadline_s: float = DEFAULT_DEADLINE_S,
     workspace: Path | None = None,
     reviewer: str = "reviewer",
 ) -> FastAPI:
@@ -165,11 +167,18 @@ def create_app(
     ``planners`` are the apprentices a run may name (``virf serve --planner``,
     as written there); the first is the one of runs that name none.
     ``run_log`` records their model calls.  With a knowledge ``workspace``,
+    ``deadline_s`` bounds each run (``virf serve --deadline``).
     its review page is a section of the app at ``/review/`` (decisions
     recorded as ``reviewer``'s).  Without an ``api_key`` the service answers
     only requests that name this machine (Host, Origin)."""
     tutors = Tutors(scenario, engine, kb, timeout_s)
-    runs = Runs(tutors, planners=planners, run_log=run_log, answer_wait_s=answer_wait_s)
+    runs = Runs(
+        tutors,
+        planners=planners,
+        run_log=run_log,
+        answer_wait_s=answer_wait_s,
+        deadline_s=deadline_s,
+    )
     default, _ = tutors.get(None, None)
     app = FastAPI(
         title="VIRF Logic Tutor",
@@ -330,8 +339,8 @@ def app_from_environment() -> FastAPI:
     command left in the environment (uvicorn starts workers by import path)."""
     import ast
 
-    scenario, engine, kb, api_key, planners, run_log, workspace, reviewer = ast.literal_eval(
-        os.environ["VIRF_SERVE_SETTINGS"]
+    scenario, engine, kb, api_key, planners, run_log, workspace, reviewer, deadline_s = (
+        ast.literal_eval(os.environ["VIRF_SERVE_SETTINGS"])
     )
     return create_app(
         scenario=scenario,
@@ -340,6 +349,7 @@ def app_from_environment() -> FastAPI:
         api_key=api_key,
         planners=planners,
         run_log=run_log,
+        deadline_s=deadline_s,
         workspace=Path(workspace) if workspace else None,
         reviewer=reviewer,
     )

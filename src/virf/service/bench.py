@@ -16,6 +16,7 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -24,6 +25,7 @@ from virf.bench.runner import _percentile
 from virf.bench.safeagentbench import build_scene, load_tasks
 from virf.errors import EnvironmentProblem, InputError
 from virf.ontology.tbox import load_tbox
+from virf.processes import guarded
 from virf.render.tables import Column, TextTable
 
 
@@ -72,26 +74,31 @@ def _free_port() -> int:
 
 
 class Server:
-    """``virf serve`` in a child process, until closed."""
+    """``virf serve`` in a child process, until closed.  The server and its
+    workers end with this process however it ends, SIGKILL included
+    (:func:`virf.processes.guarded`)."""
 
     def __init__(self, workers: int, *options: str) -> None:
         """``options``: more ``virf serve`` options (``--run-log``, ``--planner``)."""
         self.port = _free_port()
         self.url = f"http://127.0.0.1:{self.port}"
-        self.process = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "virf.cli.main",
-                "serve",
-                "--port",
-                str(self.port),
-                "--workers",
-                str(workers),
-                *options,
-            ],
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.PIPE,
+        self._stack = ExitStack()
+        self.process = self._stack.enter_context(
+            guarded(
+                [
+                    sys.executable,
+                    "-m",
+                    "virf.cli.main",
+                    "serve",
+                    "--port",
+                    str(self.port),
+                    "--workers",
+                    str(workers),
+                    *options,
+                ],
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.PIPE,
+            )
         )
 
     def wait_ready(self, timeout_s: float = 120.0) -> None:
@@ -115,11 +122,7 @@ class Server:
         raise EnvironmentProblem(f"virf serve did not become ready within {timeout_s:g} s")
 
     def close(self) -> None:
-        self.process.terminate()
-        try:
-            self.process.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            self.process.kill()
+        self._stack.close()  # stops the server and its workers, and waits for them
 
 
 def measure(

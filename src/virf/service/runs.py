@@ -8,26 +8,37 @@ in a thread of its own, so a slow model never holds up ``/v1/verify``.  Its
 answer policy waits for the client's answers; a run nobody answers within
 ``answer_wait_s`` takes no answers (fail closed: the plan is not approved on
 an open question).  Model calls go to the server's run log.
+
+An event stream is a coroutine on the server's event loop, never a thread:
+it awaits the run's next change (:class:`_Changes`, which the run's thread
+bumps), so any number of open streams leave the request threads to
+``/v1/verify`` and the rest.  A stream of another worker's run reads the run
+log every ``POLL_S`` in one of ``LOG_READERS`` threads kept for that.
 """
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import json
 import logging
 import queue
 import threading
 import time
 import uuid
-from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import asdict
+from collections.abc import AsyncIterator, Mapping, Sequence
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Final, Literal
 
+import anyio
+import anyio.to_thread
 from pydantic import BaseModel, ConfigDict, Field
 
 from virf.api import LogicTutor
 from virf.errors import InputError, VirfError, clip
 from virf.planner import RunLog, make_apprentice
+from virf.planner.deadline import DEFAULT_DEADLINE_S, Deadline, deadline_seconds
 from virf.planner.loop import Turn
 from virf.planner.methods import get_method, knowledge_filter, run_method
 from virf.planner.questions import Answers, check_answer
@@ -37,7 +48,11 @@ from virf.world.scene import build_scene
 _logger = logging.getLogger(__name__)
 MAX_RUNS: Final = 100  # kept in memory; the oldest finished ones go first
 POLL_S: Final = 0.5  # how often a run log is read for another worker's run or answers
+KEEP_ALIVE_S: Final = 15.0  # an idle stream says so this often (proxies drop silent ones)
+LOG_READERS: Final = 4  # threads that read the run log for streams of other workers' runs
 State = Literal["running", "waiting", "done", "failed"]
+# The option that sets a run's deadline, as the rejection names it.
+DEADLINE_OPTION: Final = "virf serve --deadline"
 
 
 class PlanRequest(BaseModel):
@@ -76,6 +91,58 @@ class _Locked:
             return self._verifier.verify(scene, plan)
 
 
+@dataclass(frozen=True)
+class _View:
+    """A run as it stands at one moment, for an event stream."""
+
+    state: State
+    turns: tuple[dict[str, Any], ...]
+    questions: tuple[dict[str, Any], ...]
+    result: dict[str, Any] | None
+    error: str | None
+    asks: int
+
+
+def _wake(future: asyncio.Future[None]) -> None:
+    if not future.done():
+        future.set_result(None)
+
+
+class _Changes:
+    """How many times a run has changed: bumped by the run's thread, awaited by
+    its event streams on the event loop, so that a stream waits without a
+    thread of its own."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self.count = 0
+        self._waiters: set[tuple[asyncio.AbstractEventLoop, asyncio.Future[None]]] = set()
+
+    def bump(self) -> None:
+        with self._lock:
+            self.count += 1
+            waiters, self._waiters = self._waiters, set()
+        for loop, future in waiters:
+            with contextlib.suppress(RuntimeError):  # that loop has closed: nobody waits
+                loop.call_soon_threadsafe(_wake, future)
+
+    async def wait(self, seen: int, timeout: float) -> None:
+        """Until the count is no longer ``seen``, or ``timeout`` seconds pass."""
+        loop = asyncio.get_running_loop()
+        waiter = (loop, loop.create_future())
+        with self._lock:
+            if self.count != seen:
+                return
+            self._waiters.add(waiter)
+        try:
+            await asyncio.wait_for(waiter[1], timeout)
+        except TimeoutError:
+            pass
+        finally:
+            with self._lock:
+                self._waiters.discard(waiter)
+
+
 class Run:
     """A run this worker is carrying out.  With a run log, every change is
     also recorded there, for the other workers to show."""
@@ -88,7 +155,10 @@ class Run:
         self.result: dict[str, Any] | None = None
         self.error: str | None = None
         self.asks = 0  # times the run has waited for answers
-        self.changed: Any = threading.Condition()
+        # Held only while the run's fields are read or set, never during I/O:
+        # an event stream takes it on the event loop.
+        self.lock: Any = threading.Lock()
+        self.changes = _Changes()
         # Answers with the wait they answer (``asks``): answers that come too
         # late for one wait must not answer the next one's questions.
         self.answers: queue.Queue[tuple[int, Answers]] = queue.Queue()
@@ -97,30 +167,48 @@ class Run:
             store.save_run(self.id, self.state, self.asks, self.public())
 
     def public(self) -> dict[str, Any]:
-        with self.changed:
+        with self.lock:
             return _public(self)
 
-    def _save(self) -> None:
-        if self._store is None:
-            return
-        try:
-            self._store.save_run(self.id, self.state, self.asks, self.public())
-        except VirfError as exc:
-            # The run goes on; the other workers show it as last recorded.
-            _logger.warning("run %s: %s", self.id, exc)
+    def view(self) -> _View:
+        with self.lock:
+            return _View(
+                self.state,
+                tuple(self.turns),
+                tuple(q.model_dump(mode="json") for q in self.questions),
+                self.result,
+                self.error,
+                self.asks,
+            )
+
+    async def wait_change(self, seen: int, timeout: float) -> None:
+        await self.changes.wait(seen, timeout)
+
+    def _changed(self, body: dict[str, Any]) -> None:
+        """After a change: record it for the other workers (outside the lock:
+        the log may be slow), then wake this worker's streams, so that what a
+        stream has told, every worker shows.  Only the run's own thread
+        changes a run, so the records keep their order."""
+        if self._store is not None:
+            try:
+                self._store.save_run(self.id, body["state"], body["asks"], body)
+            except VirfError as exc:
+                # The run goes on; the other workers show it as last recorded.
+                _logger.warning("run %s: %s", self.id, exc)
+        self.changes.bump()
 
     def _update(self, **changes: Any) -> None:
-        with self.changed:
+        with self.lock:
             for key, value in changes.items():
                 setattr(self, key, value)
-            self._save()
-            self.changed.notify_all()
+            body = _public(self)
+        self._changed(body)
 
     def add_turn(self, turn: Turn) -> None:
-        with self.changed:
+        with self.lock:
             self.turns.append(asdict(turn))
-            self._save()
-            self.changed.notify_all()
+            body = _public(self)
+        self._changed(body)
 
 
 def _public(run: Run | SharedRun) -> dict[str, Any]:
@@ -136,22 +224,16 @@ def _public(run: Run | SharedRun) -> dict[str, Any]:
     }
 
 
-class _Polled:
-    """Stands in for a run's condition when the run is another worker's: a
-    wait is a pause, then a fresh read of the run log."""
+@dataclass(frozen=True)
+class _Recorded:
+    """A run as the run log last recorded it."""
 
-    def __init__(self, run: SharedRun) -> None:
-        self._run = run
-
-    def __enter__(self) -> None:
-        return None
-
-    def __exit__(self, *_: object) -> None:
-        return None
-
-    def wait(self, timeout: float) -> None:
-        time.sleep(min(timeout, POLL_S))
-        self._run.reload()
+    state: State
+    turns: list[dict[str, Any]]
+    questions: list[Question]
+    result: dict[str, Any] | None
+    error: str | None
+    asks: int
 
 
 class SharedRun:
@@ -161,16 +243,45 @@ class SharedRun:
     def __init__(self, run_id: str, store: RunLog, body: Mapping[str, Any]) -> None:
         self.id = run_id
         self._store = store
-        self.changed = _Polled(self)
+        self.lock = contextlib.nullcontext()  # its state is the log's, as last read
+        self.changes = _Changes()
         self._read(body)
 
     def _read(self, body: Mapping[str, Any]) -> None:
-        self.state: State = body["state"]
-        self.turns: list[dict[str, Any]] = list(body["turns"])
-        self.questions = [Question.model_validate(q) for q in body["questions"]]
-        self.result: dict[str, Any] | None = body["result"]
-        self.error: str | None = body["error"]
-        self.asks: int = int(body["asks"])
+        # Read whole, then swapped in at once: a stream may look at any time.
+        self._recorded = _Recorded(
+            body["state"],
+            list(body["turns"]),
+            [Question.model_validate(q) for q in body["questions"]],
+            body["result"],
+            body["error"],
+            int(body["asks"]),
+        )
+        self.changes.bump()
+
+    @property
+    def state(self) -> State:
+        return self._recorded.state
+
+    @property
+    def turns(self) -> list[dict[str, Any]]:
+        return self._recorded.turns
+
+    @property
+    def questions(self) -> list[Question]:
+        return self._recorded.questions
+
+    @property
+    def result(self) -> dict[str, Any] | None:
+        return self._recorded.result
+
+    @property
+    def error(self) -> str | None:
+        return self._recorded.error
+
+    @property
+    def asks(self) -> int:
+        return self._recorded.asks
 
     def reload(self) -> None:
         body = self._store.load_run(self.id)
@@ -179,6 +290,17 @@ class SharedRun:
 
     def public(self) -> dict[str, Any]:
         return _public(self)
+
+    def view(self) -> _View:
+        now = self._recorded
+        return _View(
+            now.state,
+            tuple(now.turns),
+            tuple(q.model_dump(mode="json") for q in now.questions),
+            now.result,
+            now.error,
+            now.asks,
+        )
 
 
 class Runs:
@@ -189,15 +311,22 @@ class Runs:
         planners: Sequence[str] = (),
         run_log: str | Path | None,
         answer_wait_s: float = 600.0,
+        deadline_s: float = DEFAULT_DEADLINE_S,
     ) -> None:
+        """``deadline_s`` bounds each run as ``virf plan --deadline`` bounds
+        one (the time it waits for answers does not count)."""
         self.tutors, self.run_log = tutors, run_log
         # The planners a run may name, as the server's --planner options wrote them.
         self.planners = tuple(dict.fromkeys(p.strip() for p in planners))
         self.answer_wait_s = answer_wait_s
+        self.deadline_s = deadline_seconds(deadline_s, DEADLINE_OPTION)
         self._runs: dict[str, Run] = {}
         self._lock = threading.Lock()
         # The runs' own record: what lets another worker show a run.
         self.store = RunLog(run_log, run_id="service") if run_log is not None else None
+        # Streams of other workers' runs read the log in at most this many
+        # threads at once, never in the ones that serve requests.
+        self._readers = anyio.CapacityLimiter(LOG_READERS)
 
     def planner(self, named: str | None) -> str:
         """The planner of a run that names ``named`` (None: the server's first).
@@ -258,6 +387,10 @@ class Runs:
                 {u.name for u in vocab.uscs.values() if knowledge_filter(u, method.knowledge)}
             )
 
+        # From the moment the run is accepted, as `virf plan` counts from its start.
+        clock = Deadline(self.deadline_s, option=DEADLINE_OPTION)
+
+        @clock.excluding  # a person's time to answer is not the machine's
         def policy(questions: Sequence[Question]) -> Answers:
             run._update(state="waiting", questions=list(questions), asks=run.asks + 1)
             given = self._wait_for_answers(run)
@@ -278,6 +411,7 @@ class Runs:
                         max_iter=request.max_iter,
                         answer=policy,
                         task_id=request.task_id,
+                        deadline=clock,
                         on_turn=run.add_turn,
                     )
                 run._update(state="done", result=result.to_dict())
@@ -322,7 +456,7 @@ class Runs:
         return SharedRun(run_id, self.store, body)
 
     def answer(self, run: Run | SharedRun, answers: Mapping[str, str]) -> None:
-        with run.changed:
+        with run.lock:
             if run.state != "waiting":
                 raise InputError(f"run {run.id} is {run.state}, not waiting for answers")
             asked = {q.key: q for q in run.questions}
@@ -341,7 +475,7 @@ class Runs:
             if canonical is not None:
                 settled[key] = canonical
         if isinstance(run, Run):
-            with run.changed:
+            with run.lock:
                 if run.state != "waiting" or run.asks != asks:
                     raise InputError(f"run {run.id} stopped waiting for these answers")
                 run.answers.put((asks, settled))
@@ -349,35 +483,50 @@ class Runs:
             assert self.store is not None
             self.store.post_answers(run.id, asks, settled)
 
-    def events(self, run: Run | SharedRun) -> Iterator[str]:
+    async def events(self, run: Run | SharedRun) -> AsyncIterator[str]:
         """Server-sent events: each turn as it comes, the questions each time
-        the run waits for answers, and the result (or the failure) at the end."""
+        the run waits for answers, and the result (or the failure) at the end.
+
+        A coroutine on the event loop: between events it awaits the run's
+        next change and holds no thread (a client that goes away cancels it)."""
         sent = 0
         announced = 0  # how many times the run has waited for answers, as told
         while True:
-            with run.changed:
-                idle = sent == len(run.turns) and (
-                    run.state == "running" or (run.state == "waiting" and run.asks == announced)
-                )
-                if idle:
-                    run.changed.wait(timeout=15.0)
-                turns = run.turns[sent:]
-                state, result, error, asks = run.state, run.result, run.error, run.asks
-                questions = [q.model_dump(mode="json") for q in run.questions]
+            seen = run.changes.count
+            view = run.view()
+            idle = sent == len(view.turns) and (
+                view.state == "running" or (view.state == "waiting" and view.asks == announced)
+            )
+            if idle:
+                await self._next_change(run, seen)
+                view = run.view()
+            turns = view.turns[sent:]
             for turn in turns:
                 yield _event("turn", turn)
             sent += len(turns)
-            if state == "waiting" and asks > announced:
-                announced = asks
-                yield _event("questions", questions)
-            elif state == "done":
-                yield _event("result", result)
+            if view.state == "waiting" and view.asks > announced:
+                announced = view.asks
+                yield _event("questions", list(view.questions))
+            elif view.state == "done":
+                yield _event("result", view.result)
                 return
-            elif state == "failed":
-                yield _event("error", {"error": error})
+            elif view.state == "failed":
+                yield _event("error", {"error": view.error})
                 return
             elif not turns:
                 yield ": keep-alive\n\n"
+
+    async def _next_change(self, run: Run | SharedRun, seen: int) -> None:
+        """Until ``run`` changes, or a keep-alive is due.  Another worker's run
+        is read again from the log every ``POLL_S``."""
+        if isinstance(run, Run):
+            await run.wait_change(seen, KEEP_ALIVE_S)
+            return
+        await asyncio.sleep(POLL_S)
+        try:
+            await anyio.to_thread.run_sync(run.reload, limiter=self._readers)
+        except VirfError as exc:  # the log is unreachable: show the run as last read
+            _logger.warning("run %s: %s", run.id, exc)
 
 
 def _event(kind: str, data: Any) -> str:

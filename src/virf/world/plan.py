@@ -740,6 +740,14 @@ def parse_line(
     return replace(step, note=note)
 
 
+def check_plan_size(actions: int) -> None:
+    """The one plan limit, whatever the plan was read from (a file, a request,
+    a model's reply): more than ``MAX_PLAN_STEPS`` actions is an input error,
+    in these words everywhere."""
+    if actions > MAX_PLAN_STEPS:
+        raise InputError(f"plan has more than {MAX_PLAN_STEPS} actions (the limit)")
+
+
 def parse_plan(lines: Iterable[object]) -> tuple[PlanStep, ...]:
     steps: list[PlanStep] = []
     for line_no, line in enumerate(lines, start=1):
@@ -748,8 +756,7 @@ def parse_plan(lines: Iterable[object]) -> tuple[PlanStep, ...]:
         stripped = line.strip()
         if not stripped or stripped.startswith("#"):
             continue
-        if len(steps) == MAX_PLAN_STEPS:
-            raise InputError(f"plan has more than {MAX_PLAN_STEPS} actions (the limit)")
+        check_plan_size(len(steps) + 1)  # before the line is read: the limit is in actions
         previous = steps[-1] if steps else None
         steps.append(parse_line(stripped, line_no, index=len(steps) + 1, previous=previous))
     return tuple(steps)
