@@ -686,9 +686,11 @@ def parse_line(
         m = _match(tokens)
         if m is None:
             raise _no_reading(tokens, text, line_no)
-        # Articles and manner words are dropped only in lower case: "A" or
-        # "Back" may be an object's name.
-        words = [w for w in m.words if w not in _ARTICLES and w not in _MANNER] or m.words
+        # Articles are dropped only in lower case: "A" may be an object's
+        # name. Words of manner only in everyday lines: a line of the action
+        # language reads as it always has (recorded model replies too).
+        dropped = _ARTICLES | _MANNER if m.everyday else _ARTICLES
+        words = [w for w in m.words if w not in dropped] or m.words
         verb, args, held, everyday = _read_words(m, words, text, line_no)
         cut = _place_cut(words)
         connector = words[cut].lower() if cut is not None else None
