@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import inspect
 import json
+import tempfile
 import time
 from collections.abc import Iterator
 from contextlib import ExitStack
@@ -52,23 +53,28 @@ def urls(
     request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
 ) -> Iterator[tuple[str, str]]:
     """Where a run starts, and where its streams are opened: the same server,
-    or two sharing a run log (a stream then reads the log)."""
+    or two sharing a run log (a stream then reads the log). The servers run
+    the one planner the runs name (their allow-list)."""
+    planners = [f"replay:{REPLAY}"]
     if request.param == "this worker":
-        with serving(create_app(answer_wait_s=120.0)) as address:
+        with serving(create_app(answer_wait_s=120.0, planners=planners)) as address:
             yield address.rstrip("/"), address.rstrip("/")
         return
     log = tmp_path_factory.mktemp("shared") / "runs.sqlite"
     with (
-        serving(create_app(answer_wait_s=120.0, run_log=log)) as carrier,
-        serving(create_app(answer_wait_s=120.0, run_log=log)) as viewer,
+        serving(create_app(answer_wait_s=120.0, run_log=log, planners=planners)) as carrier,
+        serving(create_app(answer_wait_s=120.0, run_log=log, planners=planners)) as viewer,
     ):
         yield carrier.rstrip("/"), viewer.rstrip("/")
+
+
+REPLAY = Path(tempfile.gettempdir()) / "virf-test-service-runs-replay.jsonl"
 
 
 def start_waiting_run(http: httpx.Client, tmp_path: Path) -> dict[str, Any]:
     """A run that waits for answers (its streams stay open, with nothing to say)."""
     plan = json.loads((QUESTIONS / "plan.txt").read_text())
-    replay = tmp_path / "replay.jsonl"
+    replay = REPLAY
     replay.write_text(json.dumps({"task_id": "q", "iteration": 0, "text": "\n".join(plan)}) + "\n")
     started = http.post(
         "/v1/plan",
@@ -140,8 +146,8 @@ def silent_model(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> Iterator[Sl
 
 
 def test_a_service_run_ends_at_its_deadline(silent_model: SlowServer) -> None:
-    app = create_app(planner="openai:test-model", deadline_s=2.0)
-    with TestClient(app) as http:
+    app = create_app(planners=["openai:test-model"], deadline_s=2.0)
+    with TestClient(app, base_url="http://127.0.0.1") as http:
         started = time.monotonic()
         run = http.post("/v1/plan", json={"scene": FRIDGE_SCENE, "instruction": "Go."}).json()
         while http.get(run["run"]).json()["state"] == "running":
