@@ -446,18 +446,7 @@ def check(
     def report(
         normalised: str, terms: Sequence[Any], layer: Layer, text: str, related: Related
     ) -> CheckReport:
-        return CheckReport(
-            axiom=axiom,
-            normalised=normalised,
-            passed=not any(i.severity == "error" for i in items),
-            layer=layer,
-            threshold=ws.threshold,
-            terms=tuple(terms),
-            items=tuple(items),
-            related=related,
-            module_text=text,
-            checked_at=now(),
-        )
+        return ws._report(axiom, normalised, items, terms, related, layer, text)
 
     if not _CLASS_NAME.match(name):
         items.append(CheckItem.error("name", f"'{clip(name)}' is not a class name"))

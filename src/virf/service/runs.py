@@ -102,6 +102,19 @@ class _View:
     error: str | None
     asks: int
 
+    @classmethod
+    def of(cls, run: Any) -> _View:
+        """The view of anything holding a run's fields (a run, or one read
+        from the run log)."""
+        return cls(
+            run.state,
+            tuple(run.turns),
+            tuple(q.model_dump(mode="json") for q in run.questions),
+            run.result,
+            run.error,
+            run.asks,
+        )
+
 
 def _wake(future: asyncio.Future[None]) -> None:
     if not future.done():
@@ -172,14 +185,7 @@ class Run:
 
     def view(self) -> _View:
         with self.lock:
-            return _View(
-                self.state,
-                tuple(self.turns),
-                tuple(q.model_dump(mode="json") for q in self.questions),
-                self.result,
-                self.error,
-                self.asks,
-            )
+            return _View.of(self)
 
     async def wait_change(self, seen: int, timeout: float) -> None:
         await self.changes.wait(seen, timeout)
@@ -292,15 +298,7 @@ class SharedRun:
         return _public(self)
 
     def view(self) -> _View:
-        now = self._recorded
-        return _View(
-            now.state,
-            tuple(now.turns),
-            tuple(q.model_dump(mode="json") for q in now.questions),
-            now.result,
-            now.error,
-            now.asks,
-        )
+        return _View.of(self._recorded)
 
 
 class Runs:
