@@ -12,6 +12,10 @@ from virf.cli.app import EngineOpt, KbOpt, ScenarioOpt, default_reviewer
 from virf.errors import InputError
 
 LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
+# On SIGTERM or Ctrl-C, requests under way get this long to finish; then what
+# is still open (an event stream of a run waiting for answers) is cut off,
+# so an open stream cannot keep the service from stopping.
+SHUTDOWN_GRACE_S = 10
 
 
 def serve(
@@ -118,7 +122,14 @@ def serve(
             workspace=workspace,
             reviewer=reviewer or default_reviewer(),
         )
-        uvicorn.run(app, host=host, port=port, log_level="warning", http=NoDelayH11Protocol)
+        uvicorn.run(
+            app,
+            host=host,
+            port=port,
+            log_level="warning",
+            http=NoDelayH11Protocol,
+            timeout_graceful_shutdown=SHUTDOWN_GRACE_S,
+        )
     else:
         uvicorn.run(
             "virf.service.app:app_from_environment",
@@ -128,4 +139,5 @@ def serve(
             workers=workers,
             log_level="warning",
             http=NoDelayH11Protocol,
+            timeout_graceful_shutdown=SHUTDOWN_GRACE_S,
         )
