@@ -231,3 +231,58 @@ def test_a_bad_deadline_is_refused_before_anything_starts(cli: Any, tmp_path: Pa
         assert refused.output.strip() == (
             "error: --deadline 0.0 must be a number of seconds in (0, 604800]"
         )
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_an_open_event_stream_does_not_keep_the_service_from_stopping(
+    tmp_path: Path, workers: int
+) -> None:
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    from conftest import ROOT
+
+    from virf.cli.serve import SHUTDOWN_GRACE_S
+    from virf.service.bench import _free_port
+
+    port = _free_port()
+    log = ["--run-log", str(tmp_path / "runs.sqlite")] if workers > 1 else []
+    options = [
+        "--port",
+        str(port),
+        "--workers",
+        str(workers),
+        "--planner",
+        f"replay:{REPLAY}",
+        *log,
+    ]
+    serve = subprocess.Popen(
+        [sys.executable, "-m", "virf.cli.main", "serve", *options],
+        cwd=ROOT,
+        env=dict(os.environ, PYTHONPATH=str(ROOT / "src")),
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    url = f"http://127.0.0.1:{port}"
+    try:
+        for _ in range(300):
+            try:
+                if httpx.get(f"{url}/v1/health", timeout=1).status_code == 200:
+                    break
+            except httpx.HTTPError:
+                time.sleep(0.1)
+        with httpx.Client(base_url=url, timeout=60.0) as http:
+            run = start_waiting_run(http, tmp_path)
+            with http.stream("GET", run["events"]) as stream:
+                assert stream.status_code == 200
+                serve.send_signal(signal.SIGTERM)
+                started = time.monotonic()
+                serve.wait(timeout=SHUTDOWN_GRACE_S + 20)
+        assert time.monotonic() - started < SHUTDOWN_GRACE_S + 20
+        assert serve.returncode in (0, 128 + signal.SIGTERM), serve.stderr
+    finally:
+        if serve.poll() is None:
+            serve.kill()
+            serve.wait()

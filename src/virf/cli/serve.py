@@ -12,6 +12,11 @@ from virf.cli.app import EngineOpt, KbOpt, ScenarioOpt, default_reviewer
 from virf.errors import InputError
 from virf.web import LOCAL_HOSTS
 
+# On SIGTERM or Ctrl-C, requests under way get this long to finish; then what
+# is still open (an event stream of a run waiting for answers) is cut off,
+# so an open stream cannot keep the service from stopping.
+SHUTDOWN_GRACE_S = 10
+
 
 def serve(
     host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
@@ -123,7 +128,14 @@ def serve(
             workspace=workspace,
             reviewer=reviewer or default_reviewer(),
         )
-        uvicorn.run(app, host=host, port=port, log_level="warning", http=NoDelayH11Protocol)
+        uvicorn.run(
+            app,
+            host=host,
+            port=port,
+            log_level="warning",
+            http=NoDelayH11Protocol,
+            timeout_graceful_shutdown=SHUTDOWN_GRACE_S,
+        )
     else:
         uvicorn.run(
             "virf.service.app:app_from_environment",
@@ -133,4 +145,5 @@ def serve(
             workers=workers,
             log_level="warning",
             http=NoDelayH11Protocol,
+            timeout_graceful_shutdown=SHUTDOWN_GRACE_S,
         )
