@@ -61,3 +61,52 @@ def test_runs_of_deletions_find_the_one_at_a_time_result(
 
     assert drop_greedily(items, counted) == one_at_a_time(items, holds)
     assert len(calls) <= 2 * len(items) + 1
+
+
+@settings(max_examples=300, deadline=None, derandomize=True)
+@given(monotone_tests(), st.data())
+def test_proofs_as_hints_change_nothing_but_the_calls(
+    case: tuple[list[int], list[frozenset[int]]], data: st.DataObject
+) -> None:
+    """Whatever a proof names (enough, too little, items not in the list,
+    nothing), the search keeps what deleting one at a time keeps."""
+    items, needs = case
+
+    def holds(kept: list[int]) -> bool:
+        return any(need <= set(kept) for need in needs)
+
+    if not holds(items):
+        return
+    answers = data.draw(
+        st.lists(st.one_of(st.none(), st.frozensets(st.integers(-2, 16))), max_size=6)
+    )
+    asked: list[list[int]] = []
+
+    def prove(kept: list[int]) -> frozenset[int] | None:
+        asked.append(list(kept))
+        return answers[len(asked) - 1] if len(asked) <= len(answers) else None
+
+    assert drop_greedily(items, holds, prove) == one_at_a_time(items, holds)
+
+
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(monotone_tests())
+def test_a_proof_of_the_result_costs_one_call_per_item_plus_one(
+    case: tuple[list[int], list[frozenset[int]]],
+) -> None:
+    items, needs = case
+
+    def holds(kept: list[int]) -> bool:
+        return any(need <= set(kept) for need in needs)
+
+    if not holds(items):
+        return
+    result = one_at_a_time(items, holds)
+    calls: list[int] = []
+
+    def counted(kept: list[int]) -> bool:
+        calls.append(len(kept))
+        return holds(kept)
+
+    assert drop_greedily(items, counted, lambda kept: frozenset(result)) == result
+    assert len(calls) <= len(result) + 1

@@ -32,6 +32,7 @@ __all__ = [
     "Classification",
     "DeadlineExceeded",
     "Engine",
+    "Proof",
     "ReasonerFailure",
     "check_deadline",
     "current_deadline",
@@ -40,6 +41,14 @@ __all__ = [
     "register",
     "until",
 ]
+
+
+@dataclass(frozen=True)
+class Proof:
+    """The input facts and the axiom ids one derivation uses."""
+
+    facts: frozenset[Fact]
+    axioms: frozenset[str]
 
 
 @dataclass(frozen=True)
@@ -104,6 +113,24 @@ class Engine(ABC):
         with until(deadline):
             check_deadline(f"before the {self.name} engine checked consistency")
             return self._consistent(sorted(set(facts)), frozenset(without))
+
+    def proof(
+        self,
+        facts: Iterable[Fact],
+        concept: str,
+        individual: str,
+        *,
+        without: Collection[str] = (),
+        order: Sequence[object] = (),
+        deadline: float | None = None,
+    ) -> Proof | None:
+        """One derivation of ``concept(individual)`` from ``facts`` without the
+        axioms ``without``: the facts and axiom ids it uses, or None when the
+        engine keeps no derivations (or found none).  Where there are
+        alternatives, it prefers facts and axioms late in ``order``.  A hint
+        for explanations, which test it (see
+        :func:`virf.verify.explain.drop_greedily`), never a verdict."""
+        return None
 
     @abstractmethod
     def _classify(self, facts: list[Fact], concepts: list[str]) -> Classification: ...

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import threading
 from collections import Counter
-from collections.abc import Callable, Collection, Iterator
+from collections.abc import Callable, Collection, Iterable, Iterator, Sequence
 from collections.abc import Set as AbstractSet
 from contextlib import contextmanager
 from typing import Any
@@ -37,12 +37,14 @@ from virf.reasoning import (
     Classification,
     DeadlineExceeded,
     Engine,
+    Proof,
     ReasonerFailure,
     check_deadline,
     make_engine,
     until,
 )
 from virf.reasoning.program import ChaseLimit, Model, Program, compile_program
+from virf.reasoning.proof import NoProof, Prover, atom_of
 from virf.schema import Fact, FactKind
 
 # Names the engine uses for itself; an input name starting like one of these
@@ -477,15 +479,19 @@ class FastEngine(Engine):
         if full is None:
             full = compile_program(self.fragment, frozenset())
             self._programs[frozenset()] = full
-        if not without & full.structural:
+        shaping = without & full.structural
+        if not shaping:
             return full, without
-        prog = self._programs.get(without)
+        # Only the structural axioms need a program of their own; the rules
+        # of the others are switched off in it, so an explanation that tries
+        # many sets of axioms compiles a program per set of structural ones.
+        prog = self._programs.get(shaping)
         if prog is None:
-            prog = compile_program(self.fragment, without)
+            prog = compile_program(self.fragment, shaping)
             if len(self._programs) > 64:
-                self._programs.clear()
-            self._programs[without] = prog
-        return prog, frozenset()
+                self._programs = {frozenset(): full}
+            self._programs[shaping] = prog
+        return prog, without - shaping
 
     @contextmanager
     def _model(self, facts: list[Fact], without: frozenset[str]) -> Iterator[tuple[Model, _Eval]]:
@@ -677,6 +683,44 @@ class FastEngine(Engine):
 
         result: bool = self._answer(exact, lambda: self.reference._consistent(facts, without))
         return result
+
+    def proof(
+        self,
+        facts: Iterable[Fact],
+        concept: str,
+        individual: str,
+        *,
+        without: Collection[str] = (),
+        order: Sequence[object] = (),
+        deadline: float | None = None,
+    ) -> Proof | None:
+        """One derivation read off the least model of ``facts`` (see
+        :mod:`virf.reasoning.proof`), when the query is certain there; None
+        otherwise, or when the proof needs what the search does not trace (a
+        universal, a number restriction, a clash not of a class)."""
+        frag = self.fragment
+        if frag.problems:
+            return None
+        given = sorted(set(facts))
+        inputs = {a: f for f in given if (a := atom_of(f)) is not None}
+        rank = {item: i for i, item in enumerate(order)}
+        with until(deadline), self._lock:
+            prog, disabled = self.program(frozenset(without))
+            try:
+                with prog.scratch(disabled) as m:
+                    self._load(m, given)
+                    if individual not in m.types:
+                        m.element(individual)
+                        m.run()
+                    if m.clash is not None:
+                        return None
+                    ev = _Eval(m, self._definitions(frozenset(without)), frag.sinks)
+                    if not ev.certain(("C", concept), individual):
+                        return None
+                    prover = Prover(m, frag, ev.defs, inputs, rank, ev.certain, ev.impose)
+                    return prover.proof(concept, individual)
+            except (Fallback, ChaseLimit, NoProof, RecursionError):
+                return None
 
     def stats(self) -> dict[str, int]:
         with self._lock:

@@ -100,6 +100,7 @@ class Program:
     # ids of axioms compiled into facts or role tables: removing one of them
     # needs a fresh compile, not just disabled rules
     structural: set[str] = field(default_factory=set)
+    shaping: list[Axiom] = field(default_factory=list)  # the structural axioms themselves
     _aux: dict[Expr, str] = field(default_factory=dict)
     # The axiom being compiled: rules from right-hand sides carry its id so
     # that a question "without" that axiom can switch them off.  Rules from
@@ -209,6 +210,7 @@ class Program:
         self._tag = ax.id
         if ax.id is not None and k in _STRUCTURAL:
             self.structural.add(ax.id)
+            self.shaping.append(ax)
         complete = True
         if k == "sub":
             n = self.left(a[0])
@@ -230,12 +232,12 @@ class Program:
                     for b in body:
                         self.conj[b].append((body, NOTHING, self._tag))
         elif k == "cassert":
-            self.facts.append(("element", a[1]))
+            self.facts.append(("element", a[1], ax.id))
             complete = self.right(nominal(a[1]), a[0])
         elif k == "passert":
-            self.facts.append(("role", a[0], a[1], a[2]))
+            self.facts.append(("role", a[0], a[1], a[2], ax.id))
         elif k == "dassert":
-            self.facts.append(("data", a[1], a[0], a[2]))
+            self.facts.append(("data", a[1], a[0], a[2], ax.id))
         elif k == "domain":
             n = self.left(("some", a[0], ("C", THING)))
             assert n is not None
@@ -406,10 +408,15 @@ class Program:
                 )
             self.rtrig[p] = (tuple(self.role_up.get(p, ())), sides[0], sides[1])
         self._bases: dict[frozenset[str], Model] = {}
+        self._base_used: frozenset[str] = frozenset()  # see scratch()
 
-    def model(self, disabled: frozenset[str] = frozenset()) -> Model:
-        """A new least model of the TBox's own facts, the caller's to grow."""
+    def model(self, disabled: frozenset[str] = frozenset(), *, journal: bool = False) -> Model:
+        """A new least model of the TBox's own facts, the caller's to grow.
+        With ``journal``, what it derives is recorded from the start, so a
+        proof can trace its atoms back to the TBox (see :mod:`.proof`)."""
         m = Model(self, disabled)
+        if journal:
+            m.begin()
         for fact in self.facts:
             if fact[0] == "element":
                 m.element(fact[1])
@@ -418,6 +425,7 @@ class Program:
             elif fact[0] == "data":
                 m.datum(fact[1], fact[2], fact[3])
         m.run()
+        m.base_mark = len(m.journal) if m.journal is not None else 0
         return m
 
     @contextmanager
@@ -426,16 +434,28 @@ class Program:
         ``disabled`` axioms switched off), to grow for one question: built
         once, and rolled back to it when the block ends.  Rolling back costs
         what the question added; copying the TBox's model for every question
-        cost more than answering most of them."""
-        found = self._bases.get(disabled)
+        cost more than answering most of them.
+
+        Most axioms a question leaves out (an explanation asks without each
+        candidate in turn) have no rule that applies to the TBox's own facts.
+        Without them the TBox's model is the same, so a model is built only
+        for each set of the others, and grown with all of them switched off."""
+        full = self._bases.get(frozenset())
+        if full is None:
+            self._bases[frozenset()] = full = self.model(journal=True)
+            self._base_used = full.applicable()
+        shaping = disabled & self._base_used
+        found = self._bases.get(shaping)
         if found is None:
             if len(self._bases) > 64:
-                self._bases.clear()
-            self._bases[disabled] = found = self.model(disabled)
+                self._bases = {frozenset(): full}
+            self._bases[shaping] = found = self.model(shaping, journal=True)
         token = found.begin()
+        found.disabled = disabled
         try:
             yield found
         finally:
+            found.disabled = shaping
             found.rollback(token)
 
 
@@ -499,6 +519,7 @@ class Model:
         # against a closure as they arrive, but no rule sees p's derived
         # edges, so it also searches for one at its end.
         self._empty_lazy: list[tuple[str, str]] = []
+        self.base_mark = 0  # journal entries of the TBox's own facts (see Program.model)
 
     def close(self, x: str, p: str, members: frozenset[str]) -> None:
         """``x p only {members}`` (nothing when empty); two closures on the
@@ -606,13 +627,16 @@ class Model:
             return _EMPTY
         return inner.get(x, _EMPTY)
 
-    def reach(self, p: str, x: str, backward: bool) -> set[str]:
+    def reach(
+        self, p: str, x: str, backward: bool, via: dict[tuple[str, int], Hop] | None = None
+    ) -> set[str]:
         """The p-successors (``backward``: p-predecessors) of x for a lazy role
         p: a search over base, left and right edges, remembered until the
-        model changes."""
+        model changes.  ``via`` (a fresh search) receives, for each node and
+        state reached, the node, state and stored role it was reached from."""
         key = (p, backward, x)
         hit = self._reached.get(key)
-        if hit is not None and hit[0] == self.version:
+        if hit is not None and hit[0] == self.version and via is None:
             return hit[1]
         spec = self.lazy[p]
         base = (self.pred if backward else self.succ).get(p, {})
@@ -626,22 +650,28 @@ class Model:
         seen: tuple[set[str], set[str]] = ({x}, set())
         todo: list[tuple[str, int]] = [(x, 0)]
 
-        def edges(roles: tuple[Role, ...], node: str) -> Iterable[str]:
+        def edges(roles: tuple[Role, ...], node: str) -> Iterable[tuple[str, Role]]:
             for s in roles:
-                yield from self._stored((s[0], s[1] != backward), node)
+                r = (s[0], s[1] != backward)
+                for y in self._stored(r, node):
+                    yield y, r
 
+        mine = (p, backward)
         while todo:
             node, state = todo.pop()
-            moves: list[tuple[Iterable[str], int]] = []
+            moves: list[tuple[Iterable[tuple[str, Role]], int]] = []
             if state == 0 or spec.transitive:  # start a block, or the next one
-                moves += [(base.get(node, _EMPTY), 1), (edges(before, node), 0)]
+                moves += [(((y, mine) for y in base.get(node, _EMPTY)), 1)]
+                moves += [(edges(before, node), 0)]
             if state == 1:
                 moves.append((edges(after, node), 1))
             for targets, nxt in moves:
-                for y in targets:
+                for y, r in targets:
                     if y not in seen[nxt]:
                         seen[nxt].add(y)
                         todo.append((y, nxt))
+                        if via is not None:
+                            via[(y, nxt)] = (node, state, r)
         self._reached[key] = (self.version, seen[1])
         return seen[1]
 
@@ -756,6 +786,46 @@ class Model:
                     self.clash = f"{x} {p} {min(found)} contradicts '{x} {p} nothing'"
                     break
 
+    def applicable(self) -> frozenset[str]:
+        """Ids of the axioms with a rule whose body some element satisfies
+        here (a rule with a class body counts when the class has a member).
+
+        Over a least model, this is every axiom a derivation of anything in
+        it can use: the least model of a subset of the facts, or of the rules,
+        is contained in this one, so a rule that applies nowhere here applies
+        nowhere there.  Leaving such axioms out changes no such model."""
+        prog, members = self.prog, self.members
+        used: set[str] = set()
+        tables: tuple[dict[str, Any], ...] = (
+            prog.sub,
+            prog.value_head,
+            prog.all_by_class,
+            prog.some_head,
+            prog.data_head,
+        )
+        for table in tables:
+            for a, rules in table.items():
+                if members.get(a):
+                    used.update(r[-1] for r in rules if r[-1] is not None)
+        for conj in prog.conj.values():
+            for body, _, tag in conj:
+                if tag is None or tag in used:
+                    continue
+                pool = members.get(body[0])
+                if pool and any(all(c in self.types[x] for c in body[1:]) for x in pool):
+                    used.add(tag)
+        # An axiom on roles applies where one of its roles has an edge (a
+        # lazy role's derived edges all start from its stored ones).
+        for ax in prog.shaping:
+            assert ax.id is not None
+            if (
+                ax.kind in ("passert", "dassert")
+                or any(self.succ.get(p) for p in _role_names(ax.args))
+                or (ax.kind == "dfunc" and any(ax.args[0] in t for t in self.data.values()))
+            ):
+                used.add(ax.id)
+        return frozenset(used)
+
     # ------------------------------------------------------------------ journal
     def begin(self) -> Token:
         """Start recording; :meth:`rollback` with the token restores this exact
@@ -806,6 +876,8 @@ class Model:
         self.fresh = fresh
         if created:
             self.journal = None
+        if created or len(self._reached) > 4096:
+            # Entries of the states rolled back cannot be hit again.
             self._reached.clear()
 
     # ------------------------------------------------------------------ checks
@@ -821,6 +893,21 @@ _EMPTY: set[str] = set()
 # A journal position, the version, clash and fresh-name count it restores, and
 # whether the journal started with it.
 Token = tuple[int, int, str | None, int, bool]
+# How a lazy role's search reached a node: the node and state it came from,
+# and the stored role of the edge it took.
+Hop = tuple[str, int, Role]
+
+
+def _role_names(args: Any) -> set[str]:
+    """The role names in an axiom's arguments (roles are (name, inverse) pairs)."""
+    is_role = isinstance(args, tuple) and len(args) == 2 and isinstance(args[1], bool)
+    if is_role and isinstance(args[0], str):
+        return {args[0]}
+    out: set[str] = set()
+    if isinstance(args, tuple | list):
+        for a in args:
+            out |= _role_names(a)
+    return out
 
 
 def _discard(table: dict[Any, set[Any]], key: Any, item: Any) -> None:

@@ -14,7 +14,7 @@ finding raises.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TypeVar
 
@@ -79,15 +79,27 @@ def minimize(
     holds: Callable[[list[Fact]], bool],
     start: set[str],
     vocab: Vocabulary,
+    prove: Callable[[list[Fact], list[Fact]], Collection[Fact] | None] | None = None,
 ) -> list[Fact]:
-    """A minimal subset of ``facts`` for which ``holds`` is still true."""
+    """A minimal subset of ``facts`` for which ``holds`` is still true.
+    ``prove(kept, order)`` may name facts of ``kept`` that suffice (a hint,
+    tested; see :func:`drop_greedily`)."""
     pool = _component(facts, start, vocab.individuals)
     if not start or not holds(pool):
         pool = list(facts)
-    return sorted(drop_greedily(sorted(pool, key=lambda f: (_DROP_FIRST[facts[f]], f)), holds))
+    ordered = sorted(pool, key=lambda f: (_DROP_FIRST[facts[f]], f))
+
+    def hint(kept: list[Fact]) -> Collection[Fact] | None:
+        return prove(kept, ordered) if prove else None
+
+    return sorted(drop_greedily(ordered, holds, hint if prove else None))
 
 
-def drop_greedily(items: list[T], holds: Callable[[list[T]], bool]) -> list[T]:
+def drop_greedily(
+    items: list[T],
+    holds: Callable[[list[T]], bool],
+    prove: Callable[[list[T]], Collection[T] | None] | None = None,
+) -> list[T]:
     """What is left of ``items`` after trying to drop each in turn, keeping
     it out when ``holds`` stays true: the one-at-a-time deletion, with the
     same result, usually in fewer reasoner calls (proofs need few of their
@@ -98,15 +110,49 @@ def drop_greedily(items: list[T], holds: Callable[[list[T]], bool]) -> list[T]:
     items at once keeps it true, dropping them one by one would too, so runs
     are tried first, doubling after a success and halving after a failure;
     an item is kept only when dropping it alone fails, the one-at-a-time
-    test itself."""
+    test itself.
+
+    ``prove(kept)`` may name items of ``kept`` that suffice (one proof's).
+    When they do (one call tells), every trial that keeps them all holds
+    without asking: the items outside the proof are dropped up to its next
+    item, which is tested alone, as one at a time would.  When that item can
+    go too (another proof does without it), a proof of what is left is
+    asked for.  So the result is the same with any proofs, or none; when the
+    proof is the result, the search costs one call per item of it, plus one."""
     current = list(items)
+
+    def proved() -> set[T] | None:
+        found = prove(current) if prove is not None else None
+        if found is None:
+            return None
+        kept = [x for x in current if x in found]
+        return set(kept) if len(kept) < len(current) and holds(kept) else None
+
+    known = proved()
+    proving = known is not None  # an engine without proofs is not asked again
     i, run = 0, 1
     while i < len(current):
+        if known is not None:
+            j = i
+            while j < len(current) and current[j] not in known:
+                j += 1
+            del current[i:j]  # the proof is kept whole: these go without asking
+            if i == len(current):
+                break
+            trial = current[:i] + current[i + 1 :]
+            if holds(trial):
+                current = trial
+                known = proved()
+            else:
+                i += 1
+            continue
         run = min(run, len(current) - i)
         trial = current[:i] + current[i + run :]
         if holds(trial):
             current = trial
             run *= 2
+            if proving:
+                known = proved()
         elif run > 1:
             run //= 2
         else:
@@ -165,7 +211,15 @@ def needed_background(
             facts, concept, individual, without=every - set(kept), deadline=deadline
         )
 
-    return drop_greedily(sorted(candidates), holds)
+    order = sorted(candidates)
+
+    def prove(kept: list[str]) -> Collection[str] | None:
+        found = engine.proof(
+            facts, concept, individual, without=every - set(kept), order=order, deadline=deadline
+        )
+        return found.axioms if found else None
+
+    return drop_greedily(order, holds, prove)
 
 
 def background_knowledge(
@@ -237,7 +291,12 @@ class Explainer:
             self.tick()
             return self.engine.entails(fs, usc.name, ind, deadline=self.deadline)
 
-        facts = minimize(snapshot, holds, {ind}, self.vocab)
+        def prove(kept: list[Fact], order: list[Fact]) -> Collection[Fact] | None:
+            self.tick()
+            found = self.engine.proof(kept, usc.name, ind, order=order, deadline=self.deadline)
+            return found.facts if found else None
+
+        facts = minimize(snapshot, holds, {ind}, self.vocab, prove)
         background_ids = (
             needed_background(self.engine, facts, usc.name, ind, self.vocab, deadline=self.deadline)
             if self.background

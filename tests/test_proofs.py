@@ -1,0 +1,122 @@
+"""Proofs read off the fast engine's model (:mod:`virf.reasoning.proof`).
+
+A proof only guides the deletion search of an explanation, which tests it,
+so a wrong proof could cost time but not change a report.  These tests hold
+it to more: every proof suffices on its own, and reports made with proofs
+equal those of the deletion search alone on random worlds (the oracle).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Collection, Iterable, Sequence
+from pathlib import Path
+
+import pytest
+from conftest import case_params
+from hypothesis import HealthCheck, given, settings
+from random_worlds import scenes_and_plans
+
+from virf.api import LogicTutor
+from virf.reasoning import Proof
+from virf.reasoning.fast import FastEngine
+from virf.schema import Fact
+from virf.verify.verifier import Verifier
+from virf.world.plan import parse_plan
+from virf.world.scene import build_scene
+
+
+class SearchOnly(FastEngine):
+    """The fast engine with no proofs: explanations by deletion alone."""
+
+    def proof(
+        self,
+        facts: Iterable[Fact],
+        concept: str,
+        individual: str,
+        *,
+        without: Collection[str] = (),
+        order: Sequence[object] = (),
+        deadline: float | None = None,
+    ) -> Proof | None:
+        return None
+
+
+class Recording(FastEngine):
+    """The fast engine, checking each proof it gives as it gives it."""
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        self.proofs = 0
+
+    def proof(
+        self,
+        facts: Iterable[Fact],
+        concept: str,
+        individual: str,
+        *,
+        without: Collection[str] = (),
+        order: Sequence[object] = (),
+        deadline: float | None = None,
+    ) -> Proof | None:
+        facts = list(facts)
+        found = super().proof(
+            facts, concept, individual, without=without, order=order, deadline=deadline
+        )
+        if found is not None:
+            self.proofs += 1
+            assert found.facts <= set(facts)
+            assert not found.axioms & set(without)
+            # The proof's facts entail the finding without any axiom outside
+            # it, of those the explanation could leave out.
+            others = frozenset(self.tbox.vocabulary.background) - found.axioms
+            assert self.entails(found.facts, concept, individual, without=others | set(without))
+        return found
+
+
+def _report(verifier: Verifier, data: dict[str, object], steps: list[str]) -> str:
+    scene = build_scene(data, verifier.tbox.vocabulary)
+    report = json.loads(verifier.verify(scene, parse_plan(steps)).to_json())
+    return json.dumps(report, sort_keys=True)
+
+
+@pytest.fixture(scope="module")
+def engines(tutor: LogicTutor) -> tuple[Verifier, Verifier, Recording]:
+    recording = Recording(tutor.tbox)
+    return (
+        LogicTutor.over(tutor.tbox, recording).verifier,
+        LogicTutor.over(tutor.tbox, SearchOnly(tutor.tbox)).verifier,
+        recording,
+    )
+
+
+def test_reports_with_proofs_equal_the_deletion_search(
+    engines: tuple[Verifier, Verifier, Recording],
+) -> None:
+    with_proofs, search_only, recording = engines
+
+    @settings(
+        max_examples=60,
+        deadline=None,
+        derandomize=True,
+        suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+    )
+    @given(scenes_and_plans())
+    def check(case: tuple[dict[str, object], list[str]]) -> None:
+        data, steps = case
+        assert _report(with_proofs, data, steps) == _report(search_only, data, steps)
+
+    check()
+    assert recording.proofs > 20  # the proofs were there to be wrong
+
+
+@pytest.mark.parametrize("case", case_params())
+def test_examples_with_proofs_equal_the_deletion_search(
+    case: Path, example_tutor: Callable[[str], LogicTutor]
+) -> None:
+    tbox = example_tutor(case.name).tbox
+    reports = [
+        LogicTutor.over(tbox, engine).verify_files(case / "scene.json", case / "plan.txt")
+        for engine in (Recording(tbox), SearchOnly(tbox))
+    ]
+    assert reports[0].to_json() == reports[1].to_json()
