@@ -92,7 +92,7 @@ class Engine(ABC):
             raise InputError(f"unknown concept '{unknown[0]}'")
         with until(deadline):
             check_deadline(f"before the {self.name} engine classified the facts")
-            return self._classify(sorted(set(facts)), list(concepts))
+            return self._classify(Fact.sorted(set(facts)), list(concepts))
 
     def entails(
         self,
@@ -105,14 +105,14 @@ class Engine(ABC):
     ) -> bool:
         with until(deadline):
             check_deadline(f"before the {self.name} engine answered an entailment")
-            return self._entails(sorted(set(facts)), concept, individual, frozenset(without))
+            return self._entails(Fact.sorted(set(facts)), concept, individual, frozenset(without))
 
     def consistent(
         self, facts: Iterable[Fact], without: Collection[str] = (), *, deadline: float | None = None
     ) -> bool:
         with until(deadline):
             check_deadline(f"before the {self.name} engine checked consistency")
-            return self._consistent(sorted(set(facts)), frozenset(without))
+            return self._consistent(Fact.sorted(set(facts)), frozenset(without))
 
     def proof(
         self,

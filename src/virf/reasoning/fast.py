@@ -454,6 +454,9 @@ class FastEngine(Engine):
         self._counts: Counter[str] = Counter()
         self._lock = threading.Lock()
         self._core: tuple[Model, frozenset[Fact]] | None = None  # see sharing()
+        self._query_ids = frozenset(
+            a.id for a in self.fragment.query_axiom.values() if a.id is not None
+        )
         # Classes the input may not assert: the rules do not define them.
         self._defined = self.fragment.sinks | self.fragment.query_defs.keys()
 
@@ -571,10 +574,11 @@ class FastEngine(Engine):
         definition is removed is a class no axiom constrains: it gets a name
         no rule mentions, so it is empty in the model and assertable."""
         frag = self.fragment
-        if not without:
+        removed = without & self._query_ids
+        if not removed:
             return frag.query_defs
         return {
-            q: (e if frag.query_axiom[q].id not in without else ("C", f"undefined:{q}"))
+            q: (e if frag.query_axiom[q].id not in removed else ("C", f"undefined:{q}"))
             for q, e in frag.query_defs.items()
         }
 
@@ -701,7 +705,7 @@ class FastEngine(Engine):
         frag = self.fragment
         if frag.problems:
             return None
-        given = sorted(set(facts))
+        given = Fact.sorted(set(facts))
         inputs = {a: f for f in given if (a := atom_of(f)) is not None}
         rank = {item: i for i, item in enumerate(order)}
         with until(deadline), self._lock:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from collections import ChainMap, defaultdict
 from collections.abc import Callable, Iterator, Mapping
+from typing import Any
 
 from virf.ontology.fragment import Expr, Fragment, Role
 from virf.ontology.iri import NOTHING, THING
@@ -115,6 +116,30 @@ def rules_of(prog: Program) -> _Rules:
     return found[1]
 
 
+def _order(journal: list[tuple[Any, ...]], start: int, end: int | None = None) -> dict[Atom, int]:
+    """Where each atom entered the journal (from ``start``)."""
+    out: dict[Atom, int] = {}
+    for i in range(start, len(journal) if end is None else end):
+        entry = journal[i]
+        if entry[0] in ("t", "r", "d", "e"):
+            out.setdefault(entry, i)
+    return out
+
+
+_BASES: dict[int, tuple[Model, dict[Atom, int]]] = {}
+
+
+def _base_order(m: Model) -> dict[Atom, int]:
+    found = _BASES.get(id(m))
+    if found is None or found[0] is not m:
+        if len(_BASES) > 64:
+            _BASES.clear()
+        assert m.journal is not None
+        found = (m, _order(m.journal, 0, m.base_mark))
+        _BASES[id(m)] = found
+    return found[1]
+
+
 class NoProof(Exception):
     """The search met something it does not trace (the hint is then skipped)."""
 
@@ -148,14 +173,14 @@ class Prover:
         self.rank = rank
         self.certain, self.impose = certain, impose
         self.rules = rules_of(m.prog)
-        new: dict[Atom, int] = {}
-        for i in range(start, len(m.journal)):
-            entry = m.journal[i]
-            if entry[0] in ("t", "r", "d", "e"):
-                new.setdefault(entry, i)
+        if parent is None:
+            # The TBox's own part of the journal is read once per model.
+            base = _base_order(m)
+            start = m.base_mark
+        new = _order(m.journal, start)
         # A refutation's proof reads the journal its assertion extended.
-        self.order: Mapping[Atom, int] = (
-            new if parent is None else ChainMap(new, dict(parent.order))
+        self.order: ChainMap[Atom, int] = (
+            ChainMap(new, base) if parent is None else parent.order.new_child(new)
         )
         self.witness_of = {y: key for key, y in m.witness.items()}
         self.facts: set[Fact] = set()

@@ -191,19 +191,7 @@ def needed_background(
     # classes matter only if something is in them, which an axiom grown from the
     # signature must say (listing all materials would pull in every material's
     # attributes and triple the entailment tests).
-    candidates: list[str] = []
-    changed = True
-    while changed:
-        changed = False
-        for ident, ax in sorted(vocab.background.items()):
-            if ident not in candidates and ax.signature & names:
-                subject = ax.text.split(" ", 1)[0]
-                if subject.startswith("DisjointClasses"):
-                    candidates.append(ident)
-                elif subject in names:
-                    candidates.append(ident)
-                    names |= ax.signature
-                    changed = True
+    candidates = _grown(names, vocab)
     every = frozenset(candidates)
 
     def holds(kept: list[str]) -> bool:
@@ -220,6 +208,52 @@ def needed_background(
         return found.axioms if found else None
 
     return drop_greedily(order, holds, prove)
+
+
+def _grown(names: set[str], vocab: Vocabulary) -> list[str]:
+    """The background axioms that mention ``names``, grown through those
+    whose subject is named (see :func:`needed_background`): the least set
+    closed under both, found from an index of the axioms by name."""
+    by_name, subject_of = _signature_index(vocab)
+    names = set(names)
+    found: set[str] = set()
+    todo = list(names)
+    while todo:
+        name = todo.pop()
+        for ident in by_name.get(name, ()):
+            if ident in found:
+                continue
+            subject, signature = subject_of[ident], vocab.background[ident].signature
+            if (subject is None or subject in names) and not signature.isdisjoint(names):
+                found.add(ident)
+                if subject is not None:
+                    for n in signature - names:
+                        names.add(n)
+                        todo.append(n)
+    return sorted(found)
+
+
+_INDEX: dict[int, tuple[Vocabulary, dict[str, list[str]], dict[str, str | None]]] = {}
+
+
+def _signature_index(vocab: Vocabulary) -> tuple[dict[str, list[str]], dict[str, str | None]]:
+    """Background axiom ids by each name in their signature and by their
+    subject, and each axiom's subject (None for a disjointness, which joins
+    when any of its classes is named but names none of the others)."""
+    found = _INDEX.get(id(vocab))
+    if found is None or found[0] is not vocab:
+        by_name: dict[str, list[str]] = {}
+        subject_of: dict[str, str | None] = {}
+        for ident, ax in sorted(vocab.background.items()):
+            subject = ax.text.split(" ", 1)[0]
+            subject_of[ident] = None if subject.startswith("DisjointClasses") else subject
+            # An axiom joins once a name of its signature and its subject are
+            # both named: index it under both, so either arrival finds it.
+            for n in ax.signature | ({subject} if subject_of[ident] else set()):
+                by_name.setdefault(n, []).append(ident)
+        found = (vocab, by_name, subject_of)
+        _INDEX[id(vocab)] = found
+    return found[1], found[2]
 
 
 def background_knowledge(
