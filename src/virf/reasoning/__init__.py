@@ -107,6 +107,28 @@ class Engine(ABC):
             check_deadline(f"before the {self.name} engine answered an entailment")
             return self._entails(Fact.sorted(set(facts)), concept, individual, frozenset(without))
 
+    def entails_each(
+        self,
+        kept: Sequence[Fact],
+        items: Sequence[Fact],
+        tested: Sequence[bool],
+        concept: str,
+        individual: str,
+        *,
+        deadline: float | None = None,
+    ) -> list[bool]:
+        """For each item ``i`` with ``tested[i]``, in order: is ``concept(individual)``
+        entailed by ``kept``, the tested items before ``i`` and every item
+        after it?  (The questions a deletion search asks while it keeps
+        every tested item; an engine may answer them together.)"""
+        answers = []
+        for i, test in enumerate(tested):
+            if test:
+                before = [f for f, t in zip(items[:i], tested[:i], strict=True) if t]
+                trial = [*kept, *before, *items[i + 1 :]]
+                answers.append(self.entails(trial, concept, individual, deadline=deadline))
+        return answers
+
     def consistent(
         self, facts: Iterable[Fact], without: Collection[str] = (), *, deadline: float | None = None
     ) -> bool:

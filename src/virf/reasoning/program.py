@@ -409,6 +409,7 @@ class Program:
             self.rtrig[p] = (tuple(self.role_up.get(p, ())), sides[0], sides[1])
         self._bases: dict[frozenset[str], Model] = {}
         self._base_used: frozenset[str] = frozenset()  # see scratch()
+        self._spare: Model | None = None
 
     def model(self, disabled: frozenset[str] = frozenset(), *, journal: bool = False) -> Model:
         """A new least model of the TBox's own facts, the caller's to grow.
@@ -427,6 +428,14 @@ class Program:
         m.run()
         m.base_mark = len(m.journal) if m.journal is not None else 0
         return m
+
+    def spare(self) -> Model:
+        """A second model of the TBox's own facts, built once, for a caller
+        that grows it for a while and rolls it back (see
+        :meth:`virf.reasoning.fast.FastEngine.sharing`)."""
+        if self._spare is None:
+            self._spare = self.model(journal=True)
+        return self._spare
 
     @contextmanager
     def scratch(self, disabled: frozenset[str] = frozenset()) -> Iterator[Model]:
@@ -638,6 +647,19 @@ class Model:
         hit = self._reached.get(key)
         if hit is not None and hit[0] == self.version and via is None:
             return hit[1]
+        found = self.reach_any(p, (x,), backward, via)
+        self._reached[key] = (self.version, found)
+        return found
+
+    def reach_any(
+        self,
+        p: str,
+        starts: Iterable[str],
+        backward: bool,
+        via: dict[tuple[str, int], Hop] | None = None,
+    ) -> set[str]:
+        """What :meth:`reach` gives for any of ``starts``, in one search (the
+        union, found in the time of one)."""
         spec = self.lazy[p]
         base = (self.pred if backward else self.succ).get(p, {})
         # A p-path is (left* base right*), repeated when p is transitive.
@@ -647,8 +669,9 @@ class Model:
         # taken before the base edge swap with those taken after it.
         before = spec.right if backward else spec.left
         after = spec.left if backward else spec.right
-        seen: tuple[set[str], set[str]] = ({x}, set())
-        todo: list[tuple[str, int]] = [(x, 0)]
+        firsts = set(starts)
+        seen: tuple[set[str], set[str]] = (set(firsts), set())
+        todo: list[tuple[str, int]] = [(x, 0) for x in sorted(firsts)]
 
         def edges(roles: tuple[Role, ...], node: str) -> Iterable[tuple[str, Role]]:
             for s in roles:
@@ -672,7 +695,6 @@ class Model:
                         todo.append((y, nxt))
                         if via is not None:
                             via[(y, nxt)] = (node, state, r)
-        self._reached[key] = (self.version, seen[1])
         return seen[1]
 
     def run(self) -> None:

@@ -189,6 +189,8 @@ class Prover:
         self.done: set[Atom] = set()
         self.free: set[str] = set(parent.free) if parent else set()  # elements the question adds
         self.assumed: set[Atom] = set()  # what a refutation asserts
+        self._valids: dict[Atom, list[tuple[list[Atom], str | None, bool]]] = {}
+        self._worth: dict[Atom, int] = {}
 
     def proof(self, concept: str, x: str) -> Proof:
         self.free.add(x)
@@ -223,7 +225,9 @@ class Prover:
             found = [y for y in sorted(m.rsucc(role, x)) if self.certain(filler, y)]
             if not found:
                 raise NoProof(f"no {role[0]} successor")
-            y = max(found, key=lambda y: self._score([edge(role, x, y)], None))
+            if role[0] not in m.lazy:
+                found.sort(key=lambda y: -self.worth(edge(role, x, y)))
+            y = found[0]
             self.link(role, x, y)
             self.query(filler, y)
         elif tag == "value":
@@ -315,18 +319,10 @@ class Prover:
         if a in self.rules.tbox:
             self._axiom(self.rules.tbox[a])
             return
-        at = self.order.get(a)
-        if at is None:
-            raise NoProof(f"{a} is not in the model")
-        # Earlier atoms only: a derivation cannot lean on what it derives.
-        valid = [
-            d
-            for d in self._derivations(a)
-            if d[1] not in self.m.disabled and all(self.order.get(p, at) < at for p in d[0])
-        ]
+        valid = self._valid(a)
         if not valid:
             raise NoProof(f"no derivation of {a} found")
-        premises, tag, structure = max(valid, key=lambda d: self._score(d[0], d[1]))
+        premises, tag, structure = max(valid, key=self._worth_of)
         self._axiom(tag)
         self.structure = self.structure or structure
         for p in premises:
@@ -335,12 +331,57 @@ class Prover:
             else:
                 self.atom(p)
 
-    def _score(self, premises: list[Atom], tag: str | None) -> int:
-        """The rank of a derivation's earliest ranked input fact or axiom."""
-        ranks = [self.rank.get(self.inputs[p], _LATE) for p in premises if p in self.inputs]
-        if tag is not None:
-            ranks.append(self.rank.get(tag, _LATE))
-        return min(ranks, default=_LATE)
+    def _valid(self, a: Atom) -> list[tuple[list[Atom], str | None, bool]]:
+        """The derivations of ``a`` from earlier atoms (a derivation cannot
+        lean on what it derives) by rules not switched off."""
+        hit = self._valids.get(a)
+        if hit is None:
+            at = self.order.get(a)
+            hit = (
+                []
+                if at is None
+                else [
+                    d
+                    for d in self._derivations(a)
+                    if d[1] not in self.m.disabled and all(self.order.get(p, at) < at for p in d[0])
+                ]
+            )
+            self._valids[a] = hit
+        return hit
+
+    def worth(self, a: Atom) -> int:
+        """The rank of the earliest ranked fact or axiom in the best proof of
+        ``a``: the latest such rank any of its proofs reaches."""
+        hit = self._worth.get(a)
+        if hit is None:
+            if a in self.assumed:
+                hit = _LATE
+            elif a in self.inputs:
+                hit = self.rank.get(self.inputs[a], _LATE)
+            elif a in self.rules.tbox:
+                tag = self.rules.tbox[a]
+                hit = _LATE if tag is None else self.rank.get(tag, _LATE)
+            elif a[0] == "e":
+                hit = self._element_worth(str(a[1]))
+            else:
+                hit = max((self._worth_of(d) for d in self._valid(a)), default=-1)
+            self._worth[a] = hit
+        return hit
+
+    def _worth_of(self, d: tuple[list[Atom], str | None, bool]) -> int:
+        premises, tag, _ = d
+        own = _LATE if tag is None else self.rank.get(tag, _LATE)
+        return min([own, *(self.worth(p) for p in premises)])
+
+    def _element_worth(self, x: str) -> int:
+        if x in self.free:
+            return _LATE
+        if x in self.witness_of:
+            z, r, _ = self.witness_of[x]
+            return self.worth(edge(r, z, x))
+        return max(
+            (self.rank.get(f, _LATE) for a, f in self.inputs.items() if x in a[1:]), default=-1
+        )
 
     def _axiom(self, tag: str | None) -> None:
         if tag is not None:

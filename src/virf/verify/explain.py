@@ -14,7 +14,7 @@ finding raises.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Collection, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TypeVar
 
@@ -80,10 +80,12 @@ def minimize(
     start: set[str],
     vocab: Vocabulary,
     prove: Callable[[list[Fact], list[Fact]], Collection[Fact] | None] | None = None,
+    each: Callable[[list[Fact], list[Fact], list[bool]], list[bool]] | None = None,
 ) -> list[Fact]:
     """A minimal subset of ``facts`` for which ``holds`` is still true.
     ``prove(kept, order)`` may name facts of ``kept`` that suffice (a hint,
-    tested; see :func:`drop_greedily`)."""
+    tested), and ``each`` answer the tests of a proof's facts together (see
+    :func:`drop_greedily`)."""
     pool = _component(facts, start, vocab.individuals)
     if not start or not holds(pool):
         pool = list(facts)
@@ -92,13 +94,14 @@ def minimize(
     def hint(kept: list[Fact]) -> Collection[Fact] | None:
         return prove(kept, ordered) if prove else None
 
-    return sorted(drop_greedily(ordered, holds, hint if prove else None))
+    return sorted(drop_greedily(ordered, holds, hint if prove else None, each))
 
 
 def drop_greedily(
     items: list[T],
     holds: Callable[[list[T]], bool],
     prove: Callable[[list[T]], Collection[T] | None] | None = None,
+    each: Callable[[list[T], list[T], list[bool]], list[bool]] | None = None,
 ) -> list[T]:
     """What is left of ``items`` after trying to drop each in turn, keeping
     it out when ``holds`` stays true: the one-at-a-time deletion, with the
@@ -114,11 +117,14 @@ def drop_greedily(
 
     ``prove(kept)`` may name items of ``kept`` that suffice (one proof's).
     When they do (one call tells), every trial that keeps them all holds
-    without asking: the items outside the proof are dropped up to its next
-    item, which is tested alone, as one at a time would.  When that item can
-    go too (another proof does without it), a proof of what is left is
-    asked for.  So the result is the same with any proofs, or none; when the
-    proof is the result, the search costs one call per item of it, plus one."""
+    without asking: the items outside the proof are dropped, and each of
+    its items is tested alone, as one at a time would, with the items after
+    it in place.  When one can go too (another proof does without it), a
+    proof of what is left is asked for.  So the result is the same with any
+    proofs, or none; when the proof is the result, the search costs one
+    call per item of it, plus one.  ``each(kept, rest, tested)`` asks those
+    tests together: for each tested item of ``rest``, does ``kept`` with the
+    tested items before it and every item after it hold?"""
     current = list(items)
 
     def proved() -> set[T] | None:
@@ -128,23 +134,35 @@ def drop_greedily(
         kept = [x for x in current if x in found]
         return set(kept) if len(kept) < len(current) and holds(kept) else None
 
+    def one_by_one(kept: list[T], rest: list[T], tested: list[bool]) -> Iterator[bool]:
+        before: list[T] = []
+        for k, x in enumerate(rest):
+            if tested[k]:
+                yield holds(kept + before + rest[k + 1 :])
+                before.append(x)
+
     known = proved()
     proving = known is not None  # an engine without proofs is not asked again
     i, run = 0, 1
     while i < len(current):
         if known is not None:
-            j = i
-            while j < len(current) and current[j] not in known:
-                j += 1
-            del current[i:j]  # the proof is kept whole: these go without asking
-            if i == len(current):
-                break
-            trial = current[:i] + current[i + 1 :]
-            if holds(trial):
-                current = trial
-                known = proved()
+            rest = current[i:]
+            tested = [x in known for x in rest]
+            answers = iter(
+                each(current[:i], rest, tested) if each else one_by_one(current[:i], rest, tested)
+            )
+            kept = current[:i]
+            for k, x in enumerate(rest):
+                if not tested[k]:
+                    continue  # the proof is kept whole: this goes without asking
+                if next(answers):  # x can go too: another proof does without it
+                    current = kept + rest[k + 1 :]
+                    i = len(kept)
+                    known = proved()
+                    break
+                kept.append(x)
             else:
-                i += 1
+                return kept
             continue
         run = min(run, len(current) - i)
         trial = current[:i] + current[i + run :]
@@ -330,7 +348,13 @@ class Explainer:
             found = self.engine.proof(kept, usc.name, ind, order=order, deadline=self.deadline)
             return found.facts if found else None
 
-        facts = minimize(snapshot, holds, {ind}, self.vocab, prove)
+        def each(kept: list[Fact], rest: list[Fact], tested: list[bool]) -> list[bool]:
+            self.tick()
+            return self.engine.entails_each(
+                kept, rest, tested, usc.name, ind, deadline=self.deadline
+            )
+
+        facts = minimize(snapshot, holds, {ind}, self.vocab, prove, each)
         background_ids = (
             needed_background(self.engine, facts, usc.name, ind, self.vocab, deadline=self.deadline)
             if self.background
