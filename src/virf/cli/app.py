@@ -16,19 +16,22 @@ removed) with 128 + the signal's number and one line saying so
 
 Commands do not catch errors to report them: whatever a command raises ends
 in :func:`_exit_for`, the one place that maps an error to its exit code.
-The commands live in the sibling modules; :mod:`virf.cli.main` registers
-them all.
+The commands live in the sibling modules, named in :data:`COMMANDS`; a
+command's module is imported when the command is run (``virf --help``
+imports them all), so ``virf verify`` pays for neither FastAPI nor the
+benchmark and knowledge-base commands.
 """
 
 from __future__ import annotations
 
 import contextlib
+import importlib
 import json
 import os
 import re
 import sys
 import traceback
-from collections.abc import Sequence
+from collections.abc import Iterator, MutableMapping, Sequence
 from contextvars import ContextVar
 from pathlib import Path
 from typing import Annotated, Any
@@ -70,14 +73,91 @@ class _FailClosedGroup(TyperGroup):
             raise _exit_for(exc) from None
 
 
+# The root's commands in the order `virf --help` lists them: the module and
+# attribute of each command function or sub-app (a typer.Typer, a group).
+COMMANDS: dict[str, tuple[str, str]] = {
+    "verify": ("virf.cli.verify", "verify"),
+    "demo": ("virf.cli.verify", "demo"),
+    "plan": ("virf.cli.plan", "plan"),
+    "perceive": ("virf.cli.perceive", "perceive"),
+    "serve": ("virf.cli.serve", "serve"),
+    "kb": ("virf.cli.kb", "kb_app"),
+    "scene": ("virf.cli.scene", "scene_app"),
+    "bench": ("virf.cli.bench", "bench_app"),
+}
+
+
+def _command(name: str) -> Any:
+    """The click command of :data:`COMMANDS`' ``name``, made by typer as if it
+    were registered on the root (a scratch root holding only it)."""
+    module, attribute = COMMANDS[name]
+    target = getattr(importlib.import_module(module), attribute)
+    scratch = typer.Typer(add_completion=False)
+    # With a callback typer makes a group even of one command, so the
+    # command comes out under its name, as the root's own would.
+    scratch.callback()(_no_options)
+    if isinstance(target, typer.Typer):
+        scratch.add_typer(target, name=name)
+    else:
+        scratch.command(name)(target)
+    return typer.main.get_command(scratch).commands[name]  # type: ignore[attr-defined]
+
+
+def _no_options() -> None:
+    return None
+
+
+class _Commands(MutableMapping[str, Any]):
+    """The root's commands by name: every name of :data:`COMMANDS` is listed,
+    but a command is made (its module imported, its options built) only when
+    it is looked up, so a run builds the one command it runs and help, or a
+    misspelt command's suggestion, still sees them all."""
+
+    def __init__(self, made: MutableMapping[str, Any]) -> None:
+        self._made: dict[str, Any] = dict(made)
+
+    def __getitem__(self, name: str) -> Any:
+        if name not in self._made and name in COMMANDS:
+            self._made[name] = _command(name)
+        return self._made[name]
+
+    def __setitem__(self, name: str, command: Any) -> None:
+        self._made[name] = command
+
+    def __delitem__(self, name: str) -> None:
+        del self._made[name]
+
+    def __iter__(self) -> Iterator[str]:
+        yield from COMMANDS
+        yield from (name for name in self._made if name not in COMMANDS)
+
+    def __len__(self) -> int:
+        return len(COMMANDS) + sum(name not in COMMANDS for name in self._made)
+
+    def __contains__(self, name: object) -> bool:
+        return name in COMMANDS or name in self._made
+
+
+class _RootGroup(_FailClosedGroup):
+    """The ``virf`` command: :class:`_FailClosedGroup` with its commands made
+    on first use (:class:`_Commands`)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.commands = _Commands(self.commands)
+
+
 app = typer.Typer(
-    cls=_FailClosedGroup,
+    cls=_RootGroup,
     name="virf",
     help="VIRF Logic Tutor: verify robot task plans against an OWL 2 DL safety ontology.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
 )
+# No command is registered on the root itself (they are in COMMANDS); a
+# callback that does nothing makes typer build the root as a group all the same.
+app.callback()(_no_options)
 
 _SCENARIOS = (
     "a room (kitchen, living-room, bedroom, bathroom), household (every room), "
