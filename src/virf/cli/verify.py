@@ -76,7 +76,6 @@ def verify(
     With --learn, what they confirm about objects of classes the knowledge base
     lacks becomes candidate classes in that workspace, for a person to review."""
     from virf.api import LogicTutor, check_timeout
-    from virf.render.feedback import feedback_prompt
     from virf.render.text import render_report
     from virf.world.plan import load_plan_file
     from virf.world.scene import build_scene, load_scene_data
@@ -124,6 +123,9 @@ def verify(
     else:
         typer.echo(render_report(report, title=f"{scene} + {plan}"), nl=False)
         if feedback and report.status != "SAFE":
+            # Only here: the module reads its template file when imported.
+            from virf.render.feedback import feedback_prompt
+
             typer.echo("\n" + feedback_prompt(report), nl=False)
     for line in learned:
         typer.echo(line, err=True)
