@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from virf.cli.app import EXIT, EngineOpt, KbOpt, ScenarioOpt, _fail
+from virf.cli.app import EXIT, EngineOpt, KbOpt, ScenarioOpt, _fail, loaded
 from virf.cli.learning import (
     LearnOpt,
     StrictVocabularyOpt,
@@ -96,6 +96,7 @@ def verify(
         given = read_answers(answers)
     workspace = open_workspace(learn) if learn is not None else None
     tutor = LogicTutor(scenario=scenario, engine=engine, timeout_s=timeout, workers=workers, kb=kb)
+    loaded()
     vocab = tutor.tbox.vocabulary
     data = load_scene_data(scene)
     name = scene.stem if scene.stem != "scene" else scene.parent.name
