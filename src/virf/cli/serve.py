@@ -10,7 +10,6 @@ import typer
 
 from virf.cli.app import EngineOpt, KbOpt, ScenarioOpt, default_reviewer
 from virf.errors import InputError
-from virf.web import LOCAL_HOSTS
 
 # On SIGTERM or Ctrl-C, requests under way get this long to finish; then what
 # is still open (an event stream of a run waiting for answers) is cut off,
@@ -73,6 +72,7 @@ def serve(
     import uvicorn
 
     from virf.service.tcp import NoDelayH11Protocol
+    from virf.web import LOCAL_HOSTS
 
     if api_key is None and host not in LOCAL_HOSTS:
         raise InputError(

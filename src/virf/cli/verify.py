@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from virf.cli.app import EXIT, EngineOpt, KbOpt, ScenarioOpt, _fail
+from virf.cli.app import EXIT, EngineOpt, KbOpt, ScenarioOpt, _fail, loaded
 from virf.cli.learning import (
     LearnOpt,
     StrictVocabularyOpt,
@@ -76,7 +76,6 @@ def verify(
     With --learn, what they confirm about objects of classes the knowledge base
     lacks becomes candidate classes in that workspace, for a person to review."""
     from virf.api import LogicTutor, check_timeout
-    from virf.render.feedback import feedback_prompt
     from virf.render.text import render_report
     from virf.world.plan import load_plan_file
     from virf.world.scene import build_scene, load_scene_data
@@ -97,6 +96,7 @@ def verify(
         given = read_answers(answers)
     workspace = open_workspace(learn) if learn is not None else None
     tutor = LogicTutor(scenario=scenario, engine=engine, timeout_s=timeout, workers=workers, kb=kb)
+    loaded()
     vocab = tutor.tbox.vocabulary
     data = load_scene_data(scene)
     name = scene.stem if scene.stem != "scene" else scene.parent.name
@@ -124,6 +124,9 @@ def verify(
     else:
         typer.echo(render_report(report, title=f"{scene} + {plan}"), nl=False)
         if feedback and report.status != "SAFE":
+            # Only here: the module reads its template file when imported.
+            from virf.render.feedback import feedback_prompt
+
             typer.echo("\n" + feedback_prompt(report), nl=False)
     for line in learned:
         typer.echo(line, err=True)

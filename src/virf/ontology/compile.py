@@ -19,7 +19,6 @@ workspace can write, is also sealed (:mod:`virf.ontology.seal`), and
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
 import sys
@@ -28,19 +27,12 @@ from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from virf.errors import InputError
 from virf.files import write_atomically
 from virf.ontology.fragment import Axiom, Fragment, fragment_from, load_fragment
 from virf.ontology.iri import MODULE_BASE, NS, THING, iri_short
-from virf.ontology.owlapi import (
-    OwlModules,
-    annotations_of,
-    axiom_type,
-    literal,
-    make_reasoner,
-)
 from virf.ontology.tbox import (
     BackgroundAxiom,
     ModuleStats,
@@ -50,6 +42,9 @@ from virf.ontology.tbox import (
     ontology_dir,
     scenario_names,
 )
+
+if TYPE_CHECKING:
+    from virf.ontology.owlapi import OwlModules
 
 # Bumped whenever the artifact's layout or the compiler's output changes, so
 # an artifact written by an older compiler counts as out of date.
@@ -91,6 +86,10 @@ def compile_kb(owl: OwlModules, digest: str) -> CompiledKB:
 
 
 def _index(owl: OwlModules) -> tuple[Vocabulary, tuple[ModuleStats, ...]]:
+    # The Java bridge is imported by the compiling functions only: loading a
+    # compiled artifact (every start of the fast engine) does not need it.
+    from virf.ontology.owlapi import annotations_of, axiom_type, literal, make_reasoner
+
     classes: set[str] = set()
     oprops: set[str] = set()
     dprops: set[str] = set()
@@ -302,6 +301,8 @@ def _index(owl: OwlModules) -> tuple[Vocabulary, tuple[ModuleStats, ...]]:
 def _stats(
     owl: OwlModules, uscs: Mapping[str, UnsafeStateConcept], usc_module: Mapping[str, str]
 ) -> tuple[ModuleStats, ...]:
+    from virf.ontology.owlapi import annotations_of
+
     out = []
     for ont in owl.closure:
         name = owl.module_name(ont)
@@ -478,6 +479,8 @@ def _tuples(value: Any) -> Any:
 
 
 def write_artifacts(scenarios: list[str] | None = None) -> list[Path]:
+    from virf.ontology.owlapi import OwlModules
+
     digest = source_digest()
     written = []
     artifact_dir().mkdir(exist_ok=True)
@@ -505,6 +508,8 @@ def stale_artifacts() -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    import argparse
+
     parser = argparse.ArgumentParser(
         prog="python -m virf.ontology.compile",
         description="Compile the ontology modules into the knowledge artifacts the fast "

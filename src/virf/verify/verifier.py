@@ -28,9 +28,8 @@ from __future__ import annotations
 
 import time
 from collections.abc import Collection, Sequence
-from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
-from queue import Queue
+from typing import TYPE_CHECKING
 
 from virf.ontology.tbox import TBox
 from virf.reasoning import Classification, DeadlineExceeded, Engine, ReasonerFailure
@@ -43,6 +42,10 @@ from virf.world.plan import PlanStep
 from virf.world.scene import Scene
 from virf.world.simulate import Trace, simulate
 from virf.world.simulator import Simulator
+
+if TYPE_CHECKING:
+    from concurrent.futures import Future
+    from queue import Queue
 
 
 class VerificationTimeout(Exception):
@@ -307,6 +310,10 @@ class Verifier:
     ) -> list[Future[Classification]]:
         """Start classifying every snapshot, each on a free engine of the pool."""
         if self._engines is None:
+            # Imported here: one worker, the default, starts no threads.
+            from concurrent.futures import ThreadPoolExecutor
+            from queue import Queue
+
             self._engines = Queue()
             self._engines.put(self.engine)
             for _ in range(self.workers - 1):
