@@ -56,6 +56,7 @@ __all__ = [
 class Simulator:
     def __init__(self, vocab: Vocabulary) -> None:
         self.vocab = vocab
+        self._holders: dict[frozenset[str], tuple[bool, tuple[bool, ...]]] = {}
 
     # ------------------------------------------------------------------ setup
     def initial(self, scene: Scene) -> WorldState:
@@ -333,17 +334,11 @@ class Simulator:
         held = state.objects_of(state.agent, "isHolding")
         out[Fact.closure(state.agent, "isHolding", held)] = Provenance.PLAN
         for ind in state.order + tuple(sorted(set(state.objects) - set(state.order))):
-            classes = state.objects[ind]
-            # A vessel nothing can be put into (a bottle, a kettle) holds only
-            # the liquid the state gives it; while its fill is unknown, so is
-            # what it holds.
-            vessel = self.vocab.any_is_a(classes, "LiquidContainer")
+            vessel, kinds = self._holder_kinds(state.objects[ind])
+            if not (vessel or any(kinds)):
+                continue
             unknown_fill = state.has(ind, "hasState", "UnknownFillState")
-            for rel, cls in (
-                ("contains", "ContainerReceptacle"),
-                ("supports", "SurfaceReceptacle"),
-            ):
-                receptacle = self.vocab.any_is_a(classes, cls)
+            for (rel, _), receptacle in zip(_HOLDERS, kinds, strict=True):
                 if receptacle or (rel == "contains" and vessel):
                     members = state.objects_of(ind, rel)
                     listed = (
@@ -357,6 +352,20 @@ class Simulator:
                     prov = Provenance.SCENE if known else Provenance.ASSUMED
                     out[Fact.closure(ind, rel, members)] = prov
         return out
+
+    def _holder_kinds(self, classes: frozenset[str]) -> tuple[bool, tuple[bool, ...]]:
+        """Whether things of ``classes`` are vessels, and receptacles of each
+        kind of :data:`_HOLDERS`; remembered per set of classes (a scene of
+        a thousand objects has a few dozen), as every state asks them all."""
+        found = self._holders.get(classes)
+        if found is None:
+            # A vessel nothing can be put into (a bottle, a kettle) holds only
+            # the liquid the state gives it; while its fill is unknown, so is
+            # what it holds.
+            vessel = self.vocab.any_is_a(classes, "LiquidContainer")
+            kinds = tuple(self.vocab.any_is_a(classes, cls) for _, cls in _HOLDERS)
+            found = self._holders[classes] = (vessel, kinds)
+        return found
 
     # ------------------------------------------------------------------ effects
     def apply(self, state: WorldState, r: ResolvedStep) -> WorldState | PreconditionFailure:
@@ -376,6 +385,8 @@ class Simulator:
 # How near in meaning a scene's name must be to a plan's word to be offered
 # ('the sink' -> SinkBasin_1; 'hob' -> StoveBurner_1).
 MEANING_FLOOR = 0.5
+# What a receptacle holds, by relation and the class that makes one.
+_HOLDERS = (("contains", "ContainerReceptacle"), ("supports", "SurfaceReceptacle"))
 
 
 def _by_meaning(term: str, names: Iterable[str]) -> list[str]:
