@@ -85,6 +85,7 @@ def _cli(*args: str) -> subprocess.CompletedProcess[str]:
         (["--sizes", "5"], "at least 10 objects"),
         (["--lengths", "15"], "multiple of 10"),
         (["--tbox-factors", "0"], "1 to 16"),
+        (["--paper-call-limit", "0"], "'--paper-call-limit'"),
         (
             ["--cold-engines", "fast,hermit"],
             "--cold-engines: unknown engine 'hermit'; choose from fast, reference",

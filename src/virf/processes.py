@@ -121,6 +121,26 @@ def guarded(
                         stream.close()
 
 
+def run(
+    command: Sequence[str], *, timeout: float | None = None, **popen: Any
+) -> subprocess.CompletedProcess[str]:
+    """``subprocess.run(command, capture_output=True, text=True)`` under a
+    guard (:func:`guarded`): the command, and whatever it starts, ends with
+    this process even when this process is killed, and when ``timeout``
+    passes (``subprocess.TimeoutExpired``), not only the command itself, as
+    ``subprocess.run`` would, but its whole process group is stopped."""
+    import subprocess
+
+    with guarded(
+        command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **popen
+    ) as proc:
+        try:
+            out, err = proc.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            raise subprocess.TimeoutExpired(list(command), timeout or 0.0) from None
+    return subprocess.CompletedProcess(list(command), proc.returncode, out, err)
+
+
 def stop(proc: subprocess.Popen[Any]) -> None:
     """Stop a guard started by :func:`guarded` (and so its command), and wait
     for it; a guard that does not end in ``STOP_S`` is killed."""

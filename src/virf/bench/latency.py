@@ -8,7 +8,9 @@
 (b) and (c) time the whole Logic Tutor (simulation, classification of every
 snapshot, minimal explanations, report); (a) times the paper's reasoner calls
 for the same snapshots, stopping at the first snapshot where it finds a
-hazard, as the paper's loop does.  Inputs: the SafeAgentBench reference plans
+hazard, as the paper's loop does; a call past ``--paper-call-limit`` is
+stopped and counted as the limit, and every figure that rests on it is
+reported as a lower bound ("≥").  Inputs: the SafeAgentBench reference plans
 given on the command line, and a 10-step plan over synthetic kitchens of
 growing size.  The TBox scaling rows load extra synthetic domain modules
 (copies of the kitchen layer under new class names).  The containment rows
@@ -36,7 +38,7 @@ from typing import Any
 
 from virf.api import LogicTutor
 from virf.bench.coldstart import cold_start_rows
-from virf.bench.paper import PAPER_CALL_TIMEOUT_S
+from virf.bench.paper import OVER_LIMIT, PAPER_CALL_LIMIT_S
 from virf.bench.safeagentbench import build_scene as task_scene
 from virf.bench.safeagentbench import load_tasks
 from virf.errors import InputError
@@ -314,18 +316,80 @@ def _paper_plans(verifier: Verifier, cases: Sequence[Case]) -> list[tuple[str, l
     return [(c.name, [sorted(s) for s in verifier.snapshots(c.scene, c.plan)]) for c in cases]
 
 
-def _paper_plan_ms(plan: dict[str, Any]) -> float | None:
-    """Sequential time of the paper's loop: steps up to its first finding."""
+def _paper_plan_ms(plan: dict[str, Any]) -> tuple[float, bool] | None:
+    """Sequential time of the paper's loop, steps up to its first finding,
+    and whether that time is exact: it is a lower bound when a call was
+    stopped at the limit first (that call counts as the limit)."""
     total = 0.0
     for ms, found, consistent in zip(
         plan["step_ms"], plan["findings"], plan["consistent"], strict=False
     ):
+        if isinstance(found, dict) and found.get("error") == OVER_LIMIT:
+            return total + ms, False
         if ms is None or (consistent is None and isinstance(found, dict)):
-            return None  # a call failed or ran out of time: the plan has no time
+            return None  # a call failed: the plan has no time
         total += ms
         if found or consistent is False:
             break
-    return total
+    return total, True
+
+
+def _paper_row(plan: dict[str, Any], time: tuple[float, bool] | None) -> dict[str, Any]:
+    return {
+        "plan": plan["id"],
+        "ms": None if time is None else round(time[0], 1),
+        "lower_bound": time is not None and not time[1],
+        "calls": [
+            OVER_LIMIT if _over_limit(found) else ms
+            for ms, found in zip(plan["step_ms"], plan["findings"], strict=False)
+        ],
+    }
+
+
+def _over_limit(found: Any) -> bool:
+    return isinstance(found, dict) and found.get("error") == OVER_LIMIT
+
+
+def paper_figures(
+    result: dict[str, Any], fast_ms: dict[str, float], compared: Sequence[str]
+) -> dict[str, Any]:
+    """The paper method's figures from :func:`virf.bench.paper.run_paper_baseline`'s
+    result: ``compared`` names the dev-split plans (timed by the fast engine in
+    ``fast_ms`` too), the others are scaling rows.  A figure computed from a
+    plan with a call stopped at the limit is a lower bound, and says so."""
+    times = {plan["id"]: _paper_plan_ms(plan) for plan in result["plans"]}
+    timed = [(name, times[name]) for name in compared if times.get(name) is not None]
+    paper_ms = [t[0] for _, t in timed if t is not None]
+    bounded = sum(1 for _, t in timed if t is not None and not t[1])
+    ratios = [t[0] / fast_ms[name] for name, t in timed if t is not None]
+    steps = [s for p in result["plans"] for s in zip(p["step_ms"], p["findings"], strict=False)]
+    step_ms = [ms for ms, _ in steps if isinstance(ms, (int, float))]
+    calls_over = sum(1 for _, found in steps if _over_limit(found))
+    limit = result.get("call_limit_s")
+    paper: dict[str, Any] = summary(paper_ms) | {
+        "plans": len(paper_ms),
+        "plans_lower_bound": bounded,
+        "lower_bound": bounded > 0,
+        "calls": len(steps),
+        "calls_over_limit": calls_over,
+        "call_limit_s": limit,
+        "per_call_p50_ms": round(percentile(step_ms, 50), 1),
+        "per_call_lower_bound": calls_over > 0,
+        "owlready2": result.get("owlready2"),
+        "peak_rss_mb": _paper_rss(result),
+        # Every plan, each call's time or "> limit".
+        "rows": [_paper_row(plan, times[plan["id"]]) for plan in result["plans"]],
+    }
+    fast_p50 = percentile(list(fast_ms.values()), 50)
+    return {
+        "paper": paper,
+        "paper_p50_ms": paper["p50_ms"],
+        "ratio": round(statistics.median(ratios), 1) if ratios else None,
+        "ratio_of_medians": round(paper["p50_ms"] / fast_p50, 1) if paper_ms else None,
+        # A median of lower bounds is a lower bound of the median.
+        "ratio_lower_bound": bounded > 0,
+        "paper_call_limit_s": limit,
+    }
 
 
 def rss_mb() -> float:
@@ -341,6 +405,7 @@ def run_latency(
     paper: bool = True,
     sizes: Sequence[int] = SCENE_SIZES,
     paper_max_objects: int = 200,
+    paper_call_limit_s: float = PAPER_CALL_LIMIT_S,
     tbox_factors: Sequence[int] = (1, 4),
     lengths: Sequence[int] = PLAN_LENGTHS,
     chains: Sequence[int] = CHAIN_LENGTHS,
@@ -484,7 +549,7 @@ def run_latency(
         tick()
 
     # (a) the paper's method, on a sample of the same plans and the smaller scenes.
-    paper_rows: dict[str, float | None] = {}
+    out["paper_call_limit_s"] = paper_call_limit_s
     if paper:
         from virf.bench.paper import run_paper_baseline
 
@@ -492,33 +557,18 @@ def run_latency(
         small = [c for c, n in zip(synthetic, sizes, strict=True) if n <= paper_max_objects]
         # In a temporary folder of its own, removed whatever happens.
         result = run_paper_baseline(
-            tbox, _paper_plans(vf, paper_cases + small), sorted(tbox.vocabulary.uscs)
+            tbox,
+            _paper_plans(vf, paper_cases + small),
+            sorted(tbox.vocabulary.uscs),
+            call_limit_s=paper_call_limit_s,
         )
-        for plan in result["plans"]:
-            paper_rows[plan["id"]] = _paper_plan_ms(plan)
-        per_plan = [paper_rows[c.name] for c in paper_cases]
-        paper_ms = [v for v in per_plan if v is not None]
-        ratios = [
-            v / fast_ms[index[c.name]]
-            for c, v in zip(paper_cases, per_plan, strict=True)
-            if v is not None
-        ]
-        step_ms = [
-            ms for p in result["plans"] for ms in p["step_ms"] if isinstance(ms, (int, float))
-        ]
-        out["paper"] = summary(paper_ms) | {
-            "plans": len(paper_ms),
-            "per_call_p50_ms": round(percentile(step_ms, 50), 1),
-            "owlready2": result.get("owlready2"),
-            "peak_rss_mb": _paper_rss(result),
-        }
-        out["paper_p50_ms"] = out["paper"]["p50_ms"]
-        out["ratio"] = round(statistics.median(ratios), 1) if ratios else None
-        out["ratio_of_medians"] = (
-            round(out["paper"]["p50_ms"] / out["fast"]["p50_ms"], 1) if paper_ms else None
-        )
+        fast_by_name = {c.name: ms for c, ms in zip(cases, fast_ms, strict=True)}
+        out |= paper_figures(result, fast_by_name, [c.name for c in paper_cases])
+        by_plan = {row["plan"]: row for row in out["paper"]["rows"]}
         for row in rows:
-            row["paper_ms"] = paper_rows.get(f"synthetic-{row['requested_objects']}")
+            timed = by_plan.get(f"synthetic-{row['requested_objects']}")
+            row["paper_ms"] = timed["ms"] if timed else None
+            row["paper_lower_bound"] = bool(timed and timed["lower_bound"])
     else:
         out["paper_p50_ms"] = None
         out["ratio"] = None
@@ -587,19 +637,41 @@ def cold_start_table(fig: dict[str, Any]) -> TextTable:
     )
 
 
+def at_least(value: float, lower_bound: bool, digits: int = 0) -> str:
+    """A figure, written "≥ N" when it is a lower bound."""
+    return ("≥ " if lower_bound else "") + f"{value:.{digits}f}"
+
+
+def ratio_text(fig: dict[str, Any], key: str = "ratio") -> str:
+    """Ratio a/c as "N×", "≥ N×" when a plan it was computed from hit the
+    call limit, or "not measured"."""
+    value = fig.get(key)
+    if value is None:
+        return "not measured"
+    return ("≥ " if fig.get("ratio_lower_bound") else "") + f"{value:g}×"
+
+
 def latency_table(fig: dict[str, Any], *, terminal: bool) -> TextTable:
     """Per-plan latency of (a), (b) and (c); the terminal adds a note per method."""
     fast, ref, paper = fig["fast"], fig["reference"], fig.get("paper")
     rows: list[tuple[str, ...]] = []
     if paper:
+        bound = paper.get("lower_bound", False)
+        per_call = at_least(paper["per_call_p50_ms"], paper.get("per_call_lower_bound", False))
+        over = ""
+        if paper.get("calls_over_limit"):
+            over = (
+                f"; {paper['calls_over_limit']} of {paper['calls']} calls "
+                f"{OVER_LIMIT} ({paper['call_limit_s']:g} s)"
+            )
         rows.append(
             (
                 "(a) paper: owlready2 + Pellet per step",
                 str(paper["plans"]),
-                f"{paper['p50_ms']:.0f}",
-                f"{paper['p95_ms']:.0f}",
-                f"{paper['mean_ms']:.0f}",
-                f"per call p50 {paper['per_call_p50_ms']:.0f} ms; owlready2 {paper['owlready2']}",
+                at_least(paper["p50_ms"], bound),
+                at_least(paper["p95_ms"], bound),
+                at_least(paper["mean_ms"], bound),
+                f"per call p50 {per_call} ms{over}; owlready2 {paper['owlready2']}",
             )
         )
     rows += [
@@ -646,7 +718,9 @@ def scaling_table(fig: dict[str, Any], key: str, *, terminal: bool) -> TextTable
                 f"{row['fast_ms'] / size:.3f}",
                 f"{row['reference_ms']:.0f}",
                 f"{row['reference_2_workers_ms']:.0f}",
-                "-" if paper_ms is None else f"{paper_ms:.0f}",
+                "-"
+                if paper_ms is None
+                else at_least(paper_ms, row.get("paper_lower_bound", False)),
                 "yes" if row["identical"] else "NO",
             )
         )
@@ -764,6 +838,7 @@ def render_markdown(fig: dict[str, Any], command: str) -> str:
     fast = fig["fast"]
     paper = fig.get("paper")
     same = fig["identical_reports"]
+    limit = fig.get("paper_call_limit_s") or PAPER_CALL_LIMIT_S
     lines = [
         "# Performance",
         "",
@@ -774,9 +849,12 @@ def render_markdown(fig: dict[str, Any], command: str) -> str:
         "* **(a) the paper's method**: owlready2 0.49 with its bundled Pellet, one reasoner call",
         "  per plan step on a fresh copy of ontology + ABox, stopping at the first step where",
         "  it finds a hazard (the paper's loop). It runs in its own virtualenv (`.venv-paper`):",
-        "  owlready2 0.50/0.51 bundle jars built for Java 25 and fail on Java 17. A Pellet",
-        f"  call is stopped after {PAPER_CALL_TIMEOUT_S:g} s; a plan with a call stopped or failed",
-        "  has no time.",
+        "  owlready2 0.50/0.51 bundle jars built for Java 25 and fail on Java 17.",
+        f"  A reasoner call still running after {limit:g} s (`--paper-call-limit`) is stopped,",
+        "  with its JVM and every process it started, and counts as that long: the plan",
+        "  stops there and its time is a lower bound, written ≥, as is every median, mean",
+        "  and ratio a/c computed from it. A plan whose every call finished is an exact",
+        "  figure; a plan with a call that failed has no time.",
         "* **(b) the reference engine**: HermiT 1.4 in-process (OWLAPI 5 through JPype), one",
         "  fresh reasoner per question, including the minimal explanations of the report.",
         "* **(c) the fast engine** (the default): the same reports from compiled rules and",
@@ -801,12 +879,10 @@ def render_markdown(fig: dict[str, Any], command: str) -> str:
         *to_markdown(latency_table(fig, terminal=False)),
         "",
     ]
-    ratio = fig.get("ratio")
     lines += [
-        f"* **ratio a/c** (median over the plans timed both ways): "
-        f"**{ratio if ratio is not None else 'not measured'}**"
+        f"* **ratio a/c** (median over the plans timed both ways): **{ratio_text(fig)}**"
         + (
-            f"; ratio of the medians: {fig['ratio_of_medians']}"
+            f"; ratio of the medians: {ratio_text(fig, 'ratio_of_medians')}"
             if fig.get("ratio_of_medians")
             else ""
         ),
@@ -815,10 +891,18 @@ def render_markdown(fig: dict[str, Any], command: str) -> str:
         "the reference engine",
     ]
     if paper:
+        per_call = at_least(paper["per_call_p50_ms"], paper.get("per_call_lower_bound", False))
         lines.append(
-            f"* paper method: one reasoner call takes {paper['per_call_p50_ms']:.0f} ms (p50); "
+            f"* paper method: one reasoner call takes {per_call} ms (p50); "
             "each call starts a JVM and classifies the whole TBox again"
         )
+        if "calls_over_limit" in paper:
+            lines.append(
+                f"* paper method: **{paper['calls_over_limit']}** of its {paper['calls']} "
+                f"reasoner calls hit the {paper['call_limit_s']:g} s limit and were stopped; "
+                f"{paper['plans_lower_bound']} of the {paper['plans']} plans timed are "
+                "lower bounds"
+            )
     lines += [
         "",
         "Targets: fast p50 at most 20 ms per plan, ratio a/c at least 300.",
@@ -882,9 +966,12 @@ def render_markdown(fig: dict[str, Any], command: str) -> str:
         "```",
         "",
         "`--json` prints every figure as one object (`ratio`, `fast_p50_ms`, `fast_p95_ms`,",
-        "`reference_p50_ms`, `paper_p50_ms`, the scaling rows, memory, machine).",
+        "`reference_p50_ms`, `paper_p50_ms`, the scaling rows, memory, machine). Under",
+        "`paper`, `rows` gives each plan's time and each call's, `\"> limit\"` for a call",
+        "stopped; `lower_bound` and `ratio_lower_bound` say which figures are lower bounds.",
         "`--paper-sample N` times the paper's method on N plans spread over the split",
-        "(0 = all; each of its calls takes seconds); `--no-paper` skips it.",
+        "(0 = all; each of its calls takes seconds to minutes); `--paper-call-limit S` stops",
+        "a call after S seconds; `--no-paper` skips the paper's method.",
         "",
     ]
     return "\n".join(lines)

@@ -28,28 +28,53 @@ OUT.json: ``owlready2`` and ``java`` versions; per plan ``id``, ``step_ms``,
 Every snapshot costs what one step of the paper's verifier costs, and all of
 it is timed: a fresh World, loading the TBox file, building the ABox,
 ``sync_reasoner_pellet`` (a new JVM) and reading the concepts' instances.
+
+Events, one JSON object a line on stdout, tell the caller how far the run is,
+so that it can stop a call that runs past its limit (``virf.bench.paper``
+does, with the whole process group: the JVM goes too)::
+
+    {"event": "ready", "owlready2": "0.49", "java": "..."}
+    {"event": "call", "plan": 0, "step": 0}            a reasoner call starts
+    {"event": "step", "plan": 0, "step": 0, "ms": ..., "findings": [...],
+     "consistent": true}                               it ended (findings as OUT.json)
+    {"event": "end", "peak_rss_kb": {...}}
+
+``plan`` counts the job's plans from 0.  Whatever else would reach stdout
+(owlready2 or Java printing) goes to stderr instead, so the events stay
+readable.
 """
 
 from __future__ import annotations
 
 import importlib
 import json
+import os
 import resource
 import subprocess
 import sys
 import time
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 KINDS = ("type", "object", "data", "closure")
+
+Emit = Callable[..., None]
 
 
 class JobError(Exception):
     """The job file is malformed; one line says where."""
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, events: TextIO | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
+    stream = sys.stdout if events is None else events
+
+    def emit(event: str, **fields: Any) -> None:
+        stream.write(json.dumps({"event": event, **fields}) + "\n")
+        stream.flush()
+
     if len(args) != 2:
         print("usage: python paper_baseline.py JOB.json OUT.json", file=sys.stderr)
         return 2
@@ -68,20 +93,15 @@ def main(argv: list[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 2
-    if job.get("call_timeout_s"):
-        # owlready2 passes this dict to every subprocess.run that starts
-        # Pellet: a call over the limit is killed and its snapshot is an
-        # error, instead of the run waiting for it without end.
-        reasoning: Any = importlib.import_module("owlready2.reasoning")
-        reasoning._subprocess_kargs["timeout"] = float(job["call_timeout_s"])
     out: dict[str, Any] = {
         "owlready2": str(owl.VERSION),
         "java": java_version(str(owl.JAVA_EXE)),
         "plans": [],
     }
+    emit("ready", owlready2=out["owlready2"], java=out["java"])
     plans = job["plans"]
     for n, plan in enumerate(plans, 1):
-        out["plans"].append(run_plan(owl, job, plan))
+        out["plans"].append(run_plan(owl, job, plan, partial(emit, plan=n - 1)))
         total = out["plans"][-1]["total_ms"]
         print(
             f"paper baseline: plan {n}/{len(plans)} {plan['id']}: "
@@ -93,6 +113,7 @@ def main(argv: list[str] | None = None) -> int:
         "children": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss,
         "self_vmhwm": vm_hwm_kb(),
     }
+    emit("end", peak_rss_kb=out["peak_rss_kb"])
     try:
         Path(args[1]).write_text(json.dumps(out, indent=1) + "\n", encoding="utf-8")
     except OSError as exc:
@@ -116,11 +137,6 @@ def load_job(path: Path) -> dict[str, Any]:
     if not Path(job["tbox"]).is_file():
         raise JobError(f"TBox file not found: {job['tbox']}")
     job.setdefault("individual_namespace", job["namespace"])
-    limit = job.get("call_timeout_s")
-    if limit is not None and (
-        isinstance(limit, bool) or not isinstance(limit, (int, float)) or limit <= 0
-    ):
-        raise JobError("'call_timeout_s' must be a positive number of seconds")
     concepts = job.get("concepts")
     if not isinstance(concepts, list) or not all(isinstance(c, str) for c in concepts):
         raise JobError("job needs 'concepts', a list of class names")
@@ -177,11 +193,15 @@ def java_version(java: str) -> str:
     return lines[0].strip() if lines else "unknown"
 
 
-def run_plan(owl: Any, job: dict[str, Any], plan: dict[str, Any]) -> dict[str, Any]:
+def run_plan(
+    owl: Any, job: dict[str, Any], plan: dict[str, Any], emit: Emit | None = None
+) -> dict[str, Any]:
     step_ms: list[float] = []
     findings: list[Any] = []
     consistent: list[bool | None] = []
-    for facts in plan["snapshots"]:
+    for k, facts in enumerate(plan["snapshots"]):
+        if emit:
+            emit("call", step=k)
         ms, result = run_snapshot(owl, job, facts)
         step_ms.append(round(ms, 1))
         if "error" in result:
@@ -190,6 +210,8 @@ def run_plan(owl: Any, job: dict[str, Any], plan: dict[str, Any]) -> dict[str, A
         else:
             findings.append(result["findings"])
             consistent.append(result["consistent"])
+        if emit:
+            emit("step", step=k, ms=step_ms[-1], findings=findings[-1], consistent=consistent[-1])
     return {
         "id": plan["id"],
         "step_ms": step_ms,
@@ -308,5 +330,15 @@ def _ms(start: float) -> float:
     return (time.perf_counter() - start) * 1000.0
 
 
+def event_stream() -> TextIO:
+    """Stdout, kept for the events; file descriptor 1 itself now leads to
+    stderr, so that nothing printed by owlready2 or a child can be mistaken
+    for an event."""
+    events = os.fdopen(os.dup(1), "w", encoding="utf-8")
+    sys.stdout.flush()
+    os.dup2(2, 1)
+    return events
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(main(events=event_stream()))

@@ -149,12 +149,23 @@ def bench_latency(
     paper_sample: Annotated[
         int,
         typer.Option(
-            min=0, help="Time the paper's method on this many plans (0 = all; ~5 s per step)."
+            min=0,
+            help="Time the paper's method on this many plans (0 = all; seconds to minutes "
+            "per step).",
         ),
     ] = 20,
     paper_max_objects: Annotated[
         int, typer.Option(min=0, help="Largest synthetic scene the paper's method is timed on.")
     ] = 200,
+    paper_call_limit: Annotated[
+        float,
+        typer.Option(
+            "--paper-call-limit",
+            min=1.0,
+            help="Seconds one reasoner call of the paper's method may take; a call still "
+            "running is stopped and its plan's time reported as a lower bound.",
+        ),
+    ] = 60.0,  # virf.bench.paper.PAPER_CALL_LIMIT_S, unimported: commands load their modules late
     no_paper: Annotated[
         bool, typer.Option("--no-paper", help="Skip the paper's method (needs .venv-paper).")
     ] = False,
@@ -246,6 +257,7 @@ def bench_latency(
             paper=not no_paper,
             sizes=size_list,
             paper_max_objects=paper_max_objects,
+            paper_call_limit_s=paper_call_limit,
             tbox_factors=factors,
             lengths=length_list,
             cold=cold,
@@ -282,6 +294,7 @@ def _print_latency(fig: dict[str, Any]) -> None:
         chain_markdown,
         cold_start_table,
         latency_table,
+        ratio_text,
         scaling_table,
         tbox_table,
     )
@@ -298,11 +311,16 @@ def _print_latency(fig: dict[str, Any]) -> None:
         console.print(to_rich(cold_start_table(fig)))
     paper = fig.get("paper")
     same = fig["identical_reports"]
-    ratio = fig.get("ratio")
     console.print(
-        f"ratio a/c (median over plans): {ratio if ratio is not None else 'n/a'}; "
+        f"ratio a/c (median over plans): {ratio_text(fig)}; "
         f"reports identical (b vs c): {same['identical']}/{same['compared']}"
     )
+    if paper and paper.get("calls_over_limit"):
+        console.print(
+            f"paper method: {paper['calls_over_limit']} of {paper['calls']} calls hit the "
+            f"{paper['call_limit_s']:g} s limit; {paper['plans_lower_bound']} of "
+            f"{paper['plans']} plans timed are lower bounds (≥)"
+        )
     mem = fig["memory"]
     console.print(
         f"memory: process RSS {mem['process_rss_after_tbox_mb']:.0f} MB after TBox load, "
