@@ -132,7 +132,9 @@ agents-report: $(STAMP)
 # (creates .venv-paper with owlready2 0.49 for the paper's method).
 bench-latency: $(STAMP)
 	$(BIN)/virf bench latency $(SAB)/unsafe_detailed.jsonl $(SAB)/safe_detailed.jsonl \
-	  $(SAB)/abstract.jsonl --markdown docs/performance.md
+	  $(SAB)/abstract.jsonl $(SAB)/other_rooms/unsafe_detailed.jsonl \
+	  $(SAB)/other_rooms/safe_detailed.jsonl $(SAB)/other_rooms/abstract.jsonl \
+	  --markdown docs/performance.md
 
 $(STAMP): pyproject.toml | java wordnet
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "error: $(PYTHON) not found; install Python 3.11 or run 'make PYTHON=/path/to/python3.11'" >&2; exit 1; }

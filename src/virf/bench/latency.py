@@ -39,8 +39,8 @@ from typing import Any
 from virf.api import LogicTutor
 from virf.bench.coldstart import cold_start_rows
 from virf.bench.paper import OVER_LIMIT, PAPER_CALL_LIMIT_S
+from virf.bench.safeagentbench import ROOMS, UNKNOWN_ROOM, load_tasks
 from virf.bench.safeagentbench import build_scene as task_scene
-from virf.bench.safeagentbench import load_tasks
 from virf.errors import InputError
 from virf.ontology.jvm import java_version
 from virf.ontology.tbox import TBox, load_tbox, ontology_dir
@@ -148,6 +148,40 @@ def dev_cases(files: Sequence[str | Path], tbox: TBox, room: str | None = None) 
     return out
 
 
+@dataclass(frozen=True)
+class RoomGroup:
+    """One room's dev plans, with verifiers over the room's rules."""
+
+    room: str
+    cases: list[Case]
+    fast: Verifier
+    reference: Verifier
+
+
+def room_groups(
+    files: Sequence[str | Path], kitchen: TBox, fast: Engine, reference: Engine
+) -> list[RoomGroup]:
+    """The tasks with a reference plan in ``files``, by room (the kitchen's
+    with the given engines, each other room's with engines of its own)."""
+    groups = []
+    for room in (*ROOMS, UNKNOWN_ROOM):
+        tbox = kitchen if room.name == "kitchen" else load_tbox(room.name)
+        cases = dev_cases(files, tbox, room=room.name)
+        if not cases:
+            continue
+        engines = (
+            (fast, reference)
+            if tbox is kitchen
+            else (
+                make_engine("fast", tbox),
+                make_engine("reference", tbox),
+            )
+        )
+        verifiers = [LogicTutor.over(tbox, engine).verifier for engine in engines]
+        groups.append(RoomGroup(room.name, cases, *verifiers))
+    return groups
+
+
 def synthetic_scene(objects: int, tbox: TBox) -> dict[str, Any]:
     """A kitchen with ``objects`` objects on which the synthetic plan runs safely."""
     vocab = tbox.vocabulary
@@ -223,6 +257,27 @@ def chain_scene(boxes: int) -> dict[str, Any]:
 def chain_case(boxes: int, tbox: TBox) -> Case:
     scene = build_scene(chain_scene(boxes), tbox.vocabulary, name=f"chain-{boxes}")
     return Case(f"chain-{boxes}", scene, parse_plan(list(CHAIN_PLAN)))
+
+
+HAZARD_CHAIN_PLAN = ("find Box_0", "pick Box_0", "find Vase_1", "drop Box_0")
+HAZARD_CHAINS = (10, 100)
+
+
+def hazard_chain_case(boxes: int, tbox: TBox) -> Case:
+    """The containment chain with a dumbbell in the innermost box and a vase
+    on the counter: dropping Box_0 by the vase is a hazard through the whole
+    chain, so its explanation lists every link (boxes + 5 facts)."""
+    data = chain_scene(boxes)
+    data["instances"] += [
+        {"class_name": "Dumbbell", "instance_name": "Dumbbell_1"},
+        {"class_name": "Vase", "instance_name": "Vase_1"},
+    ]
+    data["assertions"] += [
+        {"subject": f"Box_{boxes - 1}", "property": "contains", "object": "Dumbbell_1"},
+        {"subject": "Vase_1", "property": "isOn", "object": "CounterTop_1"},
+    ]
+    scene = build_scene(data, tbox.vocabulary, name=f"hazard-chain-{boxes}")
+    return Case(f"hazard-chain-{boxes}", scene, parse_plan(list(HAZARD_CHAIN_PLAN)))
 
 
 def deadline_row(tbox: TBox, engine: Engine, boxes: int, timeout_s: float) -> dict[str, Any]:
@@ -432,7 +487,9 @@ def run_latency(
     fast = make_engine("fast", tbox)
     reference = make_engine("reference", tbox)
     vf, vr = LogicTutor.over(tbox, fast).verifier, LogicTutor.over(tbox, reference).verifier
-    cases = dev_cases(files, tbox)
+    # Each room's plans with its own rules, as `virf bench safeagentbench` checks them.
+    rooms = room_groups(files, tbox, fast, reference)
+    cases = [c for group in rooms for c in group.cases]
     if not cases:
         raise InputError("no task with a reference plan in the given files")
     synthetic = [synthetic_case(n, tbox) for n in sizes]
@@ -452,26 +509,46 @@ def run_latency(
 
     # (c) fast engine: a warm-up pass, then the median of `repeats` runs per plan.
     tick = bar("fast engine: warm-up", len(cases))
-    time_plans(vf, cases, 1, tick)
-    stats_before = fast.stats()
+    for group in rooms:
+        time_plans(group.fast, group.cases, 1, tick)
+    stats_before = [group.fast.engine.stats() for group in rooms]
     tick = bar("fast engine", len(cases))
-    fast_ms, fast_reports = time_plans(vf, cases, repeats, tick)
-    stats_after = fast.stats()
-    calls = stats_after.get("calls", 0) - stats_before.get("calls", 0)
-    falls = stats_after.get("fallbacks", 0) - stats_before.get("fallbacks", 0)
+    fast_ms, fast_reports = [], []
+    for group in rooms:
+        group_ms, group_reports = time_plans(group.fast, group.cases, repeats, tick)
+        fast_ms += group_ms
+        fast_reports += group_reports
+        out.setdefault("rooms", []).append({"room": group.room, "plans": len(group.cases)})
+        out["rooms"][-1] |= summary(group_ms)
+    stats_after = [group.fast.engine.stats() for group in rooms]
+    calls = sum(
+        a.get("calls", 0) - b.get("calls", 0)
+        for a, b in zip(stats_after, stats_before, strict=True)
+    )
+    falls = sum(
+        a.get("fallbacks", 0) - b.get("fallbacks", 0)
+        for a, b in zip(stats_after, stats_before, strict=True)
+    )
     tracemalloc.start()
-    for case in cases[:20]:
-        vf.verify(case.scene, case.plan, case.requirements)
+    for case in rooms[0].cases[:20]:
+        rooms[0].fast.verify(case.scene, case.plan, case.requirements)
     fast_heap = tracemalloc.get_traced_memory()[1] / 2**20
     tracemalloc.stop()
     rss_fast = rss_mb()
 
     # (b) reference engine, one run per plan (after a short JVM warm-up).
     ref_cases = sample(cases, reference_sample)
+    chosen = {c.name for c in ref_cases}
     for case in ref_cases[:3]:
         vr.verify(case.scene, case.plan, case.requirements)
     tick = bar("reference engine", len(ref_cases))
-    ref_ms, ref_reports = time_plans(vr, ref_cases, 1, tick)
+    ref_ms, ref_reports = [], []
+    for group in rooms:
+        picked = [c for c in group.cases if c.name in chosen]
+        group_ms, group_reports = time_plans(group.reference, picked, 1, tick)
+        ref_ms += group_ms
+        ref_reports += group_reports
+    ref_cases = [c for group in rooms for c in group.cases if c.name in chosen]
     rss_ref = rss_mb()
     index = {c.name: i for i, c in enumerate(cases)}
     identical = sum(
@@ -540,6 +617,21 @@ def run_latency(
         )
         tick()
     out["chain_scaling"] = by_depth
+    hazards = []
+    tick = bar("hazard chains", len(HAZARD_CHAINS))
+    for boxes in HAZARD_CHAINS:
+        h_ms, h_rep = time_plans(vf, [hazard_chain_case(boxes, tbox)], repeats)
+        found = h_rep[0].violations
+        hazards.append(
+            {
+                "objects": boxes,
+                "status": h_rep[0].status,
+                "explained_facts": len(found[0].triggering_facts) if found else 0,
+                "fast_ms": round(h_ms[0], 2),
+            }
+        )
+        tick()
+    out["hazard_chains"] = hazards
     tick = bar("deadline", len(DEADLINE_CHAINS))
     out["deadline"] = []
     for which, boxes in DEADLINE_CHAINS:
@@ -553,7 +645,8 @@ def run_latency(
     if paper:
         from virf.bench.paper import run_paper_baseline
 
-        paper_cases = sample(cases, paper_sample)
+        # The paper's method exports the kitchen's TBox: the kitchen's plans.
+        paper_cases = sample([c for c in cases if not c.name.count("/")], paper_sample)
         small = [c for c, n in zip(synthetic, sizes, strict=True) if n <= paper_max_objects]
         # In a temporary folder of its own, removed whatever happens.
         result = run_paper_baseline(
@@ -616,7 +709,69 @@ def _paper_rss(result: dict[str, Any]) -> float | None:
 # performance.md from the same rows; the terminal words some headers shorter.
 
 
-COLD_TARGET_S = 0.5
+COLD_TARGET_S = 0.25
+# The figures issue 29 asks for (printed beside the measured ones).
+TARGETS = {
+    "p50_ms": 4.0,
+    "p95_ms": 10.0,
+    "vs_reference": 300.0,
+    "vs_paper": 300.0,
+    "objects_1000_ms": 50.0,
+    "chain_1000_ms": 100.0,
+    "hazard_chain_100_ms": 100.0,
+}
+
+
+def targets_table(fig: dict[str, Any]) -> TextTable:
+    """Each figure issue 29 asks for, beside what this run measured."""
+
+    def row_ms(key: str, objects: int) -> float | None:
+        return next((r["fast_ms"] for r in fig.get(key, []) if r["objects"] == objects), None)
+
+    fast, ref = fig["fast"], fig["reference"]
+    cold = next(
+        (r for r in fig.get("cold_start", {}).get("rows", []) if r["engine"] == "fast"), None
+    )
+    vs_ref = ref["p50_ms"] / fast["p50_ms"] if ref.get("p50_ms") and fast["p50_ms"] else None
+    rows: list[tuple[str, str, float | None, bool]] = [
+        ("fast p50 per plan, ms", "≤", fast["p50_ms"], True),
+        ("fast p95 per plan, ms", "≤", fast["p95_ms"], True),
+        ("reference p50 / fast p50", "≥", vs_ref, False),
+        ("paper / fast (a/c)", "≥", fig.get("ratio"), False),
+        ("cold first verdict, s", "≤", cold["median_s"] if cold else None, True),
+        ("10-step plan, 1,000 objects, ms", "≤", row_ms("scene_scaling", 1000), True),
+        ("1,000-box chain, ms", "≤", row_ms("chain_scaling", 1000), True),
+        ("100-box hazard chain explained, ms", "≤", row_ms("hazard_chains", 100), True),
+    ]
+    goals = [
+        TARGETS["p50_ms"],
+        TARGETS["p95_ms"],
+        TARGETS["vs_reference"],
+        TARGETS["vs_paper"],
+        COLD_TARGET_S,
+        TARGETS["objects_1000_ms"],
+        TARGETS["chain_1000_ms"],
+        TARGETS["hazard_chain_100_ms"],
+    ]
+    table = []
+    for (name, way, value, at_most), goal in zip(rows, goals, strict=True):
+        if value is None or value != value:
+            table.append((name, f"{way} {goal:g}", "not measured", "-"))
+            continue
+        met = value <= goal if at_most else value >= goal
+        shown = f"{value:.3g}"
+        if name.startswith("paper") and fig.get("ratio_lower_bound"):
+            shown = f"≥ {shown}"  # a lower bound that meets the goal meets it
+        table.append((name, f"{way} {goal:g}", shown, "yes" if met else "no"))
+    return TextTable.of(("figure", "target", "measured", "met"), table)
+
+
+def reference_ratio(fig: dict[str, Any]) -> str:
+    """How many times faster the fast engine's median is than the reference's."""
+    fast, ref = fig["fast"]["p50_ms"], fig["reference"].get("p50_ms")
+    if not ref or not fast or ref != ref:  # NaN when no plan was timed
+        return "not measured"
+    return f"{ref / fast:.0f}×"
 
 
 def cold_start_table(fig: dict[str, Any]) -> TextTable:
@@ -805,6 +960,27 @@ def chain_markdown(fig: dict[str, Any]) -> list[str]:
             ],
         )
         lines += to_markdown(chain)
+    if fig.get("hazard_chains"):
+        lines += [
+            "",
+            "The same chain with a dumbbell in the innermost box and a vase on the counter;",
+            f"the plan ({', '.join(HAZARD_CHAIN_PLAN)}) drops Box_0 by the vase. The hazard",
+            "runs through every link, and the report's minimal explanation lists them all:",
+            "",
+        ]
+        hazard = TextTable.of(
+            ("boxes", "verdict", "facts in the explanation", "fast ms"),
+            [
+                (
+                    str(row["objects"]),
+                    row["status"],
+                    str(row["explained_facts"]),
+                    f"{row['fast_ms']:.1f}",
+                )
+                for row in fig["hazard_chains"]
+            ],
+        )
+        lines += to_markdown(hazard)
     if fig.get("deadline"):
         lines += [
             "",
@@ -874,11 +1050,21 @@ def render_markdown(fig: dict[str, Any], command: str) -> str:
         "",
         "## Per-plan latency on the SafeAgentBench dev split",
         "",
-        f"{fig['plans']} reference plans (every task in the given files that ships one).",
+        f"{fig['plans']} reference plans (every task in the given files that ships one),",
+        "each verified with its room's rules.",
         "",
         *to_markdown(latency_table(fig, terminal=False)),
         "",
     ]
+    if fig.get("rooms"):
+        by_room = TextTable.of(
+            ("room", "plans", "fast p50 ms", "fast p95 ms"),
+            [
+                (r["room"], str(r["plans"]), f"{r['p50_ms']:.1f}", f"{r['p95_ms']:.1f}")
+                for r in fig["rooms"]
+            ],
+        )
+        lines += ["The fast engine by room:", "", *to_markdown(by_room), ""]
     lines += [
         f"* **ratio a/c** (median over the plans timed both ways): **{ratio_text(fig)}**"
         + (
@@ -905,7 +1091,11 @@ def render_markdown(fig: dict[str, Any], command: str) -> str:
             )
     lines += [
         "",
-        "Targets: fast p50 at most 20 ms per plan, ratio a/c at least 300.",
+        "Targets (issue 29): with explanations, over the dev plans of every room, fast",
+        f"p50 at most {TARGETS['p50_ms']:g} ms and p95 at most {TARGETS['p95_ms']:g} ms per plan;",
+        f"at least {TARGETS['vs_reference']:g}× faster than the reference engine (b/c, medians)"
+        f" and {TARGETS['vs_paper']:g}× than the paper's method (a/c). This run: b/c = "
+        f"{reference_ratio(fig)}.",
         "",
     ]
     cold = fig.get("cold_start")
@@ -947,6 +1137,7 @@ def render_markdown(fig: dict[str, Any], command: str) -> str:
     ):
         lines += ["", f"## {title}", "", *to_markdown(scaling_table(fig, key, terminal=False))]
     lines += chain_markdown(fig)
+    lines += ["", "## Targets", "", *to_markdown(targets_table(fig))]
     lines += [
         "",
         "## Scaling with TBox size (50-object scene, 10-step plan)",
