@@ -24,6 +24,23 @@ def one_at_a_time(items: list[int], holds: Callable[[list[int]], bool]) -> list[
     return current
 
 
+def needing(needs: list[frozenset[int]]) -> Callable[[list[int]], bool]:
+    """The monotone test: does a list contain one of ``needs``?"""
+
+    def holds(kept: list[int]) -> bool:
+        return any(need <= set(kept) for need in needs)
+
+    return holds
+
+
+def counting(holds: Callable[[list[int]], bool], calls: list[int]) -> Callable[[list[int]], bool]:
+    def counted(kept: list[int]) -> bool:
+        calls.append(len(kept))
+        return holds(kept)
+
+    return counted
+
+
 @st.composite
 def monotone_tests(draw: st.DrawFn) -> tuple[list[int], list[frozenset[int]]]:
     """Items, and the minimal sets of which a list must contain one (a monotone test)."""
@@ -48,16 +65,12 @@ def test_runs_of_deletions_find_the_one_at_a_time_result(
 ) -> None:
     items, needs = case
 
-    def holds(kept: list[int]) -> bool:
-        return any(need <= set(kept) for need in needs)
+    holds = needing(needs)
 
     if not holds(items):
         return  # the explainer only minimises what holds
     calls: list[int] = []
-
-    def counted(kept: list[int]) -> bool:
-        calls.append(len(kept))
-        return holds(kept)
+    counted = counting(holds, calls)
 
     assert drop_greedily(items, counted) == one_at_a_time(items, holds)
     assert len(calls) <= 2 * len(items) + 1
@@ -72,8 +85,7 @@ def test_proofs_as_hints_change_nothing_but_the_calls(
     nothing), the search keeps what deleting one at a time keeps."""
     items, needs = case
 
-    def holds(kept: list[int]) -> bool:
-        return any(need <= set(kept) for need in needs)
+    holds = needing(needs)
 
     if not holds(items):
         return
@@ -88,6 +100,19 @@ def test_proofs_as_hints_change_nothing_but_the_calls(
 
     assert drop_greedily(items, holds, prove) == one_at_a_time(items, holds)
 
+    def each(kept: list[int], rest: list[int], tested: list[bool]) -> list[bool]:
+        """The tests of a proof's items, asked together (as the spec says)."""
+        return [
+            holds(
+                kept + [y for y, t in zip(rest[:k], tested[:k], strict=True) if t] + rest[k + 1 :]
+            )
+            for k in range(len(rest))
+            if tested[k]
+        ]
+
+    asked.clear()
+    assert drop_greedily(items, holds, prove, each) == one_at_a_time(items, holds)
+
 
 @settings(max_examples=200, deadline=None, derandomize=True)
 @given(monotone_tests())
@@ -96,17 +121,13 @@ def test_a_proof_of_the_result_costs_one_call_per_item_plus_one(
 ) -> None:
     items, needs = case
 
-    def holds(kept: list[int]) -> bool:
-        return any(need <= set(kept) for need in needs)
+    holds = needing(needs)
 
     if not holds(items):
         return
     result = one_at_a_time(items, holds)
     calls: list[int] = []
-
-    def counted(kept: list[int]) -> bool:
-        calls.append(len(kept))
-        return holds(kept)
+    counted = counting(holds, calls)
 
     assert drop_greedily(items, counted, lambda kept: frozenset(result)) == result
     assert len(calls) <= len(result) + 1

@@ -755,14 +755,13 @@ class FastEngine(Engine):
                 solve(m, 0, len(items) - 1)
             return [answers[i] for i in range(len(items)) if tested[i]]
 
-        with self._lock:
-            self._counts["calls"] += 1
-            try:
-                return exact()
-            except (Fallback, ChaseLimit) as why:
-                self._counts["fallbacks"] += 1
-                self._counts[f"fallback: {why}"] += 1
-        return super().entails_each(kept, items, tested, concept, individual, deadline=deadline)
+        def one_by_one() -> list[bool]:
+            return super(FastEngine, self).entails_each(
+                kept, items, tested, concept, individual, deadline=deadline
+            )
+
+        result: list[bool] = self._answer(exact, one_by_one)
+        return result
 
     def _decided(self, m: Model, concept: str, individual: str) -> bool:
         """Is ``concept(individual)`` entailed by the facts in ``m`` (grown)?"""
