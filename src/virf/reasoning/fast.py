@@ -475,6 +475,7 @@ class FastEngine(Engine):
         self._lock = threading.Lock()
         self._core: tuple[Model, frozenset[Fact]] | None = None  # see sharing()
         self._held: Model | None = None  # the program's spare model, while a block grows it
+        self._requirements: dict[str, tuple[frozenset[str], ...]] = {}  # see _required()
         self._query_ids = frozenset(
             a.id for a in self.fragment.query_axiom.values() if a.id is not None
         )
@@ -617,6 +618,37 @@ class FastEngine(Engine):
             for q, e in frag.query_defs.items()
         }
 
+    def _required(self, concept: str) -> tuple[frozenset[str], ...]:
+        """Sets of named classes (not defined by a query) such that every
+        instance of ``concept`` is, by its definition, in one class of each
+        set: where no class of a set has a member, the concept has none
+        either (:meth:`_Eval.candidates` reads the same tables)."""
+        found = self._requirements.get(concept)
+        if found is None:
+            clauses = {c for c in self._clauses(("C", concept), frozenset()) if c}
+            found = self._requirements[concept] = tuple(sorted(clauses, key=sorted))
+        return found
+
+    def _clauses(self, e: Expr, seen: frozenset[str]) -> list[frozenset[str]]:
+        frag, tag = self.fragment, e[0]
+        if tag == "and":
+            return [c for part in e[1] for c in self._clauses(part, seen)]
+        if tag == "or":
+            # A disjunct that holds meets each of its sets, so one set of
+            # each, joined, is met when the disjunction holds.
+            picks = [self._clauses(part, seen) for part in e[1]]
+            if all(picks):
+                return [frozenset().union(*(min(p, key=len) for p in picks))]
+            return []
+        if tag == "C":
+            name = e[1]
+            if name in frag.query_defs:
+                return [] if name in seen else self._clauses(frag.query_defs[name], seen | {name})
+            if name in frag.sinks or name == THING:
+                return []
+            return [frozenset({name})]
+        return []
+
     def _decide(self, ev: _Eval, concept: str, x: str) -> bool:
         """Is ``concept(x)`` entailed?  The model must already be verified."""
         if concept in self.fragment.sinks:
@@ -672,8 +704,16 @@ class FastEngine(Engine):
                     f.object for f in facts if f.kind is FactKind.OBJECT
                 }
                 found: dict[str, tuple[str, ...]] = {}
+                members = m.members
                 for concept in concepts:
                     check_deadline("while the fast engine classified the facts")
+                    # A class every instance must have, with no member here,
+                    # settles it (most concepts are about one kind of action).
+                    if any(
+                        not any(members.get(a) for a in clause)
+                        for clause in self._required(concept)
+                    ):
+                        continue
                     # Only where the concept holds in the model can it be entailed.
                     where = ev.candidates(("C", concept))
                     pool = abox if where is None else abox & where
