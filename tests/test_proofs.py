@@ -18,7 +18,7 @@ from hypothesis import HealthCheck, given, settings
 from random_worlds import scenes_and_plans
 
 from virf.api import LogicTutor
-from virf.reasoning import Proof
+from virf.reasoning import Engine, Proof
 from virf.reasoning.fast import FastEngine
 from virf.schema import Fact
 from virf.verify.verifier import Verifier
@@ -48,6 +48,7 @@ class Recording(FastEngine):
     def __init__(self, *args: object, **kwargs: object) -> None:
         super().__init__(*args, **kwargs)  # type: ignore[arg-type]
         self.proofs = 0
+        self.batches = 0  # questions answered together, each checked one by one
 
     def proof(
         self,
@@ -72,6 +73,38 @@ class Recording(FastEngine):
             others = frozenset(self.tbox.vocabulary.background) - found.axioms
             assert self.entails(found.facts, concept, individual, without=others | set(without))
         return found
+
+    def entails_each(
+        self,
+        kept: Sequence[Fact],
+        items: Sequence[Fact],
+        tested: Sequence[bool],
+        concept: str,
+        individual: str,
+        *,
+        deadline: float | None = None,
+    ) -> list[bool]:
+        together = super().entails_each(kept, items, tested, concept, individual)
+        self.batches += 1
+        assert together == Engine.entails_each(self, kept, items, tested, concept, individual)
+        return together
+
+    def entails_each_without(
+        self,
+        facts: Sequence[Fact],
+        dropped: Collection[str],
+        items: Sequence[str],
+        tested: Sequence[bool],
+        concept: str,
+        individual: str,
+        *,
+        deadline: float | None = None,
+    ) -> list[bool]:
+        args = (facts, dropped, items, tested, concept, individual)
+        together = super().entails_each_without(*args)
+        self.batches += 1
+        assert together == Engine.entails_each_without(self, *args)
+        return together
 
 
 def _report(verifier: Verifier, data: dict[str, object], steps: list[str]) -> str:
@@ -108,6 +141,7 @@ def test_reports_with_proofs_equal_the_deletion_search(
 
     check()
     assert recording.proofs > 20  # the proofs were there to be wrong
+    assert recording.batches > 20
 
 
 @pytest.mark.parametrize("case", case_params())

@@ -129,6 +129,32 @@ class Engine(ABC):
                 answers.append(self.entails(trial, concept, individual, deadline=deadline))
         return answers
 
+    def entails_each_without(
+        self,
+        facts: Sequence[Fact],
+        dropped: Collection[str],
+        items: Sequence[str],
+        tested: Sequence[bool],
+        concept: str,
+        individual: str,
+        *,
+        deadline: float | None = None,
+    ) -> list[bool]:
+        """For each axiom id ``items[i]`` with ``tested[i]``, in order: is
+        ``concept(individual)`` entailed by ``facts`` without the axioms
+        ``dropped``, the untested items before ``i`` and ``items[i]``?  (The
+        questions a deletion search over axioms asks while it keeps every
+        tested item; an engine may answer them together.)"""
+        answers = []
+        for i, test in enumerate(tested):
+            if test:
+                left = [a for a, t in zip(items[:i], tested[:i], strict=True) if not t]
+                without = {*dropped, *left, items[i]}
+                answers.append(
+                    self.entails(facts, concept, individual, without=without, deadline=deadline)
+                )
+        return answers
+
     def consistent(
         self, facts: Iterable[Fact], without: Collection[str] = (), *, deadline: float | None = None
     ) -> bool:

@@ -388,6 +388,17 @@ class Program:
             )
             if any(entry):
                 self.ctrig[a] = entry
+        # The classes whose members trigger each axiom's rules (see Model.enable).
+        self.tag_classes: dict[str, set[str]] = defaultdict(set)
+        for table in (self.sub, self.value_head, self.all_by_class, self.some_head, self.data_head):
+            for a, rules in table.items():
+                for rule in rules:
+                    if rule[-1] is not None:
+                        self.tag_classes[rule[-1]].add(a)
+        for conj in self.conj.values():
+            for body, _, tag in conj:
+                if tag is not None:
+                    self.tag_classes[tag].add(body[0])
         self.rtrig: dict[str, tuple[Any, ...]] = {}
         props = (
             set(self.role_up)
@@ -807,6 +818,18 @@ class Model:
                 if found:
                     self.clash = f"{x} {p} {min(found)} contradicts '{x} {p} nothing'"
                     break
+
+    def enable(self, tags: frozenset[str]) -> None:
+        """Switch the rules of the axioms ``tags`` back on, and queue what the
+        model holds that triggers them; the next :meth:`run` grows the model
+        to the least model with them (rules only add, so growing the smaller
+        model gives it).  The caller restores :attr:`disabled` when it rolls
+        back."""
+        self.disabled = self.disabled - tags
+        classes = {c for t in tags for c in self.prog.tag_classes.get(t, ())}
+        for a in sorted(classes):
+            for x in sorted(self.members.get(a, ())):
+                self.queue.append(("t", x, a))
 
     def applicable(self) -> frozenset[str]:
         """Ids of the axioms with a rule whose body some element satisfies

@@ -225,7 +225,13 @@ def needed_background(
         )
         return found.axioms if found else None
 
-    return drop_greedily(order, holds, prove)
+    def each(kept: list[str], rest: list[str], tested: list[bool]) -> list[bool]:
+        dropped = every - set(kept) - set(rest)
+        return engine.entails_each_without(
+            facts, dropped, rest, tested, concept, individual, deadline=deadline
+        )
+
+    return drop_greedily(order, holds, prove, each)
 
 
 def _grown(names: set[str], vocab: Vocabulary) -> list[str]:
