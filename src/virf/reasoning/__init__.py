@@ -116,18 +116,17 @@ class Engine(ABC):
         individual: str,
         *,
         deadline: float | None = None,
-    ) -> list[bool]:
+    ) -> Iterator[bool]:
         """For each item ``i`` with ``tested[i]``, in order: is ``concept(individual)``
         entailed by ``kept``, the tested items before ``i`` and every item
         after it?  (The questions a deletion search asks while it keeps
-        every tested item; an engine may answer them together.)"""
-        answers = []
+        every tested item; an engine may answer them together.)  Answered
+        as they are read: a search that stops early asks no more."""
         for i, test in enumerate(tested):
             if test:
                 before = [f for f, t in zip(items[:i], tested[:i], strict=True) if t]
                 trial = [*kept, *before, *items[i + 1 :]]
-                answers.append(self.entails(trial, concept, individual, deadline=deadline))
-        return answers
+                yield self.entails(trial, concept, individual, deadline=deadline)
 
     def entails_each_without(
         self,
@@ -139,21 +138,18 @@ class Engine(ABC):
         individual: str,
         *,
         deadline: float | None = None,
-    ) -> list[bool]:
+    ) -> Iterator[bool]:
         """For each axiom id ``items[i]`` with ``tested[i]``, in order: is
         ``concept(individual)`` entailed by ``facts`` without the axioms
         ``dropped``, the untested items before ``i`` and ``items[i]``?  (The
         questions a deletion search over axioms asks while it keeps every
-        tested item; an engine may answer them together.)"""
-        answers = []
+        tested item; an engine may answer them together.)  Answered as they
+        are read."""
         for i, test in enumerate(tested):
             if test:
                 left = [a for a, t in zip(items[:i], tested[:i], strict=True) if not t]
                 without = {*dropped, *left, items[i]}
-                answers.append(
-                    self.entails(facts, concept, individual, without=without, deadline=deadline)
-                )
-        return answers
+                yield self.entails(facts, concept, individual, without=without, deadline=deadline)
 
     def consistent(
         self, facts: Iterable[Fact], without: Collection[str] = (), *, deadline: float | None = None

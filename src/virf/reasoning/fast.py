@@ -51,6 +51,10 @@ from virf.schema import Fact, FactKind
 # could be confused with them, so such an input goes to the reference engine.
 _INTERNAL = ("owl:", "aux:", "{", "undefined:", "_:")
 _NONE: frozenset[str] = frozenset()
+# Fewer questions than this are asked one by one: halving costs its own
+# bookkeeping (and switching axioms on re-applies their rules to the whole
+# model), which a handful of questions do not repay.
+BATCH_FROM = 6
 
 
 def fragment_of(tbox: TBox) -> Fragment:
@@ -475,7 +479,6 @@ class FastEngine(Engine):
         self._lock = threading.Lock()
         self._core: tuple[Model, frozenset[Fact]] | None = None  # see sharing()
         self._held: Model | None = None  # the program's spare model, while a block grows it
-        self._requirements: dict[str, tuple[frozenset[str], ...]] = {}  # see _required()
         self._query_ids = frozenset(
             a.id for a in self.fragment.query_axiom.values() if a.id is not None
         )
@@ -618,37 +621,6 @@ class FastEngine(Engine):
             for q, e in frag.query_defs.items()
         }
 
-    def _required(self, concept: str) -> tuple[frozenset[str], ...]:
-        """Sets of named classes (not defined by a query) such that every
-        instance of ``concept`` is, by its definition, in one class of each
-        set: where no class of a set has a member, the concept has none
-        either (:meth:`_Eval.candidates` reads the same tables)."""
-        found = self._requirements.get(concept)
-        if found is None:
-            clauses = {c for c in self._clauses(("C", concept), frozenset()) if c}
-            found = self._requirements[concept] = tuple(sorted(clauses, key=sorted))
-        return found
-
-    def _clauses(self, e: Expr, seen: frozenset[str]) -> list[frozenset[str]]:
-        frag, tag = self.fragment, e[0]
-        if tag == "and":
-            return [c for part in e[1] for c in self._clauses(part, seen)]
-        if tag == "or":
-            # A disjunct that holds meets each of its sets, so one set of
-            # each, joined, is met when the disjunction holds.
-            picks = [self._clauses(part, seen) for part in e[1]]
-            if all(picks):
-                return [frozenset().union(*(min(p, key=len) for p in picks))]
-            return []
-        if tag == "C":
-            name = e[1]
-            if name in frag.query_defs:
-                return [] if name in seen else self._clauses(frag.query_defs[name], seen | {name})
-            if name in frag.sinks or name == THING:
-                return []
-            return [frozenset({name})]
-        return []
-
     def _decide(self, ev: _Eval, concept: str, x: str) -> bool:
         """Is ``concept(x)`` entailed?  The model must already be verified."""
         if concept in self.fragment.sinks:
@@ -704,16 +676,8 @@ class FastEngine(Engine):
                     f.object for f in facts if f.kind is FactKind.OBJECT
                 }
                 found: dict[str, tuple[str, ...]] = {}
-                members = m.members
                 for concept in concepts:
                     check_deadline("while the fast engine classified the facts")
-                    # A class every instance must have, with no member here,
-                    # settles it (most concepts are about one kind of action).
-                    if any(
-                        not any(members.get(a) for a in clause)
-                        for clause in self._required(concept)
-                    ):
-                        continue
                     # Only where the concept holds in the model can it be entailed.
                     where = ev.candidates(("C", concept))
                     pool = abox if where is None else abox & where
@@ -759,13 +723,13 @@ class FastEngine(Engine):
         individual: str,
         *,
         deadline: float | None = None,
-    ) -> list[bool]:
+    ) -> Iterator[bool]:
         """The questions answered on one model, halving the items: the first
         half's questions are asked with the second half added, the second's
         with the first half's tested items added, each rolled back after.
         An item is added about log n times instead of n times (a chain of a
         hundred facts, each tested, cost a hundred models)."""
-        if individual.startswith(_INTERNAL) or not any(tested):
+        if individual.startswith(_INTERNAL) or sum(tested) < BATCH_FROM:
             return super().entails_each(kept, items, tested, concept, individual, deadline=deadline)
         answers: dict[int, bool] = {}
 
@@ -796,12 +760,14 @@ class FastEngine(Engine):
             return [answers[i] for i in range(len(items)) if tested[i]]
 
         def one_by_one() -> list[bool]:
-            return super(FastEngine, self).entails_each(
-                kept, items, tested, concept, individual, deadline=deadline
+            return list(
+                super(FastEngine, self).entails_each(
+                    kept, items, tested, concept, individual, deadline=deadline
+                )
             )
 
         result: list[bool] = self._answer(exact, one_by_one)
-        return result
+        return iter(result)
 
     def entails_each_without(
         self,
@@ -813,20 +779,24 @@ class FastEngine(Engine):
         individual: str,
         *,
         deadline: float | None = None,
-    ) -> list[bool]:
+    ) -> Iterator[bool]:
         """The questions answered on one model of the facts, halving the axioms
         as :meth:`entails_each` halves facts: a half's questions are asked
         with the other half's axioms switched back on (:meth:`Model.enable`)
         and switched off again after.  Structural axioms need programs of
         their own, so a search that tests one asks one question at a time."""
 
-        def one_by_one() -> list[bool]:
+        def one_by_one() -> Iterator[bool]:
             return super(FastEngine, self).entails_each_without(
                 facts, dropped, items, tested, concept, individual, deadline=deadline
             )
 
         full = self.program(frozenset())[0]
-        if individual.startswith(_INTERNAL) or set(items) & full.structural or not any(tested):
+        if (
+            individual.startswith(_INTERNAL)
+            or set(items) & full.structural
+            or sum(tested) < BATCH_FROM
+        ):
             return one_by_one()
         answers: dict[int, bool] = {}
 
@@ -859,8 +829,8 @@ class FastEngine(Engine):
                 solve(m, 0, len(items) - 1)
             return [answers[i] for i in range(len(items)) if tested[i]]
 
-        result: list[bool] = self._answer(exact, one_by_one)
-        return result
+        result: list[bool] = self._answer(exact, lambda: list(one_by_one()))
+        return iter(result)
 
     def _decided(self, m: Model, concept: str, individual: str) -> bool:
         """Is ``concept(individual)`` entailed by the facts in ``m`` (grown,

@@ -14,7 +14,7 @@ finding raises.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Collection, Iterator, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TypeVar
 
@@ -80,7 +80,7 @@ def minimize(
     start: set[str],
     vocab: Vocabulary,
     prove: Callable[[list[Fact], list[Fact]], Collection[Fact] | None] | None = None,
-    each: Callable[[list[Fact], list[Fact], list[bool]], list[bool]] | None = None,
+    each: Callable[[list[Fact], list[Fact], list[bool]], Iterable[bool]] | None = None,
 ) -> list[Fact]:
     """A minimal subset of ``facts`` for which ``holds`` is still true.
     ``prove(kept, order)`` may name facts of ``kept`` that suffice (a hint,
@@ -101,7 +101,7 @@ def drop_greedily(
     items: list[T],
     holds: Callable[[list[T]], bool],
     prove: Callable[[list[T]], Collection[T] | None] | None = None,
-    each: Callable[[list[T], list[T], list[bool]], list[bool]] | None = None,
+    each: Callable[[list[T], list[T], list[bool]], Iterable[bool]] | None = None,
 ) -> list[T]:
     """What is left of ``items`` after trying to drop each in turn, keeping
     it out when ``holds`` stays true: the one-at-a-time deletion, with the
@@ -225,7 +225,7 @@ def needed_background(
         )
         return found.axioms if found else None
 
-    def each(kept: list[str], rest: list[str], tested: list[bool]) -> list[bool]:
+    def each(kept: list[str], rest: list[str], tested: list[bool]) -> Iterator[bool]:
         dropped = every - set(kept) - set(rest)
         return engine.entails_each_without(
             facts, dropped, rest, tested, concept, individual, deadline=deadline
@@ -354,7 +354,7 @@ class Explainer:
             found = self.engine.proof(kept, usc.name, ind, order=order, deadline=self.deadline)
             return found.facts if found else None
 
-        def each(kept: list[Fact], rest: list[Fact], tested: list[bool]) -> list[bool]:
+        def each(kept: list[Fact], rest: list[Fact], tested: list[bool]) -> Iterator[bool]:
             self.tick()
             return self.engine.entails_each(
                 kept, rest, tested, usc.name, ind, deadline=self.deadline
