@@ -56,7 +56,7 @@ test: $(STAMP) chromium postgresql
 	$(BIN)/ruff check src tests
 	$(BIN)/mypy
 	$(BIN)/lint-imports
-	$(BIN)/pytest
+	$(BIN)/pytest -rs
 
 # The full equivalence sweep: every SafeAgentBench dev plan and a few hundred
 # random scenes, plans and fact sets, fast engine against the reference.

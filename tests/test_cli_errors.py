@@ -277,7 +277,8 @@ def test_errors_before_any_command_runs(args: tuple[str, ...], code: int) -> Non
 
 
 def test_a_closed_stdout_is_not_a_verdict() -> None:
-    # `virf verify ... | head -0`: exit 1 would read as UNSAFE.
+    # `virf verify ... | head -0`: exit 1 would read as UNSAFE.  Quietly, with
+    # the status of a program SIGPIPE ended (what `| head` users expect).
     proc = subprocess.Popen(
         [sys.executable, "-m", "virf.cli.main", "verify", WALK_SCENE, WALK_PLAN],
         cwd=ROOT,
@@ -289,6 +290,5 @@ def test_a_closed_stdout_is_not_a_verdict() -> None:
     assert proc.stdout is not None and proc.stderr is not None
     proc.stdout.close()
     stderr = proc.stderr.read()
-    assert proc.wait(timeout=300) == 4, stderr
-    assert "Traceback" not in stderr
-    assert len(stderr.strip().splitlines()) == 1, stderr
+    assert proc.wait(timeout=300) == 141, stderr
+    assert stderr == ""

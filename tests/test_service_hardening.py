@@ -341,3 +341,39 @@ def test_a_key_without_bearer_is_no_key() -> None:
 def test_a_body_that_is_not_json_by_its_type_is_refused_in_one_line(client: TestClient) -> None:
     got = client.post("/v1/verify", content=b"{}", headers={"content-type": "text/plain"})
     assert "Content-Type: application/json" in error_of(got, 400)
+
+
+def test_serve_says_where_it_listens() -> None:
+    """`virf serve --port 0` picks a free port; the one line it prints names
+    it, and the service answers there (uvicorn's own lines are silenced)."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    import httpx
+    from conftest import ROOT
+
+    serve = subprocess.Popen(
+        [sys.executable, "-m", "virf.cli.main", "serve", "--port", "0"],
+        cwd=ROOT,
+        env=dict(os.environ, PYTHONPATH=str(ROOT / "src")),
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert serve.stderr is not None
+        lines = []
+        while True:
+            line = serve.stderr.readline()
+            assert line, f"virf serve ended before saying where: {lines}"
+            lines.append(line)
+            found = re.search(r"http://127\.0\.0\.1:(\d+)/", line)
+            if found:
+                break
+        port = int(found.group(1))
+        assert port > 0
+        assert httpx.get(f"http://127.0.0.1:{port}/v1/health", timeout=30).status_code == 200
+    finally:
+        serve.send_signal(signal.SIGTERM)
+        serve.wait(timeout=60)

@@ -45,6 +45,7 @@ from virf.processes import Terminated, end_on_termination
 
 EXIT = {"SAFE": 0, "UNSAFE": 1, "UNKNOWN": 3, "ERROR": 4}
 EXIT_BAD_INPUT = 2
+EXIT_CLOSED_PIPE = 141  # a closed stdout ends a command as SIGPIPE would (128 + 13)
 # Whether this invocation asked for --json: its errors are then also a JSON
 # object on stdout, so a caller parsing stdout never gets nothing.
 _JSON_ERRORS: ContextVar[bool] = ContextVar("virf_json_errors", default=False)
@@ -297,11 +298,13 @@ def _exit_for(exc: BaseException) -> BaseException:
         return _fail(str(exc), code)
     detail = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
     if isinstance(exc, BrokenPipeError):
-        # Whoever read stdout stopped reading; later writes (and the flush at
-        # exit) would fail again, so stdout goes nowhere from here on.
+        # Whoever read stdout stopped reading (`virf ... | head`): say nothing,
+        # as a program ended by SIGPIPE does, and exit as one (128 + 13), a
+        # status no verdict uses.  Later writes (and the flush at exit) would
+        # fail again, so stdout goes nowhere from here on.
         with contextlib.suppress(OSError, ValueError):  # a stdout without a descriptor
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return _fail("stdout was closed before all output was written", EXIT["ERROR"])
+        return typer.Exit(EXIT_CLOSED_PIPE)
     if isinstance(exc, MemoryError) or "OutOfMemoryError" in names:
         return _fail(f"out of memory ({detail})", EXIT["ERROR"])
     # A bug.  Exit 4 (ERROR), never 1: a crash must not read as UNSAFE, nor

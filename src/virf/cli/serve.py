@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -128,7 +128,7 @@ def serve(
             workspace=workspace,
             reviewer=reviewer or default_reviewer(),
         )
-        uvicorn.run(
+        config = uvicorn.Config(
             app,
             host=host,
             port=port,
@@ -136,7 +136,9 @@ def serve(
             http=NoDelayH11Protocol,
             timeout_graceful_shutdown=SHUTDOWN_GRACE_S,
         )
+        _run_announcing(config)
     else:
+        _announce(host, port)
         uvicorn.run(
             "virf.service.app:app_from_environment",
             factory=True,
@@ -147,3 +149,26 @@ def serve(
             http=NoDelayH11Protocol,
             timeout_graceful_shutdown=SHUTDOWN_GRACE_S,
         )
+
+
+def _announce(host: str, port: int) -> None:
+    """One line on stderr: where the service is (uvicorn's own is silenced
+    with its other info lines)."""
+    shown = f"[{host}]" if ":" in host else host
+    typer.echo(f"virf serve: http://{shown}:{port}/ (the page; API docs at /docs)", err=True)
+
+
+def _run_announcing(config: Any) -> None:
+    """Run one server that says where it listens once it does (the real
+    port when --port 0 asked for any free one)."""
+    import uvicorn
+
+    class Announcing(uvicorn.Server):
+        async def startup(self, sockets: list[Any] | None = None) -> None:
+            await super().startup(sockets)
+            for server in self.servers:
+                for sock in server.sockets:
+                    _announce(*sock.getsockname()[:2])
+                    return
+
+    Announcing(config).run()
