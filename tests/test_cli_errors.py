@@ -292,3 +292,11 @@ def test_a_closed_stdout_is_not_a_verdict() -> None:
     stderr = proc.stderr.read()
     assert proc.wait(timeout=300) == 141, stderr
     assert stderr == ""
+
+
+@pytest.mark.parametrize(("engine", "guess"), [("fats", "did you mean fast? "), ("bogus", "")])
+def test_an_unknown_engine_lists_every_engine(cli: Cli, engine: str, guess: str) -> None:
+    result = cli("verify", WALK_SCENE, WALK_PLAN, "--engine", engine)
+    assert result.exit_code == 2
+    every = "choose from fast, hermit, openllet, pellet, reference"
+    assert result.stderr.strip() == f"error: unknown engine '{engine}'; {guess}{every}"

@@ -118,3 +118,26 @@ def test_scene_show_cli(tmp_path: Path) -> None:
     refused = runner.invoke(app, ["scene", "show", str(bad)])
     assert refused.exit_code == 2
     assert "Toaster" in refused.output.split("closest", 1)[1]
+
+
+@pytest.mark.parametrize(
+    ("prop", "value", "first"),
+    [
+        ("hasState", "switched on", "OnState"),  # a state word inside a phrase
+        ("hasState", "lite", "OnState"),  # near the state word 'lit'
+        ("hasState", "swiched off", "OffState"),
+        ("hasMaterial", "metl", "Metal"),  # only materials are offered
+        ("hasMaterial", "glas", "Glass"),
+    ],
+)
+def test_an_unknown_state_or_material_suggests_one(
+    vocab, prop: str, value: str, first: str
+) -> None:
+    from virf.world.scene import build_scene
+
+    data = {
+        "instances": [inst("Candle", "Candle_1")],
+        "assertions": [rel("Candle_1", prop, value)],
+    }
+    with pytest.raises(InputError, match=f"closest known: {first}"):
+        build_scene(data, vocab)

@@ -101,6 +101,27 @@ VALUE_WORDS = {
     "unknown": "UnknownMaterial",
     "metallic": "Metal",
 }
+
+
+def _near_values(value: str, prop: str, instances: list[str], vocab: Vocabulary) -> list[str]:
+    """What an unknown value of ``prop`` may have meant: for a state, the
+    states its words or spelling come near ('switched on' -> OnState, 'lite'
+    -> OnState, by the word 'lit'); for a material, the materials; else any
+    instance or individual."""
+    if prop == "hasState":
+        words = {w: v for w, v in VALUE_WORDS.items() if v.endswith("State")}
+        pool = sorted({*(i for i in vocab.individuals if i.endswith("State")), *words})
+    elif prop == "hasMaterial":
+        known = set().union(*vocab.class_materials.values(), vocab.material_classes.values())
+        pool = sorted(m for m in known if m in vocab.individuals)
+        words = {w: v for w, v in VALUE_WORDS.items() if v in pool}
+    else:
+        return closest(value, instances + sorted(vocab.individuals))
+    said = [words[w] for w in re.findall(r"[a-z]+", value.lower()) if w in words]
+    near = said + [words.get(n, n) for n in closest(value, pool)]
+    return list(dict.fromkeys(near))[:3]
+
+
 DEFAULT_AGENT = "Robot_1"
 # A class name the knowledge base lacks is read as an open-world object when
 # it looks like a name of a kind of thing ('HairDryer', 'space heater').
@@ -413,8 +434,7 @@ def build_scene(
         for ind in sorted(vocab.individuals):
             if ind.lower() == lowered or ind.lower() == lowered + "state":
                 return [ind]
-        pool = list(classes) + sorted(vocab.individuals)
-        near = closest(value, pool)
+        near = _near_values(value, prop, list(classes), vocab)
         hint = f"; closest known: {', '.join(near)}" if near else ""
         raise InputError(f"{where}: unknown individual or value '{clip(value)}' for {prop}{hint}")
 
