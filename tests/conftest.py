@@ -44,6 +44,15 @@ def case_params(keep: Callable[[Path], bool] | None = None) -> list[Any]:
     return [pytest.param(c, id=c.name) for c in example_cases() if keep is None or keep(c)]
 
 
+def interruptible() -> None:
+    """A ``preexec_fn`` for a child a test sends SIGINT: it takes Ctrl-C as
+    from a terminal even when the suite itself runs in the background (a
+    shell's background job ignores SIGINT, and its children inherit that)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 # Small builders for inline scenes.
 def inst(cls: str, name: str) -> dict[str, str]:
     return {"class_name": cls, "instance_name": name}

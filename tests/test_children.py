@@ -28,7 +28,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from conftest import ROOT
+from conftest import ROOT, interruptible
 
 # Generous: process start-up on a loaded machine, not a speed target.
 WITHIN_S = 20.0
@@ -157,6 +157,7 @@ def test_the_paper_baseline_ends_with_its_parent(
     driver = subprocess.Popen(
         [sys.executable, "-c", DRIVER, str(stand_in), handler],
         env=env,
+        preexec_fn=interruptible,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

@@ -23,7 +23,7 @@ from types import SimpleNamespace
 from typing import Any
 
 import pytest
-from conftest import ROOT
+from conftest import ROOT, interruptible
 
 from virf.bench.latency import (
     latency_table,
@@ -307,6 +307,7 @@ def test_a_stopped_latency_run_leaves_no_process(
     driver = subprocess.Popen(
         [sys.executable, "-c", DRIVER, what.split("-")[0], *args],
         env=env,
+        preexec_fn=interruptible,
         cwd=tmp_path,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
