@@ -114,6 +114,23 @@ def _report(verifier: Verifier, data: dict[str, object], steps: list[str]) -> st
     return json.dumps(report, sort_keys=True)
 
 
+def same_on_random_worlds(first: Verifier, second: Verifier, examples: int) -> None:
+    """The two verifiers give byte-identical reports on random scenes and plans."""
+
+    @settings(
+        max_examples=examples,
+        deadline=None,
+        derandomize=True,
+        suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+    )
+    @given(scenes_and_plans())
+    def check(case: tuple[dict[str, object], list[str]]) -> None:
+        data, steps = case
+        assert _report(first, data, steps) == _report(second, data, steps)
+
+    check()
+
+
 @pytest.fixture(scope="module")
 def engines(tutor: LogicTutor) -> tuple[Verifier, Verifier, Recording]:
     recording = Recording(tutor.tbox)
@@ -128,19 +145,7 @@ def test_reports_with_proofs_equal_the_deletion_search(
     engines: tuple[Verifier, Verifier, Recording],
 ) -> None:
     with_proofs, search_only, recording = engines
-
-    @settings(
-        max_examples=60,
-        deadline=None,
-        derandomize=True,
-        suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
-    )
-    @given(scenes_and_plans())
-    def check(case: tuple[dict[str, object], list[str]]) -> None:
-        data, steps = case
-        assert _report(with_proofs, data, steps) == _report(search_only, data, steps)
-
-    check()
+    same_on_random_worlds(with_proofs, search_only, 60)
     assert recording.proofs > 20  # the proofs were there to be wrong
     assert recording.batches > 20
 
@@ -161,19 +166,7 @@ def test_questions_answered_together_equal_one_by_one(
     reports = [v.verify(chain.scene, chain.plan).to_json() for v in (together, search_only)]
     assert reports[0] == reports[1]
     assert '"HardObjectDroppedOntoFragileDanger"' in reports[0]
-
-    @settings(
-        max_examples=25,
-        deadline=None,
-        derandomize=True,
-        suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
-    )
-    @given(scenes_and_plans())
-    def check(case: tuple[dict[str, object], list[str]]) -> None:
-        data, steps = case
-        assert _report(together, data, steps) == _report(search_only, data, steps)
-
-    check()
+    same_on_random_worlds(together, search_only, 25)
     assert recording.batches > 10
 
 

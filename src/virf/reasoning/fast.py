@@ -451,6 +451,47 @@ class _Eval:
         raise Fallback(f"no model check for {k}")
 
 
+def _halving(
+    m: Model,
+    tested: Sequence[bool],
+    add: Callable[[Model, list[int]], None],
+    decide: Callable[[Model], bool],
+) -> list[bool]:
+    """For each tested item ``i``, in order, ``decide`` on ``m`` grown with
+    the tested items before ``i`` and every item after it (``m`` holds none
+    of them to begin with; ``add`` grows it with some).  The items are
+    halved: the first half's questions are asked with the second half
+    added, the second's with the first half's tested items added, each
+    rolled back after (with the rules switched off, which ``add`` may
+    change)."""
+    answers: dict[int, bool] = {}
+
+    def solve(lo: int, hi: int) -> None:
+        # m holds the tested items before lo and every item after hi.
+        targets = [i for i in range(lo, hi + 1) if tested[i]]
+        if not targets:
+            return
+        if len(targets) == 1 and targets[0] == hi:
+            # Items lo..hi-1 are untested ones before it: left out.
+            answers[hi] = decide(m)
+            return
+        mid = (lo + hi) // 2
+        for half, chosen in (
+            ((lo, mid), list(range(mid + 1, hi + 1))),
+            ((mid + 1, hi), [i for i in range(lo, mid + 1) if tested[i]]),
+        ):
+            token, off = m.begin(), m.disabled
+            try:
+                add(m, chosen)
+                solve(*half)
+            finally:
+                m.rollback(token)
+                m.disabled = off
+
+    solve(0, len(tested) - 1)
+    return [answers[i] for i in range(len(tested)) if tested[i]]
+
+
 def _assertable(e: Expr, defs: dict[str, Expr]) -> bool:
     tag = e[0]
     if tag == "C":
@@ -724,40 +765,19 @@ class FastEngine(Engine):
         *,
         deadline: float | None = None,
     ) -> Iterator[bool]:
-        """The questions answered on one model, halving the items: the first
-        half's questions are asked with the second half added, the second's
-        with the first half's tested items added, each rolled back after.
-        An item is added about log n times instead of n times (a chain of a
-        hundred facts, each tested, cost a hundred models)."""
+        """The questions answered on one model of ``kept``, halving the items
+        (:func:`_halving`): an item is added about log n times instead of n
+        times (a chain of a hundred facts, each tested, cost a hundred
+        models)."""
         if individual.startswith(_INTERNAL) or sum(tested) < BATCH_FROM:
             return super().entails_each(kept, items, tested, concept, individual, deadline=deadline)
-        answers: dict[int, bool] = {}
 
-        def solve(m: Model, lo: int, hi: int) -> None:
-            # The model holds kept, the tested items before lo, and every item after hi.
-            targets = [i for i in range(lo, hi + 1) if tested[i]]
-            if not targets:
-                return
-            if len(targets) == 1 and targets[0] == hi:
-                # Items lo..hi-1 are untested ones before it: left out.
-                answers[hi] = self._decided(m, concept, individual)
-                return
-            mid = (lo + hi) // 2
-            for half, added in (
-                ((lo, mid), items[mid + 1 : hi + 1]),
-                ((mid + 1, hi), [items[i] for i in range(lo, mid + 1) if tested[i]]),
-            ):
-                token = m.begin()
-                try:
-                    self._load(m, Fact.sorted(set(added)))
-                    solve(m, *half)
-                finally:
-                    m.rollback(token)
+        def add(m: Model, chosen: list[int]) -> None:
+            self._load(m, Fact.sorted({items[i] for i in chosen}))
 
         def exact() -> list[bool]:
             with until(deadline), self._model(Fact.sorted(set(kept)), frozenset()) as (m, _):
-                solve(m, 0, len(items) - 1)
-            return [answers[i] for i in range(len(items)) if tested[i]]
+                return _halving(m, tested, add, lambda m: self._decided(m, concept, individual))
 
         def one_by_one() -> list[bool]:
             return list(
@@ -781,10 +801,10 @@ class FastEngine(Engine):
         deadline: float | None = None,
     ) -> Iterator[bool]:
         """The questions answered on one model of the facts, halving the axioms
-        as :meth:`entails_each` halves facts: a half's questions are asked
-        with the other half's axioms switched back on (:meth:`Model.enable`)
-        and switched off again after.  Structural axioms need programs of
-        their own, so a search that tests one asks one question at a time."""
+        as :meth:`entails_each` halves facts: a half's axioms are switched
+        back on (:meth:`Model.enable`) and off again after.  Structural
+        axioms need programs of their own, so a search that tests one asks
+        one question at a time."""
 
         def one_by_one() -> Iterator[bool]:
             return super(FastEngine, self).entails_each_without(
@@ -798,36 +818,16 @@ class FastEngine(Engine):
             or sum(tested) < BATCH_FROM
         ):
             return one_by_one()
-        answers: dict[int, bool] = {}
 
-        def solve(m: Model, lo: int, hi: int) -> None:
-            # Switched on: the tested items before lo and every item after hi.
-            targets = [i for i in range(lo, hi + 1) if tested[i]]
-            if not targets:
-                return
-            if len(targets) == 1 and targets[0] == hi:
-                answers[hi] = self._decided(m, concept, individual)
-                return
-            mid = (lo + hi) // 2
-            for half, on in (
-                ((lo, mid), items[mid + 1 : hi + 1]),
-                ((mid + 1, hi), [items[i] for i in range(lo, mid + 1) if tested[i]]),
-            ):
-                token, before = m.begin(), m.disabled
-                try:
-                    m.enable(frozenset(on))
-                    m.run()
-                    solve(m, *half)
-                finally:
-                    m.rollback(token)
-                    m.disabled = before
+        def add(m: Model, chosen: list[int]) -> None:
+            m.enable(frozenset(items[i] for i in chosen))
+            m.run()
 
         def exact() -> list[bool]:
             prog, disabled = self.program(frozenset(dropped) | frozenset(items))
             with until(deadline), prog.scratch(disabled) as m:
                 self._load(m, Fact.sorted(set(facts)))
-                solve(m, 0, len(items) - 1)
-            return [answers[i] for i in range(len(items)) if tested[i]]
+                return _halving(m, tested, add, lambda m: self._decided(m, concept, individual))
 
         result: list[bool] = self._answer(exact, lambda: list(one_by_one()))
         return iter(result)
