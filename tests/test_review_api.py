@@ -548,7 +548,7 @@ def test_review_needs_a_workspace(tmp_path: Path) -> None:
 def test_review_serves_until_ctrl_c(tmp_path: Path) -> None:
     """The real command in its own process: it prints its address, answers,
     and stops cleanly (exit 0, no traceback) on SIGINT, with Java started
-    (whose own Ctrl-C handler would end the process with 130)."""
+    (which, run with -Xrs, leaves Ctrl-C to the server)."""
     import json
     import signal
     import subprocess

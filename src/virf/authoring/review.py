@@ -360,11 +360,10 @@ def serve(
     )
     sock = bind(host, port)
     try:
-        # Java installs its own Ctrl-C handler when it starts, which ends the
-        # process on the spot (exit 130, requests cut off).  Started here,
-        # before uvicorn installs its handlers, it is the one overridden, so
-        # Ctrl-C shuts the server down gracefully.  It also spares the first
-        # check the start-up time.
+        # Started before serving: the first check does not wait for the JVM,
+        # and a JVM that cannot start is a warning now, not a failed check
+        # later.  (The JVM runs with -Xrs, so Ctrl-C and SIGTERM stay
+        # uvicorn's, which shuts the server down gracefully.)
         ensure_jvm()
     except EnvironmentProblem as exc:
         say(f"warning: {exc}; the page works, but checks and decisions will fail")
