@@ -275,7 +275,8 @@ def test_serve_takes_several_planners(
         return object()
 
     monkeypatch.setattr("virf.service.app.create_app", fake_create_app)
-    monkeypatch.setattr("uvicorn.run", lambda *a, **k: None)
+    monkeypatch.setattr("uvicorn.run", lambda *a, **k: None)  # several workers
+    monkeypatch.setattr("uvicorn.Server.run", lambda *a, **k: None)  # one
     got = cli("serve", "--planner", DIALOGUE_REPLAY, "--planner", "openai:gpt-4o-mini")
     assert got.exit_code == 0, got.output
     assert seen["planners"] == [DIALOGUE_REPLAY, "openai:gpt-4o-mini"]
