@@ -29,9 +29,9 @@ from pathlib import Path
 
 import pytest
 from conftest import ROOT, interruptible
+from process_support import WITHIN_S, alive, gone
 
 # Generous: process start-up on a loaded machine, not a speed target.
-WITHIN_S = 20.0
 
 STAND_IN = """\
 #!{python}
@@ -83,25 +83,6 @@ def environ() -> dict[str, str]:
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT / "src"), env.get("PYTHONPATH", "")])
     return env
-
-
-def alive(pid: int) -> bool:
-    """Whether ``pid`` runs (a zombie waiting for its parent does not)."""
-    try:
-        status = Path(f"/proc/{pid}/status").read_text()
-    except OSError:
-        return False
-    state = next(line for line in status.splitlines() if line.startswith("State:"))
-    return "Z" not in state.split()[1]
-
-
-def gone(pids: list[int], within: float = WITHIN_S) -> bool:
-    end = time.monotonic() + within
-    while time.monotonic() < end:
-        if not any(alive(p) for p in pids):
-            return True
-        time.sleep(0.05)
-    return False
 
 
 def wait_for(path: Path, proc: subprocess.Popen[str]) -> dict[str, object]:

@@ -24,6 +24,7 @@ from typing import Any
 
 import pytest
 from conftest import ROOT, interruptible
+from process_support import WITHIN_S, alive, gone
 
 from virf.bench.latency import (
     latency_table,
@@ -37,7 +38,6 @@ from virf.render.tables import to_markdown
 from virf.schema import Fact, FactKind
 
 # Generous: process start-up on a loaded machine, not a speed target.
-WITHIN_S = 20.0
 LIMIT_S = 1.0
 
 STAND_IN = """\
@@ -126,25 +126,6 @@ class Owl:
 
 
 TBOX: Any = SimpleNamespace(owl=Owl(), vocabulary=SimpleNamespace(classes={}))
-
-
-def alive(pid: int) -> bool:
-    """Whether ``pid`` runs (a zombie waiting for its parent does not)."""
-    try:
-        status = Path(f"/proc/{pid}/status").read_text()
-    except OSError:
-        return False
-    state = next(line for line in status.splitlines() if line.startswith("State:"))
-    return "Z" not in state.split()[1]
-
-
-def gone(pids: list[int], within: float = WITHIN_S) -> bool:
-    end = time.monotonic() + within
-    while time.monotonic() < end:
-        if not any(alive(p) for p in pids):
-            return True
-        time.sleep(0.05)
-    return False
 
 
 def started(report: Path) -> list[int]:
