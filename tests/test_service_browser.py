@@ -80,6 +80,9 @@ def load_example(page: Page, name: str) -> None:
     from playwright.sync_api import expect
 
     page.get_by_test_id("example-select").select_option(name)
+    # Loaded: the label names the example the boxes now hold.
+    expect(page.get_by_test_id("example-description")).to_have_attribute("data-state", "example")
+    expect(page.get_by_test_id("example-select")).to_have_value(name)
     expect(page.get_by_test_id("plan-input")).not_to_have_value("")
     page.get_by_test_id("verify-button").click()
 
@@ -223,6 +226,59 @@ def test_errors_reach_the_banner(browser: Browser, url: str) -> None:
         expect(page.get_by_test_id("error-text")).to_have_text(
             "answer at least one question (the others may stay open)"
         )
+
+
+def test_the_example_label_follows_the_editor(browser: Browser, url: str) -> None:
+    from playwright.sync_api import expect
+
+    with page_at(browser, url) as page:
+        select = page.get_by_test_id("example-select")
+        label = page.get_by_test_id("example-description")
+        plan = page.get_by_test_id("plan-input")
+        load_example(page, "walkthrough")
+        expect(select).to_have_value("walkthrough")
+        expect(label).to_contain_text("Appendix E")
+        original = plan.input_value()
+
+        # An edit: the label no longer claims the boxes hold the example.
+        plan.fill(original + "turn_off(TestMicrowave_Action)\n")
+        expect(select).to_have_value("")
+        expect(label).to_have_attribute("data-state", "edited")
+        expect(label).to_have_text(
+            "edited from the example walkthrough; choose it again to start over"
+        )
+        # Undone, it is the example again.
+        plan.fill(original)
+        expect(select).to_have_value("walkthrough")
+        expect(label).to_contain_text("Appendix E")
+
+        # Another example: the label follows.
+        load_example(page, "unknown-material-microwave")
+        expect(select).to_have_value("unknown-material-microwave")
+        expect(label).to_have_attribute("data-state", "example")
+        # Answers written into its scene make it the example no longer.
+        expect(page.get_by_test_id("verdict")).to_have_text("UNKNOWN")
+        page.locator("[data-testid=answer][data-key='material:Bowl_1']").select_option("Glass")
+        page.get_by_test_id("answer-button").click()
+        expect(page.get_by_test_id("answers-notice")).to_be_visible()
+        expect(select).to_have_value("")
+        expect(label).to_contain_text("edited from the example unknown-material-microwave")
+
+        # An example the server does not have (a list older than the server):
+        # its one line, and the label stays with what the boxes hold.
+        select.evaluate("s => s.append(new Option('gone-example', 'gone-example'))")
+        select.select_option("gone-example")
+        expect(page.get_by_test_id("error-text")).to_contain_text("no example 'gone-example'")
+        expect(select).to_have_value("")
+        expect(label).to_contain_text("edited from the example unknown-material-microwave")
+
+        # A file of one's own is no example.
+        page.get_by_test_id("plan-file").set_input_files(
+            str(EXAMPLES_DIR / "safe-fridge" / "plan.txt")
+        )
+        expect(plan).to_have_value(re.compile("Fridge"))
+        expect(select).to_have_value("")
+        expect(label).to_have_text("")
 
 
 def test_rules_are_browsed_and_searched(browser: Browser, paper_url: str) -> None:

@@ -138,19 +138,46 @@
     }
   }
 
+  // The example the boxes were last filled from, as loaded: the label names
+  // it only while both boxes still hold it character for character.
+  let loadedExample = null; // { name, description, scene, plan }
+  let exampleSeq = 0;
+
+  function syncExampleLabel() {
+    const select = byId("example-select");
+    const description = byId("example-description");
+    const ex = loadedExample;
+    const same = ex !== null && byId("scene-input").value === ex.scene && byId("plan-input").value === ex.plan;
+    const listed = ex !== null && [...select.options].some((o) => o.value === ex.name);
+    select.value = same && listed ? ex.name : "";
+    description.dataset.state = ex === null ? "" : same ? "example" : "edited";
+    description.textContent =
+      ex === null ? "" : same ? ex.description : `edited from the example ${ex.name}; choose it again to start over`;
+  }
+
   async function pickExample() {
     const name = byId("example-select").value;
-    byId("example-description").textContent = "";
-    if (!name) return;
+    const seq = ++exampleSeq;
+    if (!name) {
+      // Nothing chosen: the label goes back to what the boxes hold.
+      syncExampleLabel();
+      return;
+    }
     clearError();
+    byId("example-description").textContent = "loading…";
+    byId("example-description").dataset.state = "loading";
     try {
       const ex = await api("GET", `/v1/examples/${encodeURIComponent(name)}`);
-      byId("scene-input").value = JSON.stringify(ex.scene, null, 2);
+      if (seq !== exampleSeq) return;
+      const scene = JSON.stringify(ex.scene, null, 2);
+      byId("scene-input").value = scene;
       byId("plan-input").value = ex.plan;
-      byId("example-description").textContent = ex.description;
+      loadedExample = { name, description: ex.description, scene, plan: ex.plan };
     } catch (exc) {
+      if (seq !== exampleSeq) return;
       showError(exc.message);
     }
+    syncExampleLabel();
   }
 
   async function readFileInto(input, target) {
@@ -158,8 +185,8 @@
     if (!file) return;
     try {
       byId(target).value = await file.text();
-      byId("example-select").value = "";
-      byId("example-description").textContent = "";
+      loadedExample = null;
+      syncExampleLabel();
     } catch (exc) {
       showError(`could not read ${file.name}: ${exc.message}`);
     }
@@ -428,6 +455,7 @@
       }
       byId("scene-input").value = JSON.stringify(update.scene, null, 2);
       byId("plan-input").value = current.plan;
+      syncExampleLabel();
       const notice = byId("answers-notice");
       const settled = update.applied.length ? update.applied.join(", ") : "nothing";
       const open = update.unsettled.length ? ` Not settled by these answers: ${update.unsettled.join(", ")}.` : "";
@@ -1153,6 +1181,8 @@
       clearError();
       rules = null;
       await Promise.all([health(), loadExamples()]);
+      // The list was made again: it names the boxes' example again, if they hold one.
+      syncExampleLabel();
       if (!byId("panel-rules").hidden) loadRules();
     });
     for (const tab of document.querySelectorAll(".tab")) {
@@ -1160,6 +1190,8 @@
     }
     byId("error-close").addEventListener("click", clearError);
     byId("example-select").addEventListener("change", pickExample);
+    byId("scene-input").addEventListener("input", syncExampleLabel);
+    byId("plan-input").addEventListener("input", syncExampleLabel);
     byId("scene-file").addEventListener("change", (e) => readFileInto(e.target, "scene-input"));
     byId("plan-file").addEventListener("change", (e) => readFileInto(e.target, "plan-input"));
     byId("verify-button").addEventListener("click", () => verify(false));
