@@ -281,6 +281,59 @@ def test_the_example_label_follows_the_editor(browser: Browser, url: str) -> Non
         expect(label).to_have_text("")
 
 
+def test_each_tab_keeps_its_own_error(browser: Browser, url: str) -> None:
+    from playwright.sync_api import expect
+
+    banner = "error-banner"
+    with page_at(browser, url) as page:
+        page.get_by_test_id("plan-input").fill("find Pot\n")
+        page.get_by_test_id("scene-input").fill("{not json")
+        page.get_by_test_id("verify-button").click()
+        expect(page.get_by_test_id("error-text")).to_contain_text("the scene is not valid JSON")
+        expect(page.get_by_test_id(banner)).to_have_attribute("data-tab", "verify")
+
+        # Not the Plan tab's error, nor the Rules tab's; the Verify tab says it holds one.
+        page.get_by_test_id("tab-plan").click()
+        expect(page.get_by_test_id(banner)).to_be_hidden()
+        expect(page.get_by_test_id("tab-verify")).to_have_attribute("data-error", "true")
+        page.get_by_test_id("plan-start").click()
+        expect(page.get_by_test_id("error-text")).to_have_text(
+            "write the instruction for the robot first"
+        )
+        expect(page.get_by_test_id(banner)).to_have_attribute("data-tab", "plan")
+        page.get_by_test_id("tab-rules").click()
+        expect(page.get_by_test_id("rule-item").first).to_be_visible()
+        expect(page.get_by_test_id(banner)).to_be_hidden()
+        expect(page.get_by_test_id("tab-plan")).to_have_attribute("data-error", "true")
+
+        # Each tab shows its own.
+        page.get_by_test_id("tab-verify").click()
+        expect(page.get_by_test_id("error-text")).to_contain_text("the scene is not valid JSON")
+        expect(page.get_by_test_id("tab-plan")).to_have_attribute("data-error", "true")
+
+        # The Plan tab's next action succeeds: its error goes, the Verify tab's stays.
+        folder = EXAMPLES_DIR / "dialogue"
+        start_run(
+            page,
+            folder / "scene.json",
+            (folder / "instruction.txt").read_text(),
+            DIALOGUE_REPLAY,
+            "demo-fridge",
+        )
+        expect(page.get_by_test_id("plan-outcome")).to_have_text("APPROVED")
+        expect(page.get_by_test_id(banner)).to_be_hidden()
+        expect(page.get_by_test_id("tab-verify")).to_have_attribute("data-error", "true")
+        page.get_by_test_id("tab-verify").click()
+        expect(page.get_by_test_id("error-text")).to_contain_text("the scene is not valid JSON")
+        expect(page.get_by_test_id("tab-plan")).to_have_attribute("data-error", "false")
+
+        # And the Verify tab's goes when a verify succeeds.
+        load_example(page, "walkthrough")
+        expect(page.get_by_test_id("verdict")).to_have_text("UNSAFE")
+        expect(page.get_by_test_id(banner)).to_be_hidden()
+        expect(page.get_by_test_id("tab-verify")).to_have_attribute("data-error", "false")
+
+
 def test_rules_are_browsed_and_searched(browser: Browser, paper_url: str) -> None:
     from playwright.sync_api import expect
 

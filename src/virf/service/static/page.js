@@ -55,14 +55,40 @@
     return node;
   }
 
-  function showError(message) {
-    byId("error-text").textContent = message;
-    byId("error-banner").hidden = false;
+  // Each tab keeps its own error, so one tab's failure is never read as
+  // another's; an action of the tab clears it.  ``page`` holds what concerns
+  // every tab (the service unreachable, its key refused): it shows in all of
+  // them, under a tab's own error.
+  const errors = { page: "", verify: "", rules: "", plan: "" };
+  let activeTab = "verify";
+
+  function showError(where, message) {
+    errors[where] = message;
+    renderBanner();
   }
 
-  function clearError() {
-    byId("error-banner").hidden = true;
-    byId("error-text").textContent = "";
+  function clearError(where) {
+    errors[where] = "";
+    renderBanner();
+  }
+
+  function renderBanner() {
+    const where = errors[activeTab] ? activeTab : "page";
+    const message = errors[where];
+    const banner = byId("error-banner");
+    banner.hidden = !message;
+    banner.dataset.tab = message ? where : "";
+    byId("error-text").textContent = message;
+    // A tab whose error is not on show says it has one.
+    for (const tab of document.querySelectorAll(".tab[data-tab]")) {
+      const held = Boolean(errors[tab.dataset.tab]) && tab.dataset.tab !== activeTab;
+      tab.dataset.error = String(held);
+      tab.title = held ? "an error happened on this tab" : "";
+    }
+  }
+
+  function dismissError() {
+    clearError(errors[activeTab] ? activeTab : "page");
   }
 
   class ApiError extends Error {}
@@ -106,12 +132,14 @@
 
   // ------------------------------------------------------------ tabs
   function showTab(name) {
+    activeTab = name;
     for (const tab of document.querySelectorAll(".tab")) {
       tab.setAttribute("aria-selected", String(tab.dataset.tab === name));
     }
     for (const panel of document.querySelectorAll(".panel")) {
       panel.hidden = panel.dataset.panel !== name;
     }
+    renderBanner();
     if (name === "rules") loadRules();
   }
 
@@ -122,7 +150,7 @@
     try {
       examples = await api("GET", "/v1/examples");
     } catch (exc) {
-      showError(exc.message);
+      showError("verify", exc.message);
       return;
     }
     select.replaceChildren();
@@ -163,7 +191,7 @@
       syncExampleLabel();
       return;
     }
-    clearError();
+    clearError("verify");
     byId("example-description").textContent = "loading…";
     byId("example-description").dataset.state = "loading";
     try {
@@ -175,7 +203,7 @@
       loadedExample = { name, description: ex.description, scene, plan: ex.plan };
     } catch (exc) {
       if (seq !== exampleSeq) return;
-      showError(exc.message);
+      showError("verify", exc.message);
     }
     syncExampleLabel();
   }
@@ -188,7 +216,7 @@
       loadedExample = null;
       syncExampleLabel();
     } catch (exc) {
-      showError(`could not read ${file.name}: ${exc.message}`);
+      showError("verify", `could not read ${file.name}: ${exc.message}`);
     }
   }
 
@@ -211,7 +239,7 @@
   }
 
   async function verify(keepNotice) {
-    clearError();
+    clearError("verify");
     if (!keepNotice) {
       byId("answers-notice").hidden = true;
       // A new scene or plan: earlier answers are not about it.
@@ -223,7 +251,7 @@
     try {
       input = readInputs();
     } catch (exc) {
-      showError(exc.message);
+      showError("verify", exc.message);
       return;
     }
     const seq = ++verifySeq;
@@ -235,7 +263,7 @@
       renderReport(report);
       await drawState(defaultState(report));
     } catch (exc) {
-      if (seq === verifySeq) showError(exc.message);
+      if (seq === verifySeq) showError("verify", exc.message);
     } finally {
       if (seq === verifySeq) busy(false);
     }
@@ -429,7 +457,7 @@
 
   async function submitAnswers(event) {
     event.preventDefault();
-    clearError();
+    clearError("verify");
     if (!current) return;
     const answers = {};
     for (const control of byId("questions-form").querySelectorAll("[data-testid=answer]")) {
@@ -437,7 +465,7 @@
       if (value) answers[control.dataset.key] = value;
     }
     if (!Object.keys(answers).length) {
-      showError("answer at least one question (the others may stay open)");
+      showError("verify", "answer at least one question (the others may stay open)");
       return;
     }
     busy(true);
@@ -462,7 +490,7 @@
       notice.textContent = `Your answers settled ${settled}; the scene above now says so.${open}`;
       notice.hidden = false;
     } catch (exc) {
-      showError(exc.message);
+      showError("verify", exc.message);
       busy(false);
       return;
     }
@@ -490,11 +518,11 @@
   }
 
   async function sendLearning() {
-    clearError();
+    clearError("verify");
     if (!learning || learning.sent) return;
     const who = byId("learn-who").value.trim();
     if (!who) {
-      showError("say who you are (your name is kept with your answers)");
+      showError("verify", "say who you are (your name is kept with your answers)");
       byId("learn-who").focus();
       return;
     }
@@ -526,7 +554,7 @@
       );
       result.hidden = false;
     } catch (exc) {
-      showError(exc.message);
+      showError("verify", exc.message);
       button.disabled = false;
     } finally {
       byId("learn-busy").hidden = true;
@@ -553,7 +581,7 @@
         row.classList.toggle("shown", Number(row.dataset.step) === stateRowOf(report, index));
       }
     } catch (exc) {
-      if (seq === stateSeq) showError(exc.message);
+      if (seq === stateSeq) showError("verify", exc.message);
     }
   }
 
@@ -780,9 +808,10 @@
       rules = await api("GET", "/v1/rules");
     } catch (exc) {
       rules = null;
-      showError(exc.message);
+      showError("rules", exc.message);
       return;
     }
+    clearError("rules");
     filterRules();
     if (pendingRule) selectRule(pendingRule);
     else if (rules.length) selectRule(rules[0].id);
@@ -893,12 +922,12 @@
   }
 
   async function startPlan() {
-    clearError();
+    clearError("plan");
     let body;
     try {
       body = readPlanInputs();
     } catch (exc) {
-      showError(exc.message);
+      showError("plan", exc.message);
       return;
     }
     if (planRun) planRun.abort.abort();
@@ -913,7 +942,7 @@
       if (seq !== planSeq) return;
       planState("");
       byId("plan-run").hidden = true;
-      showError(exc.message);
+      showError("plan", exc.message);
       return;
     }
     if (seq !== planSeq) return;
@@ -957,7 +986,7 @@
       }
     } catch (exc) {
       if (exc.name === "AbortError" || seq !== planSeq) return;
-      showError(exc instanceof ApiError ? exc.message : `the run's event stream broke off (${exc.message})`);
+      showError("plan", exc instanceof ApiError ? exc.message : `the run's event stream broke off (${exc.message})`);
     }
     if (seq !== planSeq || finished) return;
     // The stream ended early (a proxy, a restart): the run's own state says where it is.
@@ -968,10 +997,10 @@
       else if (state.error) onPlanEvent("error", { error: state.error });
       else {
         planState(state.state);
-        showError(`the run's event stream ended while the run was ${state.state}; reload its state with ${run.run}`);
+        showError("plan", `the run's event stream ended while the run was ${state.state}; reload its state with ${run.run}`);
       }
     } catch (exc) {
-      if (seq === planSeq) showError(exc.message);
+      if (seq === planSeq) showError("plan", exc.message);
     }
   }
 
@@ -993,7 +1022,7 @@
     try {
       return { event, data: JSON.parse(data.join("\n")) };
     } catch (exc) {
-      showError(`the run sent an event that is not JSON (${event})`);
+      showError("plan", `the run sent an event that is not JSON (${event})`);
       return null;
     }
   }
@@ -1015,7 +1044,7 @@
     } else if (event === "error") {
       byId("plan-questions").hidden = true;
       planState("failed");
-      showError(`the run failed: ${data.error}`);
+      showError("plan", `the run failed: ${data.error}`);
       return true;
     }
     return false;
@@ -1115,7 +1144,7 @@
 
   async function submitPlanAnswers(event) {
     event.preventDefault();
-    clearError();
+    clearError("plan");
     if (!planRun) return;
     const answers = {};
     for (const control of byId("plan-questions-form").querySelectorAll("[data-testid=plan-answer]")) {
@@ -1130,7 +1159,7 @@
       await api("POST", run.answers, { answers });
       if (run === planRun) byId("plan-questions").hidden = true;
     } catch (exc) {
-      showError(exc.message);
+      showError("plan", exc.message);
     } finally {
       button.disabled = false;
     }
@@ -1155,7 +1184,7 @@
     try {
       byId("plan-scene").value = await file.text();
     } catch (exc) {
-      showError(`could not read ${file.name}: ${exc.message}`);
+      showError("plan", `could not read ${file.name}: ${exc.message}`);
     }
   }
 
@@ -1169,7 +1198,7 @@
       byId("review-link").hidden = !h.review;
     } catch (exc) {
       byId("health").textContent = "";
-      showError(exc.message);
+      showError("page", exc.message);
     }
   }
 
@@ -1178,7 +1207,9 @@
     key.value = sessionStorage.getItem(KEY_STORE) || "";
     key.addEventListener("change", async () => {
       sessionStorage.setItem(KEY_STORE, key.value.trim());
-      clearError();
+      // Another key: what the old one was refused is no tab's error any more.
+      for (const where of Object.keys(errors)) errors[where] = "";
+      renderBanner();
       rules = null;
       await Promise.all([health(), loadExamples()]);
       // The list was made again: it names the boxes' example again, if they hold one.
@@ -1188,7 +1219,7 @@
     for (const tab of document.querySelectorAll(".tab")) {
       tab.addEventListener("click", () => showTab(tab.dataset.tab));
     }
-    byId("error-close").addEventListener("click", clearError);
+    byId("error-close").addEventListener("click", dismissError);
     byId("example-select").addEventListener("change", pickExample);
     byId("scene-input").addEventListener("input", syncExampleLabel);
     byId("plan-input").addEventListener("input", syncExampleLabel);
