@@ -228,6 +228,45 @@ def test_errors_reach_the_banner(browser: Browser, url: str) -> None:
         )
 
 
+def test_a_failed_verify_greys_the_result_it_leaves_behind(browser: Browser, url: str) -> None:
+    from playwright.sync_api import expect
+
+    with page_at(browser, url) as page:
+        load_example(page, "walkthrough")
+        result = page.get_by_test_id("result")
+        expect(page.get_by_test_id("verdict")).to_have_text("UNSAFE")
+        expect(result).to_have_attribute("data-stale", "false")
+        expect(page.get_by_test_id("stale-notice")).to_be_hidden()
+
+        # Refused by the server, then by the page itself: either way the
+        # verdict on show is not the answer to the boxes, and says so.
+        for plan, scene, error in (
+            ("find Pot\nfly Pot\n", None, "unknown action 'fly'"),
+            ("find Pot\n", "{not json", "the scene is not valid JSON"),
+            ("", None, "paste or upload a plan first"),
+        ):
+            page.get_by_test_id("plan-input").fill(plan)
+            if scene is not None:
+                page.get_by_test_id("scene-input").fill(scene)
+            page.get_by_test_id("verify-button").click()
+            expect(page.get_by_test_id("error-text")).to_contain_text(error)
+            expect(result).to_have_attribute("data-stale", "true")
+            expect(page.get_by_test_id("stale-notice")).to_be_visible()
+            expect(page.get_by_test_id("stale-notice")).to_contain_text("The last verify failed")
+            expect(page.get_by_test_id("result-body")).to_have_css("opacity", "0.45")
+            assert page.get_by_test_id("result-body").evaluate("body => body.inert")
+        shot(page, "verify-failed-stale")
+
+        # The next verify that succeeds is the result again.
+        load_example(page, "safe-fridge")
+        expect(page.get_by_test_id("verdict")).to_have_text("SAFE")
+        expect(result).to_have_attribute("data-stale", "false")
+        expect(page.get_by_test_id("stale-notice")).to_be_hidden()
+        expect(page.get_by_test_id("error-banner")).to_be_hidden()
+        expect(page.get_by_test_id("result-body")).to_have_css("opacity", "1")
+        assert not page.get_by_test_id("result-body").evaluate("body => body.inert")
+
+
 def test_the_example_label_follows_the_editor(browser: Browser, url: str) -> None:
     from playwright.sync_api import expect
 
@@ -332,6 +371,42 @@ def test_each_tab_keeps_its_own_error(browser: Browser, url: str) -> None:
         expect(page.get_by_test_id("verdict")).to_have_text("UNSAFE")
         expect(page.get_by_test_id(banner)).to_be_hidden()
         expect(page.get_by_test_id("tab-verify")).to_have_attribute("data-error", "false")
+
+
+@pytest.mark.parametrize(("width", "height"), [(1280, 720), (390, 844)], ids=["laptop", "phone"])
+def test_the_verdict_and_the_dangerous_step_are_in_view_after_a_verify(
+    browser: Browser, url: str, width: int, height: int
+) -> None:
+    from playwright.sync_api import expect
+
+    def in_view(selector: str) -> dict[str, float]:
+        box = page.locator(selector).bounding_box()
+        assert box is not None, f"{selector} is not drawn"
+        assert box["x"] >= 0 and box["x"] + box["width"] <= width, (selector, box)
+        assert box["y"] >= 0 and box["y"] + box["height"] <= height, (selector, box)
+        return box
+
+    with browser_page(browser, url, timeout_ms=STEP_MS, width=width, height=height) as page:
+        for example, step in (("walkthrough", "7"), ("noise-omission", "1")):
+            load_example(page, example)
+            expect(page.get_by_test_id("verdict-step")).to_have_attribute("data-step", step)
+            expect(page.get_by_test_id("busy")).to_be_hidden()
+            in_view("[data-testid=verdict]")
+            in_view("[data-testid=verdict-step]")
+            row = in_view("[data-testid=trace-step][data-dangerous=true]")
+            # In view of the page, and not scrolled away inside the trace's own box.
+            trace = page.get_by_test_id("trace-box").bounding_box()
+            assert trace is not None
+            assert trace["y"] <= row["y"]
+            assert row["y"] + row["height"] <= trace["y"] + trace["height"]
+        expect(page.get_by_test_id("verdict-step")).to_have_text("at step 1: find Knife")
+        shot(page, f"in-view-{width}x{height}")
+        # A SAFE plan has no dangerous step: its trace starts at its first step.
+        load_example(page, "safe-fridge")
+        expect(page.get_by_test_id("verdict")).to_have_text("SAFE")
+        expect(page.get_by_test_id("verdict-step")).to_be_hidden()
+        in_view("[data-testid=verdict]")
+        assert page.get_by_test_id("trace-box").evaluate("box => box.scrollTop") == 0
 
 
 def test_rules_are_browsed_and_searched(browser: Browser, paper_url: str) -> None:

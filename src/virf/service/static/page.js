@@ -247,26 +247,72 @@
       byId("learn-box").hidden = true;
       byId("learn-result").hidden = true;
     }
+    // Counted before the input is read: an answer still on its way for an
+    // earlier input must not land over this attempt, failed or not.
+    const seq = ++verifySeq;
     let input;
     try {
       input = readInputs();
     } catch (exc) {
-      showError("verify", exc.message);
+      verifyFailed(exc.message);
+      busy(false);
       return;
     }
-    const seq = ++verifySeq;
     busy(true);
     try {
       const report = await api("POST", "/v1/verify", input);
       if (seq !== verifySeq) return;
       current = { ...input, report };
       renderReport(report);
+      // Before the result is revealed: the box stands between the verdict and the trace.
+      offerLearning();
+      revealResult();
       await drawState(defaultState(report));
     } catch (exc) {
-      if (seq === verifySeq) showError("verify", exc.message);
+      if (seq === verifySeq) verifyFailed(exc.message);
     } finally {
       if (seq === verifySeq) busy(false);
     }
+  }
+
+  // The result on show was made from an earlier input: left as it is, it
+  // would read as the answer to what the boxes hold now.
+  function verifyFailed(message) {
+    showError("verify", message);
+    if (current) markStale(true);
+  }
+
+  // A stale result is greyed, says why, and takes no clicks: its questions
+  // and steps belong to an input the boxes no longer hold.
+  function markStale(on) {
+    const result = byId("result");
+    result.classList.toggle("stale", on);
+    result.dataset.stale = String(on);
+    byId("stale-notice").hidden = !on;
+    byId("result-body").inert = on;
+  }
+
+  // After a verify, the verdict and the dangerous step must be in view without
+  // the user scrolling: the trace scrolls (in its own box) to that step, and
+  // the page scrolls as little as it takes to show both, never past the verdict.
+  function revealResult() {
+    // The user went to another tab meanwhile: nothing of this one is laid out.
+    if (activeTab !== "verify") return;
+    const line = byId("verdict-line").getBoundingClientRect();
+    let bottom = line.bottom;
+    const row = byId("trace").querySelector("tr[data-dangerous=true]");
+    if (row) {
+      const box = byId("trace-box");
+      const head = byId("trace").querySelector("thead").getBoundingClientRect().height;
+      const rowTop = row.getBoundingClientRect().top - box.getBoundingClientRect().top + box.scrollTop;
+      if (rowTop + row.offsetHeight > box.scrollTop + box.clientHeight || rowTop - head < box.scrollTop) {
+        box.scrollTop = rowTop - head;
+      }
+      bottom = Math.max(bottom, row.getBoundingClientRect().bottom);
+    }
+    const margin = 8;
+    if (line.top >= margin && bottom <= window.innerHeight - margin) return;
+    window.scrollBy(0, Math.min(line.top - margin, bottom - window.innerHeight + margin));
   }
 
   // The state to draw first: the dangerous step's, else the plan's last.
@@ -281,10 +327,17 @@
   }
 
   function renderReport(report) {
+    markStale(false);
     byId("result").hidden = false;
     const verdict = byId("verdict");
     verdict.textContent = report.status;
     verdict.dataset.status = report.status;
+    // Where the plan goes wrong, next to the verdict: the trace row may be far below.
+    const where = byId("verdict-step");
+    const step = report.dangerous_step;
+    where.hidden = step === null;
+    where.dataset.step = step === null ? "" : String(step);
+    where.textContent = step === null ? "" : `at step ${step}: ${report.action || "the scene before the plan"}`;
     byId("reason").textContent = report.reason;
     renderTrace(report);
     renderNotes(report);
@@ -298,6 +351,8 @@
   function renderTrace(report) {
     const body = byId("trace").querySelector("tbody");
     body.replaceChildren();
+    // A new trace starts at its first step, not where the last one was scrolled.
+    byId("trace-box").scrollTop = 0;
     const rows = [
       { step: 0, action: "(the scene before the plan)", outcome: "", findings: [], added: [], removed: [] },
       ...report.trace,
@@ -496,7 +551,6 @@
     }
     busy(false);
     await verify(true);
-    offerLearning();
   }
 
   // ------------------------------------------------------------ learning
