@@ -193,8 +193,16 @@ def test_answering_an_unknowns_questions_changes_the_verdict(
         page.get_by_test_id("answer-button").click()
         expect(page.get_by_test_id("verdict")).to_have_text("SAFE")
         expect(page.get_by_test_id("verdict")).to_have_css("color", "rgb(30, 123, 52)")
+        # The notice names the questions as the report asked them, never by key.
         notice = page.get_by_test_id("answers-notice")
-        expect(notice).to_contain_text("settled material:Bowl_1, fill:Bowl_1")
+        expect(notice.get_by_test_id("settled-question")).to_have_text(
+            ["What material is Bowl_1 made of? Glass", "Does Bowl_1 hold any liquid? yes"]
+        )
+        expect(notice.get_by_test_id("unsettled-question")).to_have_count(2)
+        expect(notice.get_by_test_id("unsettled-question").first).to_have_text(
+            re.compile(r"^Is it true that nothing is in Bowl_1\?")
+        )
+        expect(notice).not_to_contain_text(re.compile(r"(material|fill|contents):"))
         expect(page.get_by_test_id("scene-input")).to_have_value(re.compile('"object": "Glass"'))
         expect(page.get_by_test_id("questions")).to_be_hidden()
         expect(page.get_by_test_id("no-violations")).to_be_visible()
@@ -545,6 +553,33 @@ def test_a_plan_run_streams_its_dialogue_to_approval(browser: Browser, url: str)
         shot(page, "plan-dialogue")
 
 
+def test_a_plan_runs_open_questions_are_named_in_words(
+    browser: Browser, paper_url: str, uncertain_replay: Path
+) -> None:
+    from playwright.sync_api import expect
+
+    with page_at(browser, paper_url) as page:
+        page.get_by_test_id("tab-plan").click()
+        page.get_by_test_id("plan-max-iter").fill("1")
+        start_run(
+            page, UNCERTAIN / "scene.json", "Heat the bowl.", f"replay:{uncertain_replay}", "q"
+        )
+        expect(page.get_by_test_id("plan-state")).to_have_text("waiting")
+        # No answers at all: every question stays open, and the run says which, in words.
+        page.get_by_test_id("plan-answer-button").click()
+        expect(page.get_by_test_id("plan-outcome")).to_have_text("TASK_REJECTED")
+        unsettled = page.locator("[data-testid=turn][data-kind=unsettled]")
+        expect(unsettled).to_contain_text("Still open:")
+        expect(
+            unsettled.locator("[data-testid=turn-unsettled][data-key='material:Bowl_1']")
+        ).to_have_text("What material is Bowl_1 made of? (not answered)")
+        expect(unsettled.get_by_test_id("turn-unsettled")).to_have_count(4)
+        expect(unsettled).not_to_contain_text(re.compile(r"(material|fill|contents):"))
+        answers = page.locator("[data-testid=turn][data-kind=answers]")
+        expect(answers).to_have_text(re.compile(r"no answers: every question stays open"))
+        shot(page, "plan-unsettled")
+
+
 def test_a_plan_run_asks_and_goes_on_with_the_answers(
     browser: Browser, paper_url: str, uncertain_replay: Path
 ) -> None:
@@ -577,8 +612,12 @@ def test_a_plan_run_asks_and_goes_on_with_the_answers(
         expect(page.get_by_test_id("plan-outcome")).to_have_text("APPROVED")
         expect(page.get_by_test_id("error-banner")).to_be_hidden()
         expect(page.get_by_test_id("plan-questions")).to_be_hidden()
+        # The answers under their questions' words, not their keys.
         answers = page.locator("[data-testid=turn][data-kind=answers]")
-        expect(answers).to_contain_text("material:Bowl_1 = Glass")
+        expect(
+            answers.locator("[data-testid=turn-answer][data-key='material:Bowl_1']")
+        ).to_have_text("What material is Bowl_1 made of? Glass")
+        expect(answers).not_to_contain_text("material:Bowl_1")
         statuses = page.get_by_test_id("turn-status")
         expect(statuses).to_have_text(["UNKNOWN", "SAFE"])
         expect(page.get_by_test_id("plan-final")).to_have_text("\n".join(plan))

@@ -472,6 +472,18 @@
   }
 
   // ------------------------------------------------------------ questions
+  // The value a question's form sends for an option: a contradiction's
+  // options are facts, and the server accepts their number.
+  const optionValue = (q, option, i) => (q.kind === "contradiction" ? String(i + 1) : option);
+
+  // An answer as the person chose it: a contradiction's number is its fact.
+  function answerText(q, value) {
+    if (q && q.kind === "contradiction" && /^[0-9]+$/.test(value)) {
+      return q.options[Number(value) - 1] || value;
+    }
+    return value;
+  }
+
   function renderQuestions(report) {
     const section = byId("questions");
     const form = byId("questions-form");
@@ -491,11 +503,7 @@
         let control;
         if (q.options.length) {
           control = el("select", { id, "data-testid": "answer", "data-key": q.key }, el("option", { value: "", text: "(leave open)" }));
-          q.options.forEach((o, i) => {
-            // A contradiction's options are facts; the server accepts their number.
-            const value = q.kind === "contradiction" ? String(i + 1) : o;
-            control.append(el("option", { value, text: o }));
-          });
+          q.options.forEach((o, i) => control.append(el("option", { value: optionValue(q, o, i), text: o })));
         } else {
           control = el("input", { id, type: "text", "data-testid": "answer", "data-key": q.key, placeholder: "leave blank to keep it open" });
         }
@@ -539,10 +547,23 @@
       byId("scene-input").value = JSON.stringify(update.scene, null, 2);
       byId("plan-input").value = current.plan;
       syncExampleLabel();
+      // Keys are for machines: the notice names each question as the report asked it.
+      const item = (testid, key, answered) => {
+        const q = asked.find((x) => x.key === key);
+        const given = answered ? [" ", el("strong", { text: answerText(q, answers[key]) })] : [];
+        return el("li", { "data-testid": testid, "data-key": key }, q ? q.text : key, ...given);
+      };
       const notice = byId("answers-notice");
-      const settled = update.applied.length ? update.applied.join(", ") : "nothing";
-      const open = update.unsettled.length ? ` Not settled by these answers: ${update.unsettled.join(", ")}.` : "";
-      notice.textContent = `Your answers settled ${settled}; the scene above now says so.${open}`;
+      notice.replaceChildren(
+        el("div", {
+          text: update.applied.length
+            ? "Your answers settled these questions; the scene above now says so:"
+            : "Your answers settled none of the questions; the scene above is unchanged.",
+        }),
+        el("ul", {}, ...update.applied.map((key) => item("settled-question", key, true))),
+        update.unsettled.length ? el("div", { text: "Not settled by these answers, still open:" }) : null,
+        el("ul", {}, ...update.unsettled.map((key) => item("unsettled-question", key, Boolean(answers[key])))),
+      );
       notice.hidden = false;
     } catch (exc) {
       showError("verify", exc.message);
@@ -920,6 +941,9 @@
   const OUTCOME_STATUS = { APPROVED: "SAFE", APPROVED_UNVERIFIED: "UNKNOWN", TASK_REJECTED: "UNSAFE" };
   let planRun = null; // { id, answers, abort }
   let planSeq = 0;
+  // The run's questions by key, as the tutor worded them: its turns name
+  // questions by key, which is for machines.
+  let planAsked = new Map();
 
   function keyHeaders(extra) {
     const headers = { ...extra };
@@ -966,6 +990,7 @@
   }
 
   function resetPlanView() {
+    planAsked = new Map();
     byId("plan-run").hidden = false;
     byId("dialogue").replaceChildren();
     byId("plan-outcome-box").hidden = true;
@@ -1126,10 +1151,13 @@
     if (turn.status) {
       head.append(el("span", { class: "verdict small-verdict", "data-testid": "turn-status", "data-status": turn.status, text: turn.status }));
     }
+    remember(turn.data && turn.data.questions);
     const body =
-      turn.kind === "proposal" || turn.kind === "answers"
-        ? el("pre", { class: "plan-text", "data-testid": "turn-text", text: turn.kind === "answers" ? answersText(turn.text) : turn.text })
-        : el("div", { class: "turn-text", "data-testid": "turn-text", text: turn.text });
+      (turn.kind === "answers" && answersList(turn.text)) ||
+      (turn.kind === "unsettled" && unsettledList(turn.data)) ||
+      (turn.kind === "proposal"
+        ? el("pre", { class: "plan-text", "data-testid": "turn-text", text: turn.text })
+        : el("div", { class: "turn-text", "data-testid": "turn-text", text: turn.text }));
     const extra = [];
     if (turn.kind === "report" && turn.data && turn.data.suggestion) {
       extra.push(el("div", { class: "small turn-note", "data-testid": "turn-suggestion", text: `Suggestion: ${turn.data.suggestion}` }));
@@ -1152,21 +1180,54 @@
     body.scrollIntoView({ block: "nearest" });
   }
 
-  // The answers turn carries the answers as JSON; a person reads one a line.
-  function answersText(text) {
+  function remember(questions) {
+    if (!Array.isArray(questions)) return;
+    for (const q of questions) if (q && typeof q.key === "string") planAsked.set(q.key, q);
+  }
+
+  const askedText = (key) => (planAsked.has(key) ? planAsked.get(key).text : key);
+
+  // The answers turn carries the answers as JSON {key: answer}: each is shown
+  // under its question's words.  Null when it is not that JSON (shown as it came).
+  function answersList(text) {
+    let given;
     try {
-      const given = JSON.parse(text);
-      if (given && typeof given === "object" && !Array.isArray(given)) {
-        const lines = Object.entries(given).map(([key, value]) => `${key} = ${value}`);
-        return lines.length ? lines.join("\n") : "(no answers: every question stays open)";
-      }
+      given = JSON.parse(text);
     } catch (exc) {
-      // Not JSON: shown as it came.
+      return null;
     }
-    return text;
+    if (!given || typeof given !== "object" || Array.isArray(given)) return null;
+    const entries = Object.entries(given);
+    if (!entries.length) {
+      return el("div", { class: "turn-text", "data-testid": "turn-text", text: "(no answers: every question stays open)" });
+    }
+    return el(
+      "ul",
+      { class: "turn-list", "data-testid": "turn-text" },
+      ...entries.map(([key, value]) =>
+        el("li", { "data-testid": "turn-answer", "data-key": key }, askedText(key), " ", el("strong", { text: answerText(planAsked.get(key), String(value)) })),
+      ),
+    );
+  }
+
+  // The questions still open when the tutor stops asking, each with why.
+  function unsettledList(data) {
+    const rows = data && Array.isArray(data.unsettled) ? data.unsettled : null;
+    if (!rows) return null;
+    return el(
+      "div",
+      { "data-testid": "turn-text" },
+      el("div", { class: "turn-text", text: "Still open:" }),
+      el(
+        "ul",
+        { class: "turn-list" },
+        ...rows.map((r) => el("li", { "data-testid": "turn-unsettled", "data-key": r.key }, askedText(r.key), el("span", { class: "muted", text: ` (${r.why})` }))),
+      ),
+    );
   }
 
   function renderPlanQuestions(questions) {
+    remember(questions);
     const section = byId("plan-questions");
     const form = byId("plan-questions-form");
     form.replaceChildren();
@@ -1175,11 +1236,7 @@
       let control;
       if (q.options.length) {
         control = el("select", { id, "data-testid": "plan-answer", "data-key": q.key }, el("option", { value: "", text: "(leave open)" }));
-        q.options.forEach((o, i) => {
-          // A contradiction's options are facts; the server accepts their number.
-          const value = q.kind === "contradiction" ? String(i + 1) : o;
-          control.append(el("option", { value, text: o }));
-        });
+        q.options.forEach((o, i) => control.append(el("option", { value: optionValue(q, o, i), text: o })));
       } else {
         control = el("input", { id, type: "text", "data-testid": "plan-answer", "data-key": q.key, placeholder: "leave blank to keep it open" });
       }
