@@ -250,6 +250,9 @@ def test_a_failed_verify_greys_the_result_it_leaves_behind(browser: Browser, url
         # verdict on show is not the answer to the boxes, and says so.
         for plan, scene, error in (
             ("find Pot\nfly Pot\n", None, "unknown action 'fly'"),
+            # The browser's JSON.parse keeps the later of two keys; the server
+            # refuses the scene as the CLI refuses the file.
+            ("find Pot\n", '{"instances": [], "instances": []}', "duplicate key 'instances'"),
             ("find Pot\n", "{not json", "the scene is not valid JSON"),
             ("", None, "paste or upload a plan first"),
         ):
@@ -348,6 +351,12 @@ def test_each_tab_keeps_its_own_error(browser: Browser, url: str) -> None:
             "write the instruction for the robot first"
         )
         expect(page.get_by_test_id(banner)).to_have_attribute("data-tab", "plan")
+        page.get_by_test_id("plan-instruction").fill("Go.")
+        page.get_by_test_id("plan-scene").fill(
+            '{"instances": [], "assertions": [], "instances": []}'
+        )
+        page.get_by_test_id("plan-start").click()
+        expect(page.get_by_test_id("error-text")).to_contain_text("duplicate key 'instances'")
         page.get_by_test_id("tab-rules").click()
         expect(page.get_by_test_id("rule-item").first).to_be_visible()
         expect(page.get_by_test_id(banner)).to_be_hidden()

@@ -103,7 +103,8 @@
       response = await fetch(path, {
         method,
         headers,
-        body: body === undefined ? undefined : JSON.stringify(body),
+        // A string is a body already written as JSON.
+        body: body === undefined || typeof body === "string" ? body : JSON.stringify(body),
       });
     } catch (exc) {
       throw new ApiError(`the server did not answer (${exc.message})`);
@@ -221,6 +222,14 @@
   }
 
   // ------------------------------------------------------------ verify
+  // A request body with the scene as it was typed, not as the browser read
+  // it: the server refuses what JSON.parse lets by (a key twice, the later
+  // value silently winning), as the CLI refuses it in a file.  ``sceneText``
+  // has been parsed as a JSON object; ``fields`` is not empty.
+  function sceneBody(sceneText, fields) {
+    return `{"scene": ${sceneText}, ${JSON.stringify(fields).slice(1)}`;
+  }
+
   function readInputs() {
     const sceneText = byId("scene-input").value;
     const plan = byId("plan-input").value;
@@ -235,7 +244,7 @@
     if (scene === null || typeof scene !== "object" || Array.isArray(scene)) {
       throw new ApiError("the scene must be a JSON object with instances and assertions");
     }
-    return { scene, plan };
+    return { scene, plan, sceneText };
   }
 
   async function verify(keepNotice) {
@@ -260,9 +269,9 @@
     }
     busy(true);
     try {
-      const report = await api("POST", "/v1/verify", input);
+      const report = await api("POST", "/v1/verify", sceneBody(input.sceneText, { plan: input.plan }));
       if (seq !== verifySeq) return;
-      current = { ...input, report };
+      current = { scene: input.scene, plan: input.plan, report };
       renderReport(report);
       // Before the result is revealed: the box stands between the verdict and the trace.
       offerLearning();
@@ -976,17 +985,17 @@
     if (scene === null || typeof scene !== "object" || Array.isArray(scene)) {
       throw new ApiError("the run's scene must be a JSON object with instances and assertions");
     }
-    const body = { scene, instruction };
+    const fields = { instruction };
     const planner = byId("plan-planner").value.trim();
-    if (planner) body.planner = planner;
-    body.task_id = byId("plan-task-id").value.trim() || "task";
+    if (planner) fields.planner = planner;
+    fields.task_id = byId("plan-task-id").value.trim() || "task";
     const maxIter = byId("plan-max-iter").value.trim();
     if (maxIter) {
       const n = Number(maxIter);
       if (!Number.isInteger(n) || n < 1 || n > 20) throw new ApiError("max iterations must be a whole number from 1 to 20");
-      body.max_iter = n;
+      fields.max_iter = n;
     }
-    return body;
+    return sceneBody(sceneText, fields);
   }
 
   function resetPlanView() {
