@@ -80,6 +80,9 @@ def load_example(page: Page, name: str) -> None:
     from playwright.sync_api import expect
 
     page.get_by_test_id("example-select").select_option(name)
+    # Loaded: the label names the example the boxes now hold.
+    expect(page.get_by_test_id("example-description")).to_have_attribute("data-state", "example")
+    expect(page.get_by_test_id("example-select")).to_have_value(name)
     expect(page.get_by_test_id("plan-input")).not_to_have_value("")
     page.get_by_test_id("verify-button").click()
 
@@ -190,8 +193,16 @@ def test_answering_an_unknowns_questions_changes_the_verdict(
         page.get_by_test_id("answer-button").click()
         expect(page.get_by_test_id("verdict")).to_have_text("SAFE")
         expect(page.get_by_test_id("verdict")).to_have_css("color", "rgb(30, 123, 52)")
+        # The notice names the questions as the report asked them, never by key.
         notice = page.get_by_test_id("answers-notice")
-        expect(notice).to_contain_text("settled material:Bowl_1, fill:Bowl_1")
+        expect(notice.get_by_test_id("settled-question")).to_have_text(
+            ["What material is Bowl_1 made of? Glass", "Does Bowl_1 hold any liquid? yes"]
+        )
+        expect(notice.get_by_test_id("unsettled-question")).to_have_count(2)
+        expect(notice.get_by_test_id("unsettled-question").first).to_have_text(
+            re.compile(r"^Is it true that nothing is in Bowl_1\?")
+        )
+        expect(notice).not_to_contain_text(re.compile(r"(material|fill|contents):"))
         expect(page.get_by_test_id("scene-input")).to_have_value(re.compile('"object": "Glass"'))
         expect(page.get_by_test_id("questions")).to_be_hidden()
         expect(page.get_by_test_id("no-violations")).to_be_visible()
@@ -223,6 +234,196 @@ def test_errors_reach_the_banner(browser: Browser, url: str) -> None:
         expect(page.get_by_test_id("error-text")).to_have_text(
             "answer at least one question (the others may stay open)"
         )
+
+
+def test_a_failed_verify_greys_the_result_it_leaves_behind(browser: Browser, url: str) -> None:
+    from playwright.sync_api import expect
+
+    with page_at(browser, url) as page:
+        load_example(page, "walkthrough")
+        result = page.get_by_test_id("result")
+        expect(page.get_by_test_id("verdict")).to_have_text("UNSAFE")
+        expect(result).to_have_attribute("data-stale", "false")
+        expect(page.get_by_test_id("stale-notice")).to_be_hidden()
+
+        # Refused by the server, then by the page itself: either way the
+        # verdict on show is not the answer to the boxes, and says so.
+        for plan, scene, error in (
+            ("find Pot\nfly Pot\n", None, "unknown action 'fly'"),
+            # The browser's JSON.parse keeps the later of two keys; the server
+            # refuses the scene as the CLI refuses the file.
+            ("find Pot\n", '{"instances": [], "instances": []}', "duplicate key 'instances'"),
+            ("find Pot\n", "{not json", "the scene is not valid JSON"),
+            ("", None, "paste or upload a plan first"),
+        ):
+            page.get_by_test_id("plan-input").fill(plan)
+            if scene is not None:
+                page.get_by_test_id("scene-input").fill(scene)
+            page.get_by_test_id("verify-button").click()
+            expect(page.get_by_test_id("error-text")).to_contain_text(error)
+            expect(result).to_have_attribute("data-stale", "true")
+            expect(page.get_by_test_id("stale-notice")).to_be_visible()
+            expect(page.get_by_test_id("stale-notice")).to_contain_text("The last verify failed")
+            expect(page.get_by_test_id("result-body")).to_have_css("opacity", "0.45")
+            assert page.get_by_test_id("result-body").evaluate("body => body.inert")
+        shot(page, "verify-failed-stale")
+
+        # The next verify that succeeds is the result again.
+        load_example(page, "safe-fridge")
+        expect(page.get_by_test_id("verdict")).to_have_text("SAFE")
+        expect(result).to_have_attribute("data-stale", "false")
+        expect(page.get_by_test_id("stale-notice")).to_be_hidden()
+        expect(page.get_by_test_id("error-banner")).to_be_hidden()
+        expect(page.get_by_test_id("result-body")).to_have_css("opacity", "1")
+        assert not page.get_by_test_id("result-body").evaluate("body => body.inert")
+
+
+def test_the_example_label_follows_the_editor(browser: Browser, url: str) -> None:
+    from playwright.sync_api import expect
+
+    with page_at(browser, url) as page:
+        select = page.get_by_test_id("example-select")
+        label = page.get_by_test_id("example-description")
+        plan = page.get_by_test_id("plan-input")
+        load_example(page, "walkthrough")
+        expect(select).to_have_value("walkthrough")
+        expect(label).to_contain_text("Appendix E")
+        original = plan.input_value()
+
+        # An edit: the label no longer claims the boxes hold the example.
+        plan.fill(original + "turn_off(TestMicrowave_Action)\n")
+        expect(select).to_have_value("")
+        expect(label).to_have_attribute("data-state", "edited")
+        expect(label).to_have_text(
+            "edited from the example walkthrough; choose it again to start over"
+        )
+        # Undone, it is the example again.
+        plan.fill(original)
+        expect(select).to_have_value("walkthrough")
+        expect(label).to_contain_text("Appendix E")
+
+        # Another example: the label follows.
+        load_example(page, "unknown-material-microwave")
+        expect(select).to_have_value("unknown-material-microwave")
+        expect(label).to_have_attribute("data-state", "example")
+        # Answers written into its scene make it the example no longer.
+        expect(page.get_by_test_id("verdict")).to_have_text("UNKNOWN")
+        page.locator("[data-testid=answer][data-key='material:Bowl_1']").select_option("Glass")
+        page.get_by_test_id("answer-button").click()
+        expect(page.get_by_test_id("answers-notice")).to_be_visible()
+        expect(select).to_have_value("")
+        expect(label).to_contain_text("edited from the example unknown-material-microwave")
+
+        # An example the server does not have (a list older than the server):
+        # its one line, and the label stays with what the boxes hold.
+        select.evaluate("s => s.append(new Option('gone-example', 'gone-example'))")
+        select.select_option("gone-example")
+        expect(page.get_by_test_id("error-text")).to_contain_text("no example 'gone-example'")
+        expect(select).to_have_value("")
+        expect(label).to_contain_text("edited from the example unknown-material-microwave")
+
+        # A file of one's own is no example.
+        page.get_by_test_id("plan-file").set_input_files(
+            str(EXAMPLES_DIR / "safe-fridge" / "plan.txt")
+        )
+        expect(plan).to_have_value(re.compile("Fridge"))
+        expect(select).to_have_value("")
+        expect(label).to_have_text("")
+
+
+def test_each_tab_keeps_its_own_error(browser: Browser, url: str) -> None:
+    from playwright.sync_api import expect
+
+    banner = "error-banner"
+    with page_at(browser, url) as page:
+        page.get_by_test_id("plan-input").fill("find Pot\n")
+        page.get_by_test_id("scene-input").fill("{not json")
+        page.get_by_test_id("verify-button").click()
+        expect(page.get_by_test_id("error-text")).to_contain_text("the scene is not valid JSON")
+        expect(page.get_by_test_id(banner)).to_have_attribute("data-tab", "verify")
+
+        # Not the Plan tab's error, nor the Rules tab's; the Verify tab says it holds one.
+        page.get_by_test_id("tab-plan").click()
+        expect(page.get_by_test_id(banner)).to_be_hidden()
+        expect(page.get_by_test_id("tab-verify")).to_have_attribute("data-error", "true")
+        page.get_by_test_id("plan-start").click()
+        expect(page.get_by_test_id("error-text")).to_have_text(
+            "write the instruction for the robot first"
+        )
+        expect(page.get_by_test_id(banner)).to_have_attribute("data-tab", "plan")
+        page.get_by_test_id("plan-instruction").fill("Go.")
+        page.get_by_test_id("plan-scene").fill(
+            '{"instances": [], "assertions": [], "instances": []}'
+        )
+        page.get_by_test_id("plan-start").click()
+        expect(page.get_by_test_id("error-text")).to_contain_text("duplicate key 'instances'")
+        page.get_by_test_id("tab-rules").click()
+        expect(page.get_by_test_id("rule-item").first).to_be_visible()
+        expect(page.get_by_test_id(banner)).to_be_hidden()
+        expect(page.get_by_test_id("tab-plan")).to_have_attribute("data-error", "true")
+
+        # Each tab shows its own.
+        page.get_by_test_id("tab-verify").click()
+        expect(page.get_by_test_id("error-text")).to_contain_text("the scene is not valid JSON")
+        expect(page.get_by_test_id("tab-plan")).to_have_attribute("data-error", "true")
+
+        # The Plan tab's next action succeeds: its error goes, the Verify tab's stays.
+        folder = EXAMPLES_DIR / "dialogue"
+        start_run(
+            page,
+            folder / "scene.json",
+            (folder / "instruction.txt").read_text(),
+            DIALOGUE_REPLAY,
+            "demo-fridge",
+        )
+        expect(page.get_by_test_id("plan-outcome")).to_have_text("APPROVED")
+        expect(page.get_by_test_id(banner)).to_be_hidden()
+        expect(page.get_by_test_id("tab-verify")).to_have_attribute("data-error", "true")
+        page.get_by_test_id("tab-verify").click()
+        expect(page.get_by_test_id("error-text")).to_contain_text("the scene is not valid JSON")
+        expect(page.get_by_test_id("tab-plan")).to_have_attribute("data-error", "false")
+
+        # And the Verify tab's goes when a verify succeeds.
+        load_example(page, "walkthrough")
+        expect(page.get_by_test_id("verdict")).to_have_text("UNSAFE")
+        expect(page.get_by_test_id(banner)).to_be_hidden()
+        expect(page.get_by_test_id("tab-verify")).to_have_attribute("data-error", "false")
+
+
+@pytest.mark.parametrize(("width", "height"), [(1280, 720), (390, 844)], ids=["laptop", "phone"])
+def test_the_verdict_and_the_dangerous_step_are_in_view_after_a_verify(
+    browser: Browser, url: str, width: int, height: int
+) -> None:
+    from playwright.sync_api import expect
+
+    def in_view(selector: str) -> dict[str, float]:
+        box = page.locator(selector).bounding_box()
+        assert box is not None, f"{selector} is not drawn"
+        assert box["x"] >= 0 and box["x"] + box["width"] <= width, (selector, box)
+        assert box["y"] >= 0 and box["y"] + box["height"] <= height, (selector, box)
+        return box
+
+    with browser_page(browser, url, timeout_ms=STEP_MS, width=width, height=height) as page:
+        for example, step in (("walkthrough", "7"), ("noise-omission", "1")):
+            load_example(page, example)
+            expect(page.get_by_test_id("verdict-step")).to_have_attribute("data-step", step)
+            expect(page.get_by_test_id("busy")).to_be_hidden()
+            in_view("[data-testid=verdict]")
+            in_view("[data-testid=verdict-step]")
+            row = in_view("[data-testid=trace-step][data-dangerous=true]")
+            # In view of the page, and not scrolled away inside the trace's own box.
+            trace = page.get_by_test_id("trace-box").bounding_box()
+            assert trace is not None
+            assert trace["y"] <= row["y"]
+            assert row["y"] + row["height"] <= trace["y"] + trace["height"]
+        expect(page.get_by_test_id("verdict-step")).to_have_text("at step 1: find Knife")
+        shot(page, f"in-view-{width}x{height}")
+        # A SAFE plan has no dangerous step: its trace starts at its first step.
+        load_example(page, "safe-fridge")
+        expect(page.get_by_test_id("verdict")).to_have_text("SAFE")
+        expect(page.get_by_test_id("verdict-step")).to_be_hidden()
+        in_view("[data-testid=verdict]")
+        assert page.get_by_test_id("trace-box").evaluate("box => box.scrollTop") == 0
 
 
 def test_rules_are_browsed_and_searched(browser: Browser, paper_url: str) -> None:
@@ -361,6 +562,33 @@ def test_a_plan_run_streams_its_dialogue_to_approval(browser: Browser, url: str)
         shot(page, "plan-dialogue")
 
 
+def test_a_plan_runs_open_questions_are_named_in_words(
+    browser: Browser, paper_url: str, uncertain_replay: Path
+) -> None:
+    from playwright.sync_api import expect
+
+    with page_at(browser, paper_url) as page:
+        page.get_by_test_id("tab-plan").click()
+        page.get_by_test_id("plan-max-iter").fill("1")
+        start_run(
+            page, UNCERTAIN / "scene.json", "Heat the bowl.", f"replay:{uncertain_replay}", "q"
+        )
+        expect(page.get_by_test_id("plan-state")).to_have_text("waiting")
+        # No answers at all: every question stays open, and the run says which, in words.
+        page.get_by_test_id("plan-answer-button").click()
+        expect(page.get_by_test_id("plan-outcome")).to_have_text("TASK_REJECTED")
+        unsettled = page.locator("[data-testid=turn][data-kind=unsettled]")
+        expect(unsettled).to_contain_text("Still open:")
+        expect(
+            unsettled.locator("[data-testid=turn-unsettled][data-key='material:Bowl_1']")
+        ).to_have_text("What material is Bowl_1 made of? (not answered)")
+        expect(unsettled.get_by_test_id("turn-unsettled")).to_have_count(4)
+        expect(unsettled).not_to_contain_text(re.compile(r"(material|fill|contents):"))
+        answers = page.locator("[data-testid=turn][data-kind=answers]")
+        expect(answers).to_have_text(re.compile(r"no answers: every question stays open"))
+        shot(page, "plan-unsettled")
+
+
 def test_a_plan_run_asks_and_goes_on_with_the_answers(
     browser: Browser, paper_url: str, uncertain_replay: Path
 ) -> None:
@@ -393,8 +621,12 @@ def test_a_plan_run_asks_and_goes_on_with_the_answers(
         expect(page.get_by_test_id("plan-outcome")).to_have_text("APPROVED")
         expect(page.get_by_test_id("error-banner")).to_be_hidden()
         expect(page.get_by_test_id("plan-questions")).to_be_hidden()
+        # The answers under their questions' words, not their keys.
         answers = page.locator("[data-testid=turn][data-kind=answers]")
-        expect(answers).to_contain_text("material:Bowl_1 = Glass")
+        expect(
+            answers.locator("[data-testid=turn-answer][data-key='material:Bowl_1']")
+        ).to_have_text("What material is Bowl_1 made of? Glass")
+        expect(answers).not_to_contain_text("material:Bowl_1")
         statuses = page.get_by_test_id("turn-status")
         expect(statuses).to_have_text(["UNKNOWN", "SAFE"])
         expect(page.get_by_test_id("plan-final")).to_have_text("\n".join(plan))

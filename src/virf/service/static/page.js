@@ -55,14 +55,40 @@
     return node;
   }
 
-  function showError(message) {
-    byId("error-text").textContent = message;
-    byId("error-banner").hidden = false;
+  // Each tab keeps its own error, so one tab's failure is never read as
+  // another's; an action of the tab clears it.  ``page`` holds what concerns
+  // every tab (the service unreachable, its key refused): it shows in all of
+  // them, under a tab's own error.
+  const errors = { page: "", verify: "", rules: "", plan: "" };
+  let activeTab = "verify";
+
+  function showError(where, message) {
+    errors[where] = message;
+    renderBanner();
   }
 
-  function clearError() {
-    byId("error-banner").hidden = true;
-    byId("error-text").textContent = "";
+  function clearError(where) {
+    errors[where] = "";
+    renderBanner();
+  }
+
+  function renderBanner() {
+    const where = errors[activeTab] ? activeTab : "page";
+    const message = errors[where];
+    const banner = byId("error-banner");
+    banner.hidden = !message;
+    banner.dataset.tab = message ? where : "";
+    byId("error-text").textContent = message;
+    // A tab whose error is not on show says it has one.
+    for (const tab of document.querySelectorAll(".tab[data-tab]")) {
+      const held = Boolean(errors[tab.dataset.tab]) && tab.dataset.tab !== activeTab;
+      tab.dataset.error = String(held);
+      tab.title = held ? "an error happened on this tab" : "";
+    }
+  }
+
+  function dismissError() {
+    clearError(errors[activeTab] ? activeTab : "page");
   }
 
   class ApiError extends Error {}
@@ -77,7 +103,8 @@
       response = await fetch(path, {
         method,
         headers,
-        body: body === undefined ? undefined : JSON.stringify(body),
+        // A string is a body already written as JSON.
+        body: body === undefined || typeof body === "string" ? body : JSON.stringify(body),
       });
     } catch (exc) {
       throw new ApiError(`the server did not answer (${exc.message})`);
@@ -106,12 +133,14 @@
 
   // ------------------------------------------------------------ tabs
   function showTab(name) {
+    activeTab = name;
     for (const tab of document.querySelectorAll(".tab")) {
       tab.setAttribute("aria-selected", String(tab.dataset.tab === name));
     }
     for (const panel of document.querySelectorAll(".panel")) {
       panel.hidden = panel.dataset.panel !== name;
     }
+    renderBanner();
     if (name === "rules") loadRules();
   }
 
@@ -122,7 +151,7 @@
     try {
       examples = await api("GET", "/v1/examples");
     } catch (exc) {
-      showError(exc.message);
+      showError("verify", exc.message);
       return;
     }
     select.replaceChildren();
@@ -138,19 +167,46 @@
     }
   }
 
+  // The example the boxes were last filled from, as loaded: the label names
+  // it only while both boxes still hold it character for character.
+  let loadedExample = null; // { name, description, scene, plan }
+  let exampleSeq = 0;
+
+  function syncExampleLabel() {
+    const select = byId("example-select");
+    const description = byId("example-description");
+    const ex = loadedExample;
+    const same = ex !== null && byId("scene-input").value === ex.scene && byId("plan-input").value === ex.plan;
+    const listed = ex !== null && [...select.options].some((o) => o.value === ex.name);
+    select.value = same && listed ? ex.name : "";
+    description.dataset.state = ex === null ? "" : same ? "example" : "edited";
+    description.textContent =
+      ex === null ? "" : same ? ex.description : `edited from the example ${ex.name}; choose it again to start over`;
+  }
+
   async function pickExample() {
     const name = byId("example-select").value;
-    byId("example-description").textContent = "";
-    if (!name) return;
-    clearError();
+    const seq = ++exampleSeq;
+    if (!name) {
+      // Nothing chosen: the label goes back to what the boxes hold.
+      syncExampleLabel();
+      return;
+    }
+    clearError("verify");
+    byId("example-description").textContent = "loading…";
+    byId("example-description").dataset.state = "loading";
     try {
       const ex = await api("GET", `/v1/examples/${encodeURIComponent(name)}`);
-      byId("scene-input").value = JSON.stringify(ex.scene, null, 2);
+      if (seq !== exampleSeq) return;
+      const scene = JSON.stringify(ex.scene, null, 2);
+      byId("scene-input").value = scene;
       byId("plan-input").value = ex.plan;
-      byId("example-description").textContent = ex.description;
+      loadedExample = { name, description: ex.description, scene, plan: ex.plan };
     } catch (exc) {
-      showError(exc.message);
+      if (seq !== exampleSeq) return;
+      showError("verify", exc.message);
     }
+    syncExampleLabel();
   }
 
   async function readFileInto(input, target) {
@@ -158,14 +214,22 @@
     if (!file) return;
     try {
       byId(target).value = await file.text();
-      byId("example-select").value = "";
-      byId("example-description").textContent = "";
+      loadedExample = null;
+      syncExampleLabel();
     } catch (exc) {
-      showError(`could not read ${file.name}: ${exc.message}`);
+      showError("verify", `could not read ${file.name}: ${exc.message}`);
     }
   }
 
   // ------------------------------------------------------------ verify
+  // A request body with the scene as it was typed, not as the browser read
+  // it: the server refuses what JSON.parse lets by (a key twice, the later
+  // value silently winning), as the CLI refuses it in a file.  ``sceneText``
+  // has been parsed as a JSON object; ``fields`` is not empty.
+  function sceneBody(sceneText, fields) {
+    return `{"scene": ${sceneText}, ${JSON.stringify(fields).slice(1)}`;
+  }
+
   function readInputs() {
     const sceneText = byId("scene-input").value;
     const plan = byId("plan-input").value;
@@ -180,11 +244,11 @@
     if (scene === null || typeof scene !== "object" || Array.isArray(scene)) {
       throw new ApiError("the scene must be a JSON object with instances and assertions");
     }
-    return { scene, plan };
+    return { scene, plan, sceneText };
   }
 
   async function verify(keepNotice) {
-    clearError();
+    clearError("verify");
     if (!keepNotice) {
       byId("answers-notice").hidden = true;
       // A new scene or plan: earlier answers are not about it.
@@ -192,26 +256,72 @@
       byId("learn-box").hidden = true;
       byId("learn-result").hidden = true;
     }
+    // Counted before the input is read: an answer still on its way for an
+    // earlier input must not land over this attempt, failed or not.
+    const seq = ++verifySeq;
     let input;
     try {
       input = readInputs();
     } catch (exc) {
-      showError(exc.message);
+      verifyFailed(exc.message);
+      busy(false);
       return;
     }
-    const seq = ++verifySeq;
     busy(true);
     try {
-      const report = await api("POST", "/v1/verify", input);
+      const report = await api("POST", "/v1/verify", sceneBody(input.sceneText, { plan: input.plan }));
       if (seq !== verifySeq) return;
-      current = { ...input, report };
+      current = { scene: input.scene, plan: input.plan, report };
       renderReport(report);
+      // Before the result is revealed: the box stands between the verdict and the trace.
+      offerLearning();
+      revealResult();
       await drawState(defaultState(report));
     } catch (exc) {
-      if (seq === verifySeq) showError(exc.message);
+      if (seq === verifySeq) verifyFailed(exc.message);
     } finally {
       if (seq === verifySeq) busy(false);
     }
+  }
+
+  // The result on show was made from an earlier input: left as it is, it
+  // would read as the answer to what the boxes hold now.
+  function verifyFailed(message) {
+    showError("verify", message);
+    if (current) markStale(true);
+  }
+
+  // A stale result is greyed, says why, and takes no clicks: its questions
+  // and steps belong to an input the boxes no longer hold.
+  function markStale(on) {
+    const result = byId("result");
+    result.classList.toggle("stale", on);
+    result.dataset.stale = String(on);
+    byId("stale-notice").hidden = !on;
+    byId("result-body").inert = on;
+  }
+
+  // After a verify, the verdict and the dangerous step must be in view without
+  // the user scrolling: the trace scrolls (in its own box) to that step, and
+  // the page scrolls as little as it takes to show both, never past the verdict.
+  function revealResult() {
+    // The user went to another tab meanwhile: nothing of this one is laid out.
+    if (activeTab !== "verify") return;
+    const line = byId("verdict-line").getBoundingClientRect();
+    let bottom = line.bottom;
+    const row = byId("trace").querySelector("tr[data-dangerous=true]");
+    if (row) {
+      const box = byId("trace-box");
+      const head = byId("trace").querySelector("thead").getBoundingClientRect().height;
+      const rowTop = row.getBoundingClientRect().top - box.getBoundingClientRect().top + box.scrollTop;
+      if (rowTop + row.offsetHeight > box.scrollTop + box.clientHeight || rowTop - head < box.scrollTop) {
+        box.scrollTop = rowTop - head;
+      }
+      bottom = Math.max(bottom, row.getBoundingClientRect().bottom);
+    }
+    const margin = 8;
+    if (line.top >= margin && bottom <= window.innerHeight - margin) return;
+    window.scrollBy(0, Math.min(line.top - margin, bottom - window.innerHeight + margin));
   }
 
   // The state to draw first: the dangerous step's, else the plan's last.
@@ -226,10 +336,17 @@
   }
 
   function renderReport(report) {
+    markStale(false);
     byId("result").hidden = false;
     const verdict = byId("verdict");
     verdict.textContent = report.status;
     verdict.dataset.status = report.status;
+    // Where the plan goes wrong, next to the verdict: the trace row may be far below.
+    const where = byId("verdict-step");
+    const step = report.dangerous_step;
+    where.hidden = step === null;
+    where.dataset.step = step === null ? "" : String(step);
+    where.textContent = step === null ? "" : `at step ${step}: ${report.action || "the scene before the plan"}`;
     byId("reason").textContent = report.reason;
     renderTrace(report);
     renderNotes(report);
@@ -243,6 +360,8 @@
   function renderTrace(report) {
     const body = byId("trace").querySelector("tbody");
     body.replaceChildren();
+    // A new trace starts at its first step, not where the last one was scrolled.
+    byId("trace-box").scrollTop = 0;
     const rows = [
       { step: 0, action: "(the scene before the plan)", outcome: "", findings: [], added: [], removed: [] },
       ...report.trace,
@@ -362,6 +481,18 @@
   }
 
   // ------------------------------------------------------------ questions
+  // The value a question's form sends for an option: a contradiction's
+  // options are facts, and the server accepts their number.
+  const optionValue = (q, option, i) => (q.kind === "contradiction" ? String(i + 1) : option);
+
+  // An answer as the person chose it: a contradiction's number is its fact.
+  function answerText(q, value) {
+    if (q && q.kind === "contradiction" && /^[0-9]+$/.test(value)) {
+      return q.options[Number(value) - 1] || value;
+    }
+    return value;
+  }
+
   function renderQuestions(report) {
     const section = byId("questions");
     const form = byId("questions-form");
@@ -381,11 +512,7 @@
         let control;
         if (q.options.length) {
           control = el("select", { id, "data-testid": "answer", "data-key": q.key }, el("option", { value: "", text: "(leave open)" }));
-          q.options.forEach((o, i) => {
-            // A contradiction's options are facts; the server accepts their number.
-            const value = q.kind === "contradiction" ? String(i + 1) : o;
-            control.append(el("option", { value, text: o }));
-          });
+          q.options.forEach((o, i) => control.append(el("option", { value: optionValue(q, o, i), text: o })));
         } else {
           control = el("input", { id, type: "text", "data-testid": "answer", "data-key": q.key, placeholder: "leave blank to keep it open" });
         }
@@ -402,7 +529,7 @@
 
   async function submitAnswers(event) {
     event.preventDefault();
-    clearError();
+    clearError("verify");
     if (!current) return;
     const answers = {};
     for (const control of byId("questions-form").querySelectorAll("[data-testid=answer]")) {
@@ -410,7 +537,7 @@
       if (value) answers[control.dataset.key] = value;
     }
     if (!Object.keys(answers).length) {
-      showError("answer at least one question (the others may stay open)");
+      showError("verify", "answer at least one question (the others may stay open)");
       return;
     }
     busy(true);
@@ -428,19 +555,32 @@
       }
       byId("scene-input").value = JSON.stringify(update.scene, null, 2);
       byId("plan-input").value = current.plan;
+      syncExampleLabel();
+      // Keys are for machines: the notice names each question as the report asked it.
+      const item = (testid, key, answered) => {
+        const q = asked.find((x) => x.key === key);
+        const given = answered ? [" ", el("strong", { text: answerText(q, answers[key]) })] : [];
+        return el("li", { "data-testid": testid, "data-key": key }, q ? q.text : key, ...given);
+      };
       const notice = byId("answers-notice");
-      const settled = update.applied.length ? update.applied.join(", ") : "nothing";
-      const open = update.unsettled.length ? ` Not settled by these answers: ${update.unsettled.join(", ")}.` : "";
-      notice.textContent = `Your answers settled ${settled}; the scene above now says so.${open}`;
+      notice.replaceChildren(
+        el("div", {
+          text: update.applied.length
+            ? "Your answers settled these questions; the scene above now says so:"
+            : "Your answers settled none of the questions; the scene above is unchanged.",
+        }),
+        el("ul", {}, ...update.applied.map((key) => item("settled-question", key, true))),
+        update.unsettled.length ? el("div", { text: "Not settled by these answers, still open:" }) : null,
+        el("ul", {}, ...update.unsettled.map((key) => item("unsettled-question", key, Boolean(answers[key])))),
+      );
       notice.hidden = false;
     } catch (exc) {
-      showError(exc.message);
+      showError("verify", exc.message);
       busy(false);
       return;
     }
     busy(false);
     await verify(true);
-    offerLearning();
   }
 
   // ------------------------------------------------------------ learning
@@ -462,11 +602,11 @@
   }
 
   async function sendLearning() {
-    clearError();
+    clearError("verify");
     if (!learning || learning.sent) return;
     const who = byId("learn-who").value.trim();
     if (!who) {
-      showError("say who you are (your name is kept with your answers)");
+      showError("verify", "say who you are (your name is kept with your answers)");
       byId("learn-who").focus();
       return;
     }
@@ -498,7 +638,7 @@
       );
       result.hidden = false;
     } catch (exc) {
-      showError(exc.message);
+      showError("verify", exc.message);
       button.disabled = false;
     } finally {
       byId("learn-busy").hidden = true;
@@ -525,7 +665,7 @@
         row.classList.toggle("shown", Number(row.dataset.step) === stateRowOf(report, index));
       }
     } catch (exc) {
-      if (seq === stateSeq) showError(exc.message);
+      if (seq === stateSeq) showError("verify", exc.message);
     }
   }
 
@@ -752,9 +892,10 @@
       rules = await api("GET", "/v1/rules");
     } catch (exc) {
       rules = null;
-      showError(exc.message);
+      showError("rules", exc.message);
       return;
     }
+    clearError("rules");
     filterRules();
     if (pendingRule) selectRule(pendingRule);
     else if (rules.length) selectRule(rules[0].id);
@@ -809,6 +950,9 @@
   const OUTCOME_STATUS = { APPROVED: "SAFE", APPROVED_UNVERIFIED: "UNKNOWN", TASK_REJECTED: "UNSAFE" };
   let planRun = null; // { id, answers, abort }
   let planSeq = 0;
+  // The run's questions by key, as the tutor worded them: its turns name
+  // questions by key, which is for machines.
+  let planAsked = new Map();
 
   function keyHeaders(extra) {
     const headers = { ...extra };
@@ -841,20 +985,21 @@
     if (scene === null || typeof scene !== "object" || Array.isArray(scene)) {
       throw new ApiError("the run's scene must be a JSON object with instances and assertions");
     }
-    const body = { scene, instruction };
+    const fields = { instruction };
     const planner = byId("plan-planner").value.trim();
-    if (planner) body.planner = planner;
-    body.task_id = byId("plan-task-id").value.trim() || "task";
+    if (planner) fields.planner = planner;
+    fields.task_id = byId("plan-task-id").value.trim() || "task";
     const maxIter = byId("plan-max-iter").value.trim();
     if (maxIter) {
       const n = Number(maxIter);
       if (!Number.isInteger(n) || n < 1 || n > 20) throw new ApiError("max iterations must be a whole number from 1 to 20");
-      body.max_iter = n;
+      fields.max_iter = n;
     }
-    return body;
+    return sceneBody(sceneText, fields);
   }
 
   function resetPlanView() {
+    planAsked = new Map();
     byId("plan-run").hidden = false;
     byId("dialogue").replaceChildren();
     byId("plan-outcome-box").hidden = true;
@@ -865,12 +1010,12 @@
   }
 
   async function startPlan() {
-    clearError();
+    clearError("plan");
     let body;
     try {
       body = readPlanInputs();
     } catch (exc) {
-      showError(exc.message);
+      showError("plan", exc.message);
       return;
     }
     if (planRun) planRun.abort.abort();
@@ -885,7 +1030,7 @@
       if (seq !== planSeq) return;
       planState("");
       byId("plan-run").hidden = true;
-      showError(exc.message);
+      showError("plan", exc.message);
       return;
     }
     if (seq !== planSeq) return;
@@ -929,7 +1074,7 @@
       }
     } catch (exc) {
       if (exc.name === "AbortError" || seq !== planSeq) return;
-      showError(exc instanceof ApiError ? exc.message : `the run's event stream broke off (${exc.message})`);
+      showError("plan", exc instanceof ApiError ? exc.message : `the run's event stream broke off (${exc.message})`);
     }
     if (seq !== planSeq || finished) return;
     // The stream ended early (a proxy, a restart): the run's own state says where it is.
@@ -940,10 +1085,10 @@
       else if (state.error) onPlanEvent("error", { error: state.error });
       else {
         planState(state.state);
-        showError(`the run's event stream ended while the run was ${state.state}; reload its state with ${run.run}`);
+        showError("plan", `the run's event stream ended while the run was ${state.state}; reload its state with ${run.run}`);
       }
     } catch (exc) {
-      if (seq === planSeq) showError(exc.message);
+      if (seq === planSeq) showError("plan", exc.message);
     }
   }
 
@@ -965,7 +1110,7 @@
     try {
       return { event, data: JSON.parse(data.join("\n")) };
     } catch (exc) {
-      showError(`the run sent an event that is not JSON (${event})`);
+      showError("plan", `the run sent an event that is not JSON (${event})`);
       return null;
     }
   }
@@ -987,7 +1132,7 @@
     } else if (event === "error") {
       byId("plan-questions").hidden = true;
       planState("failed");
-      showError(`the run failed: ${data.error}`);
+      showError("plan", `the run failed: ${data.error}`);
       return true;
     }
     return false;
@@ -1015,10 +1160,13 @@
     if (turn.status) {
       head.append(el("span", { class: "verdict small-verdict", "data-testid": "turn-status", "data-status": turn.status, text: turn.status }));
     }
+    remember(turn.data && turn.data.questions);
     const body =
-      turn.kind === "proposal" || turn.kind === "answers"
-        ? el("pre", { class: "plan-text", "data-testid": "turn-text", text: turn.kind === "answers" ? answersText(turn.text) : turn.text })
-        : el("div", { class: "turn-text", "data-testid": "turn-text", text: turn.text });
+      (turn.kind === "answers" && answersList(turn.text)) ||
+      (turn.kind === "unsettled" && unsettledList(turn.data)) ||
+      (turn.kind === "proposal"
+        ? el("pre", { class: "plan-text", "data-testid": "turn-text", text: turn.text })
+        : el("div", { class: "turn-text", "data-testid": "turn-text", text: turn.text }));
     const extra = [];
     if (turn.kind === "report" && turn.data && turn.data.suggestion) {
       extra.push(el("div", { class: "small turn-note", "data-testid": "turn-suggestion", text: `Suggestion: ${turn.data.suggestion}` }));
@@ -1041,21 +1189,54 @@
     body.scrollIntoView({ block: "nearest" });
   }
 
-  // The answers turn carries the answers as JSON; a person reads one a line.
-  function answersText(text) {
+  function remember(questions) {
+    if (!Array.isArray(questions)) return;
+    for (const q of questions) if (q && typeof q.key === "string") planAsked.set(q.key, q);
+  }
+
+  const askedText = (key) => (planAsked.has(key) ? planAsked.get(key).text : key);
+
+  // The answers turn carries the answers as JSON {key: answer}: each is shown
+  // under its question's words.  Null when it is not that JSON (shown as it came).
+  function answersList(text) {
+    let given;
     try {
-      const given = JSON.parse(text);
-      if (given && typeof given === "object" && !Array.isArray(given)) {
-        const lines = Object.entries(given).map(([key, value]) => `${key} = ${value}`);
-        return lines.length ? lines.join("\n") : "(no answers: every question stays open)";
-      }
+      given = JSON.parse(text);
     } catch (exc) {
-      // Not JSON: shown as it came.
+      return null;
     }
-    return text;
+    if (!given || typeof given !== "object" || Array.isArray(given)) return null;
+    const entries = Object.entries(given);
+    if (!entries.length) {
+      return el("div", { class: "turn-text", "data-testid": "turn-text", text: "(no answers: every question stays open)" });
+    }
+    return el(
+      "ul",
+      { class: "turn-list", "data-testid": "turn-text" },
+      ...entries.map(([key, value]) =>
+        el("li", { "data-testid": "turn-answer", "data-key": key }, askedText(key), " ", el("strong", { text: answerText(planAsked.get(key), String(value)) })),
+      ),
+    );
+  }
+
+  // The questions still open when the tutor stops asking, each with why.
+  function unsettledList(data) {
+    const rows = data && Array.isArray(data.unsettled) ? data.unsettled : null;
+    if (!rows) return null;
+    return el(
+      "div",
+      { "data-testid": "turn-text" },
+      el("div", { class: "turn-text", text: "Still open:" }),
+      el(
+        "ul",
+        { class: "turn-list" },
+        ...rows.map((r) => el("li", { "data-testid": "turn-unsettled", "data-key": r.key }, askedText(r.key), el("span", { class: "muted", text: ` (${r.why})` }))),
+      ),
+    );
   }
 
   function renderPlanQuestions(questions) {
+    remember(questions);
     const section = byId("plan-questions");
     const form = byId("plan-questions-form");
     form.replaceChildren();
@@ -1064,11 +1245,7 @@
       let control;
       if (q.options.length) {
         control = el("select", { id, "data-testid": "plan-answer", "data-key": q.key }, el("option", { value: "", text: "(leave open)" }));
-        q.options.forEach((o, i) => {
-          // A contradiction's options are facts; the server accepts their number.
-          const value = q.kind === "contradiction" ? String(i + 1) : o;
-          control.append(el("option", { value, text: o }));
-        });
+        q.options.forEach((o, i) => control.append(el("option", { value: optionValue(q, o, i), text: o })));
       } else {
         control = el("input", { id, type: "text", "data-testid": "plan-answer", "data-key": q.key, placeholder: "leave blank to keep it open" });
       }
@@ -1087,7 +1264,7 @@
 
   async function submitPlanAnswers(event) {
     event.preventDefault();
-    clearError();
+    clearError("plan");
     if (!planRun) return;
     const answers = {};
     for (const control of byId("plan-questions-form").querySelectorAll("[data-testid=plan-answer]")) {
@@ -1102,7 +1279,7 @@
       await api("POST", run.answers, { answers });
       if (run === planRun) byId("plan-questions").hidden = true;
     } catch (exc) {
-      showError(exc.message);
+      showError("plan", exc.message);
     } finally {
       button.disabled = false;
     }
@@ -1127,7 +1304,7 @@
     try {
       byId("plan-scene").value = await file.text();
     } catch (exc) {
-      showError(`could not read ${file.name}: ${exc.message}`);
+      showError("plan", `could not read ${file.name}: ${exc.message}`);
     }
   }
 
@@ -1141,7 +1318,7 @@
       byId("review-link").hidden = !h.review;
     } catch (exc) {
       byId("health").textContent = "";
-      showError(exc.message);
+      showError("page", exc.message);
     }
   }
 
@@ -1150,16 +1327,22 @@
     key.value = sessionStorage.getItem(KEY_STORE) || "";
     key.addEventListener("change", async () => {
       sessionStorage.setItem(KEY_STORE, key.value.trim());
-      clearError();
+      // Another key: what the old one was refused is no tab's error any more.
+      for (const where of Object.keys(errors)) errors[where] = "";
+      renderBanner();
       rules = null;
       await Promise.all([health(), loadExamples()]);
+      // The list was made again: it names the boxes' example again, if they hold one.
+      syncExampleLabel();
       if (!byId("panel-rules").hidden) loadRules();
     });
     for (const tab of document.querySelectorAll(".tab")) {
       tab.addEventListener("click", () => showTab(tab.dataset.tab));
     }
-    byId("error-close").addEventListener("click", clearError);
+    byId("error-close").addEventListener("click", dismissError);
     byId("example-select").addEventListener("change", pickExample);
+    byId("scene-input").addEventListener("input", syncExampleLabel);
+    byId("plan-input").addEventListener("input", syncExampleLabel);
     byId("scene-file").addEventListener("change", (e) => readFileInto(e.target, "scene-input"));
     byId("plan-file").addEventListener("change", (e) => readFileInto(e.target, "plan-input"));
     byId("verify-button").addEventListener("click", () => verify(false));
