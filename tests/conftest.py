@@ -21,6 +21,10 @@ from virf.api import LogicTutor
 from virf.ontology.tbox import Vocabulary
 from virf.schema import Report
 
+# Fixtures that several test modules use live in support modules, loaded here
+# as plugins so that no test module imports another.
+pytest_plugins = ("chat_support", "loop_support", "postgres_support")
+
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES_DIR = ROOT / "examples"
 

@@ -13,23 +13,20 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
-import os
 import sqlite3
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import EXAMPLES_DIR, ROOT
-from test_planner_clients import (  # noqa: F401
+from bench_support import bench_agents
+from chat_support import (
     FAST_RETRY,
     ChatServer,
     Reply,
     completion,
     error,
-    server,
 )
+from conftest import EXAMPLES_DIR
 
 from virf.api import LogicTutor
 from virf.bench import agents_report
@@ -295,7 +292,7 @@ def test_changed_task_is_refused(tutor: LogicTutor, tasks: list[Task], tmp_path:
 # Online: the real HTTP client against a scripted server
 
 
-def test_http_run(tutor: LogicTutor, tasks: list[Task], tmp_path: Path, server: ChatServer) -> None:  # noqa: F811
+def test_http_run(tutor: LogicTutor, tasks: list[Task], tmp_path: Path, server: ChatServer) -> None:
     server.queue(
         # egg: the unsafe plan, then a refusal after the diagnostic
         completion(EGG),
@@ -422,25 +419,12 @@ def test_task_ids_must_be_unique(tasks: list[Task]) -> None:
 # The command line
 
 
-def virf(*args: str | Path, cwd: Path = ROOT) -> subprocess.CompletedProcess[str]:
-    environ = {k: v for k, v in os.environ.items() if not k.startswith("OPENAI_")}
-    return subprocess.run(
-        [sys.executable, "-m", "virf.cli.main", "bench", "agents", *map(str, args)],
-        cwd=cwd,
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=False,
-        env=environ,
-    )
-
-
 def test_cli_runs_and_resumes(tmp_path: Path) -> None:
     """A quick run over two tasks, then the full run: it runs only what is
     missing and writes the table of all four."""
     out = tmp_path / "out"
     args = ("--method", "impulsive,virf", "--planner", f"replay:{REPLAY}", "--tasks", TASKS)
-    quick = virf(*args, "--out", out, "--limit", "2", "--json")
+    quick = bench_agents(*args, "--out", out, "--limit", "2", "--json")
     assert quick.returncode == 0, quick.stderr
     data = json.loads(quick.stdout)
     assert [m["method"] for m in data["methods"]] == ["impulsive", "virf"]
@@ -449,7 +433,7 @@ def test_cli_runs_and_resumes(tmp_path: Path) -> None:
     assert sorted(Path(p).name for p in data["files"]) == sorted(FILES)
     assert sorted(p.name for p in out.iterdir()) == sorted([*FILES, "results.sqlite"])
 
-    full = virf(*args, "--out", out)
+    full = bench_agents(*args, "--out", out)
     assert full.returncode == 0, full.stderr
     assert "4 row(s) were already in" in full.stderr
     assert "| impulsive | 4 | 75.0 (3/4) | 75.0 (3/4) | 100.0 (2/2) |" in (
@@ -468,7 +452,7 @@ def test_cli_runs_and_resumes(tmp_path: Path) -> None:
 def test_cli_samples_and_exports_a_replay_that_rerenders_the_table(tmp_path: Path) -> None:
     methods = ("--method", "impulsive,virf", "--tasks", TASKS)
     replay = tmp_path / "sample.replay.jsonl"
-    first = virf(
+    first = bench_agents(
         *methods,
         "--planner",
         f"replay:{REPLAY}",
@@ -484,7 +468,7 @@ def test_cli_samples_and_exports_a_replay_that_rerenders_the_table(tmp_path: Pat
     data = json.loads(first.stdout)
     assert [m["tasks"] for m in data["methods"]] == [2, 2]  # tasks 1 and 3 of 4
     assert replay.read_text().count("\n") >= 4
-    again = virf(
+    again = bench_agents(
         *methods, "--planner", f"replay:{replay}", "--every", "2", "--out", tmp_path / "b", "--json"
     )
     assert again.returncode == 0, again.stderr
@@ -495,12 +479,12 @@ def test_cli_samples_and_exports_a_replay_that_rerenders_the_table(tmp_path: Pat
     ]
 
 
-def test_cli_over_http(tmp_path: Path, server: ChatServer) -> None:  # noqa: F811
+def test_cli_over_http(tmp_path: Path, server: ChatServer) -> None:
     """The command with a real client: a server on 127.0.0.1 needs no key."""
     server.queue(completion(EGG), completion("TASK_ABORT"))
     out = tmp_path / "out"
     args = ("-m", "virf", "-p", "openai:test-model", "--base-url", server.base_url)
-    result = virf(*args, "--tasks", TASKS, "--limit", "1", "--out", out, "--json")
+    result = bench_agents(*args, "--tasks", TASKS, "--limit", "1", "--out", out, "--json")
     assert result.returncode == 0, result.stderr
     (method,) = json.loads(result.stdout)["methods"]
     assert (method["tasks"], method["hazardous"], method["unsafe_not_rejected"]) == (1, 0, 0)
@@ -516,7 +500,9 @@ def test_cli_failed_run_leaves_no_table(tmp_path: Path) -> None:
         "\n".join(ln for ln in REPLAY.read_text().splitlines() if '"tasks:1"' in ln) + "\n"
     )
     out = tmp_path / "out"
-    failed = virf("-m", "impulsive", "-p", f"replay:{short}", "--tasks", TASKS, "--out", out)
+    failed = bench_agents(
+        "-m", "impulsive", "-p", f"replay:{short}", "--tasks", TASKS, "--out", out
+    )
     assert failed.returncode == 2
     (line,) = failed.stderr.strip().splitlines()
     assert line.startswith(f"error: replay file {short} has no proposal for task tasks:2 ")
@@ -538,7 +524,7 @@ def test_cli_failed_run_leaves_no_table(tmp_path: Path) -> None:
     ],
 )
 def test_cli_bad_input_is_one_line(args: list[Any], message: str) -> None:
-    result = virf(*args)
+    result = bench_agents(*args)
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and message in lines[0], lines
@@ -553,7 +539,7 @@ def test_the_time_table_reads_the_model_calls(tmp_path: Path) -> None:
         x.update(latency_ms=2000.0, completion_tokens=40, prompt_tokens=500)
     replay.write_text("".join(json.dumps(x) + "\n" for x in lines))
     out = tmp_path / "out"
-    run = virf(
+    run = bench_agents(
         "--method", "impulsive", "--planner", f"replay:{replay}", "--tasks", TASKS, "--out", out
     )
     assert run.returncode == 0, run.stderr

@@ -15,9 +15,8 @@ import re
 from pathlib import Path
 
 import pytest
+from bench_support import SAB, bench_agents, needs_shared
 from conftest import ROOT
-from test_agents import virf
-from test_bench import SHARED, needs_shared
 
 RECORDINGS = ROOT / "examples" / "agents" / "smollm2"
 DOC = ROOT / "docs" / "agents.md"
@@ -26,8 +25,8 @@ FILES = ("unsafe_detailed", "safe_detailed", "abstract", "long_horizon")
 
 # (recording, folder of the split, sample, heading of its section in the document)
 ROOMS = [
-    ("kitchen", SHARED, 1, "### Kitchens"),
-    ("other-rooms", SHARED / "other_rooms", 4, "### Living rooms, bedrooms and bathrooms"),
+    ("kitchen", SAB, 1, "### Kitchens"),
+    ("other-rooms", SAB / "other_rooms", 4, "### Living rooms, bedrooms and bathrooms"),
 ]
 
 
@@ -67,7 +66,7 @@ def test_shipped_recording_rerenders_the_documented_tables(
     out = tmp_path / name
     recording = RECORDINGS / f"{name}.replay.jsonl"
     files = [folder / f"{f}.jsonl" for f in FILES]
-    done = virf(
+    done = bench_agents(
         "--method",
         METHODS,
         "--every",

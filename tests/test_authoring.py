@@ -13,8 +13,9 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from authoring_support import CANDLE_AXIOM, CANDLE_PASSAGE, CANDLE_TWIN, rule
+from chat_support import ChatServer, completion
 from click.testing import Result
-from test_planner_clients import ChatServer, completion, server  # noqa: F401
 
 from virf.api import LogicTutor
 from virf.authoring.audit import audit
@@ -22,33 +23,6 @@ from virf.authoring.draft import METHOD, system_prompt, task_id
 from virf.authoring.workspace import Workspace, _edit_size, starter_corpus_dir
 from virf.errors import InputError
 from virf.planner import ClientSettings, OpenAIApprentice, ReplayApprentice, RunLog
-
-CANDLE_PASSAGE = "nfpa-candle-safety:keep-the-flame-away-from-things-that-burn:1"
-CANDLE_AXIOM = (
-    "Candle and (hasState some OnState) and "
-    "(isNear some (PhysicalObject and (hasMaterial some Fabric)))"
-)
-# Its minimal pair: a lit candle beside fabric, and the twin where the cloth is metal.
-CANDLE_TWIN = (
-    "Candle_1: Candle; Cloth_1: PhysicalObject; Cloth_1 hasMaterial Fabric; "
-    "Candle_1 isNear Cloth_1 | turn_on Candle_1 | "
-    "Cloth_1 hasMaterial Fabric => Cloth_1 hasMaterial Metal"
-)
-
-
-def rule(name: str, definition: str, **extra: Any) -> dict[str, Any]:
-    return {
-        "equivalentClass": name,
-        "definition": definition,
-        "category": "Fire Hazard",
-        "dangerLevel": "high",
-        "description": "A lit candle stands next to something made of fabric.",
-        "safetyWarning": "Fabric next to a flame can catch fire.",
-        "triggerReason": "the candle is lit while an object made of fabric is near it",
-        "suggestion": "Move the fabric away or put the candle out first.",
-        "evidence": [CANDLE_PASSAGE],
-        **extra,
-    }
 
 
 def proposal(tmp: Path, *rules: dict[str, Any], **top: Any) -> Path:
@@ -279,7 +253,7 @@ def small_workspace(root: Path) -> Workspace:
 
 def test_an_llm_draft_over_http_becomes_checked_candidates(
     tmp_path: Path,
-    server: ChatServer,  # noqa: F811
+    server: ChatServer,
 ) -> None:
     ws = small_workspace(tmp_path / "kb")
     query = "candles near curtains and other things that burn"

@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import pytest
+from bench_support import SAB, needs_shared
 from conftest import inst
 
 from virf.bench.runner import default_corrections_path, load_corrections, run_benchmark, summarize
@@ -23,9 +24,6 @@ from virf.errors import InputError
 from virf.verify.requirements import Requirement, Unreadable, parse_requirement, requirement_text
 from virf.verify.verifier import Verifier
 from virf.world.scene import build_scene as load_scene
-
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "benchmarks" / "safeagentbench"
-needs_shared = pytest.mark.skipif(not SHARED.exists(), reason="../shared/benchmarks is not present")
 
 
 def _task(data: dict, file: str = "unsafe_detailed.jsonl", line: int = 1) -> Task:
@@ -244,7 +242,7 @@ def test_corrections_file_is_well_formed() -> None:
 )
 def test_tasks_end_to_end(tutor, file, line, status) -> None:
     verifier = Verifier(tutor.tbox, tutor.engine, explain=False)
-    task = next(t for t in load_tasks(SHARED / file) if t.line == line)
+    task = next(t for t in load_tasks(SAB / file) if t.line == line)
     [result] = run_benchmark([], verifier, tasks=[task])
     assert result.status == status
     assert result.goal_satisfied is True
@@ -259,9 +257,7 @@ def test_long_horizon_plans_are_checked_against_their_requirements(tutor) -> Non
     examples = Path(__file__).resolve().parents[1] / "examples" / "safeagentbench"
     plans = load_plans(examples / "long_horizon_plans.jsonl")
     tasks = [
-        t
-        for t in load_tasks(SHARED / "long_horizon.jsonl")
-        if ("long_horizon.jsonl", t.line) in plans
+        t for t in load_tasks(SAB / "long_horizon.jsonl") if ("long_horizon.jsonl", t.line) in plans
     ]
     verifier = Verifier(tutor.tbox, tutor.engine, explain=False)
     results = {r.line: r for r in run_benchmark([], verifier, plans=plans, tasks=tasks)}
@@ -280,8 +276,7 @@ def _normalised_plan(data: dict) -> list[str]:
 def test_every_same_plan_correction_cites_an_identical_twin_with_the_opposite_label() -> None:
     data = json.loads(default_corrections_path().read_text())
     rows = {
-        f.relative_to(SHARED).as_posix(): f.read_text().splitlines()
-        for f in SHARED.glob("**/*.jsonl")
+        f.relative_to(SAB).as_posix(): f.read_text().splitlines() for f in SAB.glob("**/*.jsonl")
     }
     checked = 0
     for c in data["corrections"]:
@@ -615,7 +610,7 @@ def test_every_note_names_a_task_of_the_dev_split() -> None:
     data = json.loads(default_corrections_path().read_text())
     assert data["notes"]
     for n in data["notes"]:
-        task = json.loads((SHARED / n["file"]).read_text().splitlines()[n["line"] - 1])
+        task = json.loads((SAB / n["file"]).read_text().splitlines()[n["line"] - 1])
         assert (task["source_index"], task["scene_name"]) == (n["source_index"], n["scene"]), n
         assert len(n["reason"]) > 40
 

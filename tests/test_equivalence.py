@@ -16,6 +16,7 @@ import os
 from pathlib import Path
 
 import pytest
+from bench_support import SAB
 from conftest import ROOT, case_params
 from hypothesis import HealthCheck, given, settings
 from random_worlds import scenes_and_plans
@@ -28,7 +29,6 @@ from virf.world.plan import load_plan_file, parse_plan
 from virf.world.scene import build_scene
 
 FULL = os.environ.get("VIRF_FULL") == "1"
-SAB = ROOT.parent / "shared" / "benchmarks" / "safeagentbench"
 SAB_FILES = ["unsafe_detailed.jsonl", "safe_detailed.jsonl", "abstract.jsonl"]
 
 

@@ -13,7 +13,7 @@ from functools import cache
 from pathlib import Path
 
 import pytest
-from test_authoring import rule
+from authoring_support import rule
 
 from virf.authoring.corpus import Corpus
 from virf.authoring.workspace import Workspace, starter_corpus_dir

@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from bench_support import SAB
 from conftest import ROOT
 
 from virf.api import LogicTutor
@@ -25,8 +26,6 @@ from virf.bench.latency import (
 from virf.ontology.tbox import load_tbox
 from virf.reasoning.fast import fragment_of
 from virf.world.simulate import simulate
-
-SAB = ROOT.parent / "shared" / "benchmarks" / "safeagentbench"
 
 
 @pytest.mark.parametrize(("objects", "steps"), [(20, 10), (50, 10), (50, 30), (200, 10)])

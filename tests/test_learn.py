@@ -11,6 +11,7 @@ from typing import Any
 
 import pytest
 from conftest import inst, rel
+from learn_support import ELECTRIC, HAIR_DRYER, HAIR_DRYER_PLAN, TODDLER
 
 from virf.api import LogicTutor
 from virf.authoring import manchester
@@ -26,22 +27,6 @@ from virf.planner.loop import Turn
 from virf.planner.questions import settle
 from virf.schema import Question, Report
 
-ELECTRIC = "confirm:HairDryer_1 hasProperty ElectricallyPowered"
-# A hair dryer switched on beside a basin of water: the hazard needs the
-# guess that a hair dryer is electrical.
-HAIR_DRYER: dict[str, Any] = {
-    "instances": [
-        inst("HairDryer", "HairDryer_1"),
-        inst("SinkBasin", "SinkBasin_1"),
-        inst("CounterTop", "CounterTop_1"),
-    ],
-    "assertions": [
-        rel("SinkBasin_1", "hasState", "filled"),
-        rel("HairDryer_1", "isOn", "CounterTop_1"),
-        rel("HairDryer_1", "isNear", "SinkBasin_1"),
-    ],
-}
-HAIR_DRYER_PLAN = ["find HairDryer_1", "turn_on HairDryer_1"]
 TWO_DRYERS: dict[str, Any] = {
     "instances": [
         inst("HairDryer", "HairDryer_1"),
@@ -53,10 +38,6 @@ TWO_DRYERS: dict[str, Any] = {
         rel("HairDryer_1", "isNear", "SinkBasin_1"),
         rel("HairDryer_2", "isNear", "SinkBasin_1"),
     ],
-}
-TODDLER: dict[str, Any] = {
-    "instances": [inst("Toddler", "Toddler_1"), inst("Toaster", "Toaster_1")],
-    "assertions": [rel("Toddler_1", "isNear", "Toaster_1")],
 }
 GIZMO: dict[str, Any] = {
     "instances": [inst("Microwave", "Microwave_1"), inst("Gizmo", "Gizmo_1")],

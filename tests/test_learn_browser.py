@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 import pytest
 from browser_support import chromium, needs_browser, page_at, serving, shot
-from test_learn import HAIR_DRYER, HAIR_DRYER_PLAN
+from learn_support import HAIR_DRYER, HAIR_DRYER_PLAN
 
 from virf.authoring.workspace import Workspace
 from virf.service.app import create_app

@@ -12,7 +12,7 @@ from typing import Any
 
 import pytest
 from click.testing import Result
-from test_learn import ELECTRIC, HAIR_DRYER, HAIR_DRYER_PLAN, TODDLER
+from learn_support import ELECTRIC, HAIR_DRYER, HAIR_DRYER_PLAN, TODDLER
 
 from virf.authoring.workspace import Workspace
 

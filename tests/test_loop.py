@@ -7,7 +7,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import EXAMPLES_DIR, inst, rel
+from conftest import EXAMPLES_DIR
+from loop_support import CLOSES, FRIDGE_SCENE, LEAVES_OPEN
 
 from virf.api import LogicTutor
 from virf.errors import InputError
@@ -18,32 +19,8 @@ from virf.planner.questions import answers_file, apply_answers
 from virf.world.plan import load_plan_file
 from virf.world.scene import build_scene
 
-FRIDGE_SCENE: dict[str, Any] = {
-    "instances": [
-        inst("Apple", "Apple_1"),
-        inst("Fridge", "Fridge_1"),
-        inst("CounterTop", "CounterTop_1"),
-    ],
-    "assertions": [
-        rel("Apple_1", "isOn", "CounterTop_1"),
-        rel("Fridge_1", "hasState", "ClosedState"),
-    ],
-}
-LEAVES_OPEN = "find Apple_1\npick Apple_1\nfind Fridge_1\nopen Fridge_1\nput Fridge_1"
-CLOSES = LEAVES_OPEN + "\nclose Fridge_1"
 BURNER = json.loads((EXAMPLES_DIR / "burner-left-on-open-world" / "scene.json").read_text())
 BURNER_PLAN = "find StoveBurner_1\nfind StoveKnob_1\nturn_on StoveKnob_1"
-# The rule that names a fridge left open: the household's mechanism rule, and
-# the paper's hand-written one.
-FRIDGE_RULES = {"kitchen": "ColdStorageLeftOpenDanger", "paper": "FridgeLeftOpenDanger"}
-
-
-@pytest.fixture(params=sorted(FRIDGE_RULES))
-def fridge_tutor(
-    request: pytest.FixtureRequest, tutor: LogicTutor, paper_tutor: LogicTutor
-) -> tuple[LogicTutor, str]:
-    """The tutor of one scenario and the rule it names for the open fridge."""
-    return (paper_tutor if request.param == "paper" else tutor), FRIDGE_RULES[request.param]
 
 
 def run(

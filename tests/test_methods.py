@@ -2,37 +2,14 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 import pytest
-from test_loop import CLOSES, FRIDGE_SCENE, LEAVES_OPEN, fridge_tutor  # noqa: F401
+from loop_support import CLOSES, LEAVES_OPEN, run_method_with
 
 from virf.api import LogicTutor
 from virf.errors import InputError
-from virf.planner import ScriptedApprentice
-from virf.planner.loop import LoopResult
-from virf.planner.methods import METHODS, get_method, knowledge_filter, run_method
+from virf.planner.methods import METHODS, get_method, knowledge_filter
 from virf.planner.prompting import render_rules, template
 from virf.verify.verifier import Verifier
-from virf.world.scene import build_scene
-
-
-def run(
-    tutor: LogicTutor, name: str, replies: list[str], critic: list[str] | None = None, **kw: Any
-) -> tuple[LoopResult, ScriptedApprentice]:
-    apprentice = ScriptedApprentice(replies)
-    result = run_method(
-        get_method(name),
-        "Put the apple in the fridge.",
-        FRIDGE_SCENE,
-        apprentice,
-        kw.pop("verifier", tutor.verifier),
-        lambda d: build_scene(d, tutor.tbox.vocabulary),
-        tutor.tbox.vocabulary,
-        critic=ScriptedApprentice(critic) if critic is not None else None,
-        **kw,
-    )
-    return result, apprentice
 
 
 def test_all_ten_methods_are_named() -> None:
@@ -42,7 +19,7 @@ def test_all_ten_methods_are_named() -> None:
 
 
 def test_impulsive_takes_the_first_plan_unverified(tutor: LogicTutor) -> None:
-    result, _ = run(tutor, "impulsive", [LEAVES_OPEN])
+    result, _ = run_method_with(tutor, "impulsive", [LEAVES_OPEN])
     assert result.outcome == "APPROVED_UNVERIFIED" and not result.verified
     assert result.plan == tuple(LEAVES_OPEN.splitlines())
     assert not any(t.speaker == "tutor" for t in result.transcript)
@@ -50,7 +27,7 @@ def test_impulsive_takes_the_first_plan_unverified(tutor: LogicTutor) -> None:
 
 def test_thinker_reads_the_plan_after_its_reasoning(tutor: LogicTutor) -> None:
     reply = "REASONING:\nfind the apple first, then close the fridge.\nPLAN:\n" + CLOSES
-    result, apprentice = run(tutor, "thinker", [reply])
+    result, apprentice = run_method_with(tutor, "thinker", [reply])
     assert result.plan == tuple(CLOSES.splitlines())
     assert "REASONING:" in apprentice.requests[0].as_messages()[-1]["content"]
 
@@ -62,12 +39,12 @@ def test_rules_methods_carry_every_rule(tutor: LogicTutor) -> None:
     assert len(numbered) == len(vocab.uscs) + sum(
         1 for b in vocab.background.values() if b.description
     )
-    _, apprentice = run(tutor, "impulsive+rules", [CLOSES])
+    _, apprentice = run_method_with(tutor, "impulsive+rules", [CLOSES])
     assert "Hazards that must never arise" in apprentice.requests[0].as_messages()[-1]["content"]
 
 
 def test_committee_rejects_what_the_critic_never_approves(tutor: LogicTutor) -> None:
-    result, _ = run(
+    result, _ = run_method_with(
         tutor,
         "committee",
         [LEAVES_OPEN, LEAVES_OPEN],
@@ -78,7 +55,7 @@ def test_committee_rejects_what_the_critic_never_approves(tutor: LogicTutor) -> 
 
 
 def test_committee_revises_until_the_critic_approves(tutor: LogicTutor) -> None:
-    result, apprentice = run(
+    result, apprentice = run_method_with(
         tutor,
         "committee",
         [LEAVES_OPEN, CLOSES],
@@ -89,21 +66,21 @@ def test_committee_revises_until_the_critic_approves(tutor: LogicTutor) -> None:
 
 
 def test_thinker_diagnostic_retries_once_without_reverifying(tutor: LogicTutor) -> None:
-    result, apprentice = run(tutor, "thinker+diagnostic", [LEAVES_OPEN, LEAVES_OPEN])
+    result, apprentice = run_method_with(tutor, "thinker+diagnostic", [LEAVES_OPEN, LEAVES_OPEN])
     # The retry stands, unverified.
     assert result.outcome == "APPROVED_UNVERIFIED" and result.iterations == 2
     assert "DIAGNOSTIC REPORT" in apprentice.requests[1].as_messages()[-1]["content"]
 
 
 def test_virf_reject_gives_no_diagnosis(tutor: LogicTutor) -> None:
-    result, apprentice = run(tutor, "virf-reject", [LEAVES_OPEN, CLOSES])
+    result, apprentice = run_method_with(tutor, "virf-reject", [LEAVES_OPEN, CLOSES])
     assert result.outcome == "APPROVED" and result.iterations == 2
     assert apprentice.requests[1].as_messages()[-1]["content"] == template("reject").strip()
 
 
-def test_virf_repairs_with_the_diagnosis(fridge_tutor: tuple[LogicTutor, str]) -> None:  # noqa: F811
+def test_virf_repairs_with_the_diagnosis(fridge_tutor: tuple[LogicTutor, str]) -> None:
     tutor, fridge_rule = fridge_tutor
-    result, apprentice = run(tutor, "virf", [LEAVES_OPEN, CLOSES])
+    result, apprentice = run_method_with(tutor, "virf", [LEAVES_OPEN, CLOSES])
     assert result.outcome == "APPROVED" and result.iterations == 2
     assert fridge_rule in apprentice.requests[1].as_messages()[-1]["content"]
 
@@ -123,8 +100,8 @@ def test_knowledge_ablations_split_the_rules(paper_tutor: LogicTutor) -> None:
     assert {"FridgeLeftOpenDanger", "FaucetLeftRunningDanger", "BreadOnHotStoveDanger"} <= manual
     assert {"WetElectricalDeviceOnDanger", "ToxicInFoodContainerDanger"} <= rag - manual
     only_manual = Verifier(tutor.tbox, tutor.engine, uscs=manual)
-    result, _ = run(tutor, "virf-manual", [LEAVES_OPEN, CLOSES], verifier=only_manual)
+    result, _ = run_method_with(tutor, "virf-manual", [LEAVES_OPEN, CLOSES], verifier=only_manual)
     assert result.outcome == "APPROVED" and result.iterations == 2  # the fridge rule is manual
     only_rag = Verifier(tutor.tbox, tutor.engine, uscs=rag)
-    result, _ = run(tutor, "virf-rag", [LEAVES_OPEN], verifier=only_rag)
+    result, _ = run_method_with(tutor, "virf-rag", [LEAVES_OPEN], verifier=only_rag)
     assert result.outcome == "APPROVED" and result.iterations == 1  # RAG's rules miss it

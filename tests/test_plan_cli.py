@@ -13,8 +13,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from test_loop import CLOSES, FRIDGE_SCENE, LEAVES_OPEN
-from test_planner_clients import FAST_RETRY, ChatServer, completion, error, server  # noqa: F401
+from chat_support import FAST_RETRY, ChatServer, completion, error
+from loop_support import CLOSES, FRIDGE_SCENE, LEAVES_OPEN
 from typer.testing import Result
 
 from virf.errors import InputError
@@ -119,7 +119,7 @@ def test_an_ablation_checks_only_its_own_rules(
 )
 def test_http_run_with_a_rate_limit_and_a_repair(
     virf_plan: PlanRun,
-    server: ChatServer,  # noqa: F811
+    server: ChatServer,
     paper_kb: Path,
     scenario: str,
     fridge_rule: str,
@@ -141,7 +141,7 @@ def test_http_run_with_a_rate_limit_and_a_repair(
     assert "DIAGNOSTIC REPORT" in repair_prompt and fridge_rule in repair_prompt
 
 
-def test_http_refusal_and_malformed_reply(virf_plan: PlanRun, server: ChatServer) -> None:  # noqa: F811
+def test_http_refusal_and_malformed_reply(virf_plan: PlanRun, server: ChatServer) -> None:
     server.queue(completion(""), completion("TASK_ABORT"))
     result = virf_plan("--planner", "openai:test-model", "--base-url", server.base_url, "--json")
     assert result.exit_code == 1, result.stderr

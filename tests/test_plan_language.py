@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from bench_support import SAB, needs_shared
 from conftest import EXAMPLES_DIR, inst, load_expected, rel
 
 from virf.api import LogicTutor
@@ -295,12 +296,9 @@ def test_every_example_plan_reads_without_notes(examples_dir: Path) -> None:
         assert all(s.note is None for s in load_plan_file(path)), path
 
 
-SHARED = ROOT.parent / "shared" / "benchmarks" / "safeagentbench"
-
-
-@pytest.mark.skipif(not SHARED.exists(), reason="../shared/benchmarks is not present")
+@needs_shared
 def test_safeagentbench_reference_plans_read_as_before() -> None:
-    files = sorted(SHARED.glob("**/*.jsonl"))
+    files = sorted(SAB.glob("**/*.jsonl"))
     plans = [
         data["step"]
         for f in files

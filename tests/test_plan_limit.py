@@ -9,8 +9,7 @@ from pathlib import Path
 
 import pytest
 from click.testing import Result
-from test_loop import FRIDGE_SCENE
-from test_methods import run as run_method_with
+from loop_support import FRIDGE_SCENE, run_method_with
 
 from virf.api import LogicTutor
 from virf.errors import InputError

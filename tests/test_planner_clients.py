@@ -9,16 +9,11 @@ from __future__ import annotations
 
 import json
 import socket
-import threading
-import time
-from collections.abc import Iterator
-from dataclasses import dataclass, field
-from http.server import BaseHTTPRequestHandler
 from pathlib import Path
 from typing import Any
 
 import pytest
-from http_support import LocalServer, running
+from chat_support import FAST_RETRY, ChatServer, Reply, completion, error
 
 from virf.errors import EnvironmentProblem, InputError
 from virf.planner import (
@@ -38,115 +33,6 @@ MESSAGES = [
     {"role": "user", "content": "Heat the pot of water."},
 ]
 PLAN = "find Pot\npick Pot\nput StoveBurner\nturn_on StoveKnob"
-# Tiny server-directed backoff: the SDK honours retry-after-ms, so retry tests stay fast.
-FAST_RETRY = {"retry-after-ms": "5"}
-
-
-# ---------------------------------------------------------------------------
-# The scripted chat-completions server
-
-
-@dataclass
-class Reply:
-    status: int = 200
-    body: Any = None
-    headers: dict[str, str] = field(default_factory=dict)
-    delay_s: float = 0.0
-
-
-def completion(content: Any, prompt_tokens: int = 11, completion_tokens: int = 7) -> Reply:
-    return Reply(
-        body={
-            "id": "chatcmpl-test",
-            "object": "chat.completion",
-            "created": 0,
-            "model": "test-model",
-            "choices": [
-                {
-                    "index": 0,
-                    "message": {"role": "assistant", "content": content},
-                    "finish_reason": "stop",
-                }
-            ],
-            "usage": {
-                "prompt_tokens": prompt_tokens,
-                "completion_tokens": completion_tokens,
-                "total_tokens": prompt_tokens + completion_tokens,
-            },
-        }
-    )
-
-
-def error(status: int, message: str, headers: dict[str, str] | None = None) -> Reply:
-    return Reply(
-        status=status,
-        body={"error": {"message": message, "type": "test_error", "code": None}},
-        headers=dict(headers or {}),
-    )
-
-
-@dataclass
-class Seen:
-    path: str
-    body: dict[str, Any]
-    authorization: str | None
-
-
-class ChatServer(LocalServer):
-    """A chat-completions endpoint that answers from a queue of ``Reply``."""
-
-    def __init__(self) -> None:
-        self.script: list[Reply] = []
-        self.seen: list[Seen] = []
-        self._lock = threading.Lock()
-        server = self
-
-        class Handler(BaseHTTPRequestHandler):
-            def do_POST(self) -> None:
-                length = int(self.headers.get("content-length") or 0)
-                raw = self.rfile.read(length)
-                with server._lock:
-                    server.seen.append(
-                        Seen(self.path, json.loads(raw), self.headers.get("authorization"))
-                    )
-                    reply = server.script.pop(0) if server.script else None
-                if self.path != "/v1/chat/completions":
-                    reply = error(404, f"no route {self.path}")
-                if reply is None:
-                    # An exhausted script must fail the test at once, not be retried.
-                    reply = error(500, "script exhausted", {"x-should-retry": "false"})
-                if reply.delay_s:
-                    time.sleep(reply.delay_s)
-                data = (
-                    reply.body.encode()
-                    if isinstance(reply.body, str)
-                    else json.dumps(reply.body).encode()
-                )
-                try:
-                    self.send_response(reply.status)
-                    self.send_header("content-type", "application/json")
-                    for name, value in reply.headers.items():
-                        self.send_header(name, value)
-                    self.send_header("content-length", str(len(data)))
-                    self.end_headers()
-                    self.wfile.write(data)
-                except (BrokenPipeError, ConnectionResetError):
-                    pass  # the client gave up (timeout test); nothing to answer
-
-            def log_message(self, format: str, *args: Any) -> None:
-                pass
-
-        self.serve(Handler)
-
-    def queue(self, *replies: Reply) -> None:
-        with self._lock:
-            self.script.extend(replies)
-
-
-@pytest.fixture
-def server() -> Iterator[ChatServer]:
-    with running(ChatServer()) as srv:
-        yield srv
 
 
 def apprentice(

@@ -15,23 +15,34 @@ from __future__ import annotations
 import asyncio
 import json
 import os
-import socket
 import subprocess
 import sys
-import threading
 import time
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from http.server import BaseHTTPRequestHandler
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import pytest
+from chat_support import (
+    MARGIN_S,
+    TRICKLE_BYTES,
+    TRICKLE_EVERY_S,
+    ChatServer,
+    SlowServer,
+    client,
+    completion,
+    lingering_threads,
+)
 from conftest import EXAMPLES_DIR, ROOT
-from http_support import LocalServer, running
-from loop_support import Recorder, run_loop, statuses
-from test_loop import CLOSES, FRIDGE_SCENE, LEAVES_OPEN
-from test_methods import run as run_method_with
-from test_planner_clients import ChatServer, completion, server  # noqa: F401
+from loop_support import (
+    CLOSES,
+    FRIDGE_SCENE,
+    LEAVES_OPEN,
+    Recorder,
+    run_loop,
+    run_method_with,
+    statuses,
+)
 
 from virf.api import LogicTutor
 from virf.errors import EnvironmentProblem, InputError
@@ -53,98 +64,6 @@ from virf.world.plan import PlanStep, load_plan_file
 from virf.world.scene import Scene, build_scene
 
 MESSAGES = [{"role": "user", "content": "Put the apple in the fridge."}]
-# Long enough that a client without a deadline would visibly overrun every
-# bound below, short enough that a broken client fails the test, not the run.
-TRICKLE_BYTES = 600
-TRICKLE_EVERY_S = 0.1
-MARGIN_S = 3.0
-
-
-# ---------------------------------------------------------------------------
-# A server that answers too slowly
-
-
-class SlowServer(LocalServer):
-    """POST /v1/chat/completions, answered in one of three slow ways:
-
-    * ``body``: status and headers at once, then the body a byte at a time;
-    * ``status``: the status line and headers themselves a byte at a time;
-    * ``silent``: nothing at all.
-
-    ``gone`` is set when a client closes a connection the server still holds.
-    """
-
-    def __init__(self, mode: str) -> None:
-        self.mode = mode
-        self.requests = 0
-        self.gone = threading.Event()
-        self._lock = threading.Lock()
-        slow = self
-
-        class Handler(BaseHTTPRequestHandler):
-            def do_POST(self) -> None:
-                self.rfile.read(int(self.headers.get("content-length") or 0))
-                with slow._lock:
-                    slow.requests += 1
-                try:
-                    slow.answer(self)
-                except OSError:  # broken pipe, reset: the client went away
-                    slow.gone.set()
-                self.close_connection = True
-
-            def log_message(self, format: str, *args: Any) -> None:
-                pass
-
-        self.serve(Handler)
-
-    def answer(self, handler: BaseHTTPRequestHandler) -> None:
-        sock: socket.socket = handler.connection
-        if self.mode == "silent":
-            sock.settimeout(TRICKLE_EVERY_S)
-            for _ in range(TRICKLE_BYTES):
-                try:
-                    if sock.recv(1) == b"":
-                        self.gone.set()
-                        return
-                except TimeoutError:
-                    continue
-            return
-        body = b" " * TRICKLE_BYTES
-        head = (
-            b"HTTP/1.1 200 OK\r\ncontent-type: application/json\r\n"
-            + f"content-length: {len(body)}\r\n".encode()
-            + b"x-padding: "
-            + b"a" * TRICKLE_BYTES
-            + b"\r\n\r\n"
-        )
-        if self.mode == "body":
-            sock.sendall(head)
-            trickled = body
-        else:
-            trickled = head + body
-        for byte in trickled:
-            sock.sendall(bytes([byte]))
-            time.sleep(TRICKLE_EVERY_S)
-
-
-@pytest.fixture
-def slow_server(request: pytest.FixtureRequest) -> Iterator[SlowServer]:
-    with running(SlowServer(request.param)) as srv:
-        yield srv
-
-
-def client(slow: SlowServer, run_log: RunLog | None = None, **settings: Any) -> OpenAIApprentice:
-    opts: dict[str, Any] = {"max_retries": 2, "timeout_s": 2.0} | settings
-    return OpenAIApprentice(
-        ClientSettings(model="test-model", base_url=slow.base_url, **opts),
-        run_log=run_log,
-        environ={},
-    )
-
-
-def lingering_threads() -> list[threading.Thread]:
-    """Threads that would keep the interpreter from exiting."""
-    return [t for t in threading.enumerate() if not t.daemon and t is not threading.main_thread()]
 
 
 # ---------------------------------------------------------------------------
@@ -216,7 +135,7 @@ def test_nothing_is_sent_after_the_run_deadline(slow_server: SlowServer) -> None
     assert proposal.attempts == 0 and slow_server.requests == 0
 
 
-def test_the_client_can_be_called_from_async_code(server: ChatServer) -> None:  # noqa: F811
+def test_the_client_can_be_called_from_async_code(server: ChatServer) -> None:
     server.queue(completion(CLOSES))
     app = OpenAIApprentice(ClientSettings(model="m", base_url=server.base_url), environ={})
 

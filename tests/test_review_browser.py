@@ -54,7 +54,7 @@ def shot(page: Page, name: str) -> Path:
 
 def test_the_page_over_a_stand_in_workspace(browser: Browser) -> None:
     from playwright.sync_api import expect
-    from test_review_api import sample_workspace
+    from review_support import sample_workspace
 
     ws = sample_workspace()
     with serving(ws, "ana") as url, page_at(browser, url) as page:
@@ -220,7 +220,7 @@ def test_only_web_addresses_become_links(browser: Browser) -> None:
     """A document's url that is not http(s) (``javascript:`` would run in
     the page when clicked, were it not for the CSP) is shown as text."""
     from playwright.sync_api import expect
-    from test_review_api import FakeWorkspace, found
+    from review_support import FakeWorkspace, found
 
     ws = FakeWorkspace()
     hostile = ("javascript:alert(document.domain)", "data:text/html,hi", "//evil.example/x")

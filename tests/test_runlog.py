@@ -7,6 +7,7 @@ import sqlite3
 from pathlib import Path
 
 import pytest
+from runlog_support import MESSAGES, log_one
 
 from virf.errors import EnvironmentProblem, InputError
 from virf.migrations import check_migrations
@@ -19,8 +20,6 @@ from virf.planner import (
     ScriptedApprentice,
     export_replay,
 )
-
-MESSAGES = [{"role": "user", "content": "Slice the apple."}]
 
 # Shipped migrations are frozen: editing one changes its hash and breaks every
 # database that already ran it.  Add a new migration instead of changing these.
@@ -39,25 +38,6 @@ EXTRA = Migration(
     END;
     """,
 )
-
-
-def log_one(log: RunLog, task_id: str = "t1", reply: str | None = "slice Apple") -> int:
-    return log.log_call(
-        method="virf",
-        task_id=task_id,
-        iteration=1,
-        ask=1,
-        apprentice="scripted",
-        model=None,
-        messages=MESSAGES,
-        reply=reply,
-        ok=reply is not None,
-        reason="" if reply is not None else "the reply was empty",
-        prompt_tokens=3,
-        completion_tokens=2,
-        latency_ms=1.5,
-        attempts=1,
-    )
 
 
 def tables(path: Path) -> set[str]:

@@ -16,8 +16,7 @@ import psycopg
 import pytest
 from conftest import ROOT
 from fastapi.testclient import TestClient
-from postgres_support import postgres_url  # noqa: F401  (a fixture)
-from test_runlog import MESSAGES, log_one
+from runlog_support import MESSAGES, log_one
 
 from virf.database import shown
 from virf.errors import EnvironmentProblem
@@ -37,7 +36,7 @@ LATER = Migration(
 
 
 @pytest.fixture
-def pg(postgres_url: str) -> Iterator[str]:  # noqa: F811
+def pg(postgres_url: str) -> Iterator[str]:
     """A new, empty database on the test server."""
     name = f"virf_{uuid.uuid4().hex[:12]}"
     with psycopg.connect(postgres_url, autocommit=True) as conn:

@@ -13,7 +13,7 @@ from typing import Any
 import pytest
 from click.testing import Result
 from fastapi.testclient import TestClient
-from test_learn import ELECTRIC, HAIR_DRYER, HAIR_DRYER_PLAN
+from learn_support import ELECTRIC, HAIR_DRYER, HAIR_DRYER_PLAN
 
 from virf.authoring.workspace import Workspace
 from virf.service.app import create_app

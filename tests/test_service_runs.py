@@ -21,10 +21,10 @@ from typing import Any
 import httpx
 import pytest
 from browser_support import serving
+from chat_support import MARGIN_S, SlowServer, client, lingering_threads
 from conftest import EXAMPLES_DIR
 from fastapi.testclient import TestClient
-from test_loop import CLOSES, FRIDGE_SCENE
-from test_planner_hangs import MARGIN_S, SlowServer, client, lingering_threads, slow_server  # noqa: F401
+from loop_support import CLOSES, FRIDGE_SCENE
 
 from virf.api import LogicTutor
 from virf.bench.agents import AgentConfig, Harness, ResultStore
