@@ -7,7 +7,10 @@ import json
 import os
 import subprocess
 import sys
+from dataclasses import replace
+from functools import cache
 from pathlib import Path
+from types import MappingProxyType
 
 import pytest
 
@@ -24,11 +27,68 @@ def test_every_artifact_was_compiled_from_the_modules_as_they_are() -> None:
     assert kbc.stale_artifacts() == [], "run 'make kb' and commit src/virf/ontology/compiled"
 
 
+@cache
+def _rebuilt(scenario: str) -> kbc.CompiledKB:
+    return kbc.compile_kb(OwlModules(scenario, ontology_dir()), kbc.source_digest())
+
+
 @pytest.mark.parametrize("scenario", scenario_names())
 def test_rebuilding_an_artifact_with_the_jvm_gives_the_same_bytes(scenario: str) -> None:
-    rebuilt = kbc.to_json(kbc.compile_kb(OwlModules(scenario, ontology_dir()), kbc.source_digest()))
-    shipped = kbc.artifact_path(scenario).read_text(encoding="utf-8")
+    rebuilt = kbc.to_json(_rebuilt(scenario))
+    # Through the index: a scenario that shares another's file gets its own
+    # name and module back.
+    shipped = kbc.to_json(kbc.read_artifact(scenario))
     assert rebuilt == shipped, f"run 'make kb': the {scenario} artifact is out of date"
+
+
+def test_the_compiled_folder_holds_exactly_what_make_kb_writes() -> None:
+    files = kbc.artifact_files([_rebuilt(s) for s in scenario_names()])
+    shipped = {p.name: p.read_text(encoding="utf-8") for p in kbc.artifact_dir().glob("*.json")}
+    assert sorted(shipped) == sorted(files), "run 'make kb' and commit src/virf/ontology/compiled"
+    for name, text in files.items():
+        assert shipped[name] == text, f"run 'make kb': {name} is out of date"
+
+
+ROOMS = ("bathroom", "bedroom", "kitchen", "living-room")
+
+
+def test_rooms_that_compile_to_the_same_knowledge_share_one_artifact() -> None:
+    # Each room imports the same rules; only its own module differs.
+    assert {kbc.artifact_path(room).name for room in ROOMS} == {"kitchen.json"}
+    index = json.loads(kbc.index_path().read_text(encoding="utf-8"))["scenarios"]
+    assert sorted(index) == scenario_names()
+    named = {entry["artifact"] for entry in index.values()}
+    on_disk = {p.name for p in kbc.artifact_dir().glob("*.json")} - {kbc.INDEX}
+    assert named == on_disk, "every artifact file is some scenario's, and only those"
+    forms = [kbc.shared_form(kbc.from_json((kbc.artifact_dir() / n).read_text())) for n in named]
+    assert len(set(forms)) == len(forms), "two files hold the same knowledge"
+
+
+@pytest.mark.parametrize("scenario", scenario_names())
+def test_every_scenario_name_loads_as_itself(scenario: str) -> None:
+    tbox = tbox_module._load.__wrapped__(scenario, (), "", None)
+    assert tbox.source == "artifact" and tbox.scenario == scenario
+    own = [m for m in tbox.module_stats if m.name.startswith("scenario-")]
+    assert f"scenario-{scenario}" in {m.name for m in own}
+    assert all(m.iri.endswith("/" + m.name) for m in tbox.module_stats)
+
+
+def test_scenarios_share_a_file_only_when_their_knowledge_is_the_same() -> None:
+    kitchen = kbc.read_artifact("kitchen")
+    [own] = [m for m in kitchen.module_stats if m.name == "scenario-kitchen"]
+    attic = replace(own, name="scenario-attic", iri=own.iri.replace("kitchen", "attic"))
+    same = kbc.as_scenario(kitchen, "attic", attic)
+    files = kbc.artifact_files([same, kitchen])
+    assert sorted(files) == ["kitchen.json", kbc.INDEX]
+    entry = json.loads(files[kbc.INDEX])["scenarios"]["attic"]
+    assert entry["artifact"] == "kitchen.json" and entry["module"]["name"] == "scenario-attic"
+    # One rule fewer: its own file.
+    vocabulary = same.vocabulary
+    fewer = dict(vocabulary.uscs)
+    fewer.pop(sorted(fewer)[0])
+    other = replace(same, vocabulary=replace(vocabulary, uscs=MappingProxyType(fewer)))
+    files = kbc.artifact_files([other, kitchen])
+    assert sorted(files) == ["attic.json", "kitchen.json", kbc.INDEX]
 
 
 def test_the_loaded_artifact_is_the_knowledge_the_compiler_built() -> None:

@@ -100,25 +100,6 @@ Ontology: <http://virf.dev/ontology/kitchen>
         rdfs:label "VIRF kitchen domain layer",
         rdfs:comment "Every AI2-THOR kitchen object type as a class, with its category, strict materials, intrinsic attributes and affordances as background knowledge. Safety rules speak of the categories, materials and attributes, so they cover types they never name."
 
-AnnotationProperty: :id
-AnnotationProperty: :kind
-AnnotationProperty: :source
-AnnotationProperty: :typicalMaterial
-AnnotationProperty: :possibleMaterial
-    Annotations: rdfs:comment "A material some instances of this type have and others do not (AI2-THOR's instances differ): a hazard that needs it is asked about, never assumed."
-AnnotationProperty: :mayAfford
-    Annotations: rdfs:comment "An affordance some instances of this type have and others lack (AI2-THOR's instances differ): the simulator neither assumes nor refuses it."
-AnnotationProperty: :defaultState
-AnnotationProperty: :randomState
-AnnotationProperty: :slicedType
-AnnotationProperty: :crackedType
-AnnotationProperty: rdfs:comment
-AnnotationProperty: rdfs:label
-AnnotationProperty: :controlsType
-    Annotations: rdfs:comment "A control of this type switches devices of the named type (a stove knob switches a stove burner)."
-AnnotationProperty: :compatibleReceptacle
-    Annotations: rdfs:comment "A receptacle type AI2-THOR lets this type be put in or on."
-
 # ---------------------------------------------------------------- categories
 Class: :FoodItem
     Annotations: rdfs:comment "Something eaten or drunk."
@@ -470,9 +451,18 @@ def kitchen_path() -> Path:
 
 
 def main() -> int:
+    from virf.ontology.catalog import write_catalog
+
     text = render_kitchen(load_catalogue())
     kitchen_path().write_text(text, encoding="utf-8")
     print(f"wrote {kitchen_path()}")
+    # After kitchen.omn: the catalog Protégé resolves imports through is read
+    # off every module's header as it now is.
+    try:
+        print(f"wrote {write_catalog()}")
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     return 0
 
 

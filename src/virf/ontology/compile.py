@@ -6,6 +6,12 @@ hierarchy, annotations, USC metadata, background axioms, module statistics and
 the TBox as fast-engine terms) is written to ``compiled/<scenario>.json``.
 ``virf verify`` with the fast engine then answers without starting Java.
 
+Scenarios that compile to the same knowledge share one file: the four room
+scenarios import the same rules, and differ only in their own module (its
+name, IRI and label).  ``compiled/scenarios.json`` names each scenario's file
+and, for a scenario that shares another's, the statistics of its own module,
+which :func:`read_artifact` puts back.
+
 The artifact names a digest of the module files it came from; a module edited
 since is noticed when the knowledge base loads, and the modules are compiled
 in-process instead (see :func:`virf.ontology.tbox.load_tbox`).  The digest is
@@ -24,7 +30,7 @@ import json
 import sys
 from collections import defaultdict
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any
@@ -34,6 +40,7 @@ from virf.files import write_atomically
 from virf.ontology.fragment import Axiom, Fragment, fragment_from, load_fragment
 from virf.ontology.iri import MODULE_BASE, NS, THING, iri_short
 from virf.ontology.tbox import (
+    DEFAULT_SCENARIO,
     BackgroundAxiom,
     ModuleStats,
     UnsafeStateConcept,
@@ -62,12 +69,31 @@ class CompiledKB:
     fragment: Fragment
 
 
+# Which file holds each scenario's knowledge (see the module's docstring).
+INDEX = "scenarios.json"
+
+
 def artifact_dir() -> Path:
     return Path(__file__).with_name("compiled")
 
 
+def index_path() -> Path:
+    return artifact_dir() / INDEX
+
+
+def _index_entries() -> dict[str, Any]:
+    entries: dict[str, Any] = json.loads(index_path().read_text(encoding="utf-8"))["scenarios"]
+    return entries
+
+
 def artifact_path(scenario: str) -> Path:
-    return artifact_dir() / f"{scenario}.json"
+    """The file that holds ``scenario``'s knowledge, shared or its own;
+    ``<scenario>.json`` when the index does not name one (yet)."""
+    try:
+        name = str(_index_entries()[scenario]["artifact"])
+    except (OSError, ValueError, KeyError, TypeError):
+        name = f"{scenario}.json"
+    return artifact_dir() / name
 
 
 def source_digest(module_dir: Path | None = None) -> str:
@@ -329,9 +355,13 @@ def _stats(
                 usc_by_kind=MappingProxyType(dict(sorted(by_kind.items()))),
             )
         )
-    order = {"core": 0, "kitchen": 1}
-    out.sort(key=lambda m: (order.get(m.name, 3 if m.name.startswith("scenario") else 2), m.name))
+    out.sort(key=_module_order)
     return tuple(out)
+
+
+def _module_order(m: ModuleStats) -> tuple[int, str]:
+    order = {"core": 0, "kitchen": 1}
+    return order.get(m.name, 3 if m.name.startswith("scenario") else 2), m.name
 
 
 def _one(ann: Mapping[str, tuple[str, ...]], key: str) -> str:
@@ -445,23 +475,24 @@ def from_json(text: str) -> CompiledKB:
         exclusive_states=_sets(raw["exclusive_states"]),
         catalogue_types=frozenset(raw["catalogue_types"]),
     )
-    stats = tuple(
-        ModuleStats(
-            **{
-                **m,
-                "imports": tuple(m["imports"]),
-                "usc_by_category": MappingProxyType(m["usc_by_category"]),
-                "usc_by_kind": MappingProxyType(m["usc_by_kind"]),
-            }
-        )
-        for m in doc["module_stats"]
-    )
+    stats = tuple(_module_stats(m) for m in doc["module_stats"])
     axioms = [
         Axiom(kind, _tuples(args), ident, text)
         for kind, args, ident, text in doc["fragment"]["axioms"]
     ]
     fragment = fragment_from(axioms, list(doc["fragment"]["problems"]))
     return CompiledKB(doc["scenario"], doc["digest"], vocabulary, stats, fragment)
+
+
+def _module_stats(m: Mapping[str, Any]) -> ModuleStats:
+    return ModuleStats(
+        **{
+            **m,
+            "imports": tuple(m["imports"]),
+            "usc_by_category": MappingProxyType(m["usc_by_category"]),
+            "usc_by_kind": MappingProxyType(m["usc_by_kind"]),
+        }
+    )
 
 
 def _sets(mapping: Mapping[str, list[str]]) -> Mapping[str, frozenset[str]]:
@@ -478,17 +509,75 @@ def _tuples(value: Any) -> Any:
 # ---------------------------------------------------------------------------
 
 
-def write_artifacts(scenarios: list[str] | None = None) -> list[Path]:
+def _own_module(scenario: str) -> str:
+    return f"scenario-{scenario}"
+
+
+def shared_form(kb: CompiledKB) -> str:
+    """The artifact without what only names its scenario (the scenario and
+    its own module's statistics): two scenarios with the same shared form
+    compile to the same knowledge."""
+    own = _own_module(kb.scenario)
+    rest = tuple(m for m in kb.module_stats if m.name != own)
+    return to_json(replace(kb, scenario="", module_stats=rest))
+
+
+def as_scenario(kb: CompiledKB, scenario: str, own: ModuleStats) -> CompiledKB:
+    """``kb``'s knowledge as ``scenario``'s, whose own module is ``own``."""
+    former = _own_module(kb.scenario)
+    stats = sorted([*(m for m in kb.module_stats if m.name != former), own], key=_module_order)
+    return replace(kb, scenario=scenario, module_stats=tuple(stats))
+
+
+def artifact_files(kbs: list[CompiledKB]) -> dict[str, str]:
+    """The files of ``compiled/`` for these scenarios, by name: one artifact
+    per distinct knowledge, named after the first scenario that has it (the
+    default scenario first), and the index."""
+    ordered = sorted(kbs, key=lambda kb: (kb.scenario != DEFAULT_SCENARIO, kb.scenario))
+    files: dict[str, str] = {}
+    owner: dict[str, str] = {}  # shared form -> the file that holds it
+    entries: dict[str, dict[str, Any]] = {}
+    for kb in ordered:
+        form = shared_form(kb)
+        name = owner.get(form)
+        if name is None:
+            name = owner[form] = f"{kb.scenario}.json"
+            files[name] = to_json(kb)
+            entries[kb.scenario] = {"artifact": name}
+            continue
+        [own] = [m for m in kb.module_stats if m.name == _own_module(kb.scenario)]
+        entries[kb.scenario] = {"artifact": name, "module": _plain(vars(own))}
+    index = {"format": FORMAT, "scenarios": dict(sorted(entries.items()))}
+    files[INDEX] = json.dumps(index, indent=1, ensure_ascii=False, sort_keys=True) + "\n"
+    return files
+
+
+def read_artifact(scenario: str) -> CompiledKB:
+    """``scenario``'s knowledge as the built-in artifacts hold it.  OSError,
+    ValueError or KeyError when they are missing, unreadable or name no such
+    scenario."""
+    entry = _index_entries()[scenario]
+    kb = from_json((artifact_dir() / entry["artifact"]).read_text(encoding="utf-8"))
+    if kb.scenario == scenario:
+        return kb
+    return as_scenario(kb, scenario, _module_stats(entry["module"]))
+
+
+def write_artifacts() -> list[Path]:
     from virf.ontology.owlapi import OwlModules
 
     digest = source_digest()
+    kbs = [compile_kb(OwlModules(s, ontology_dir()), digest) for s in scenario_names()]
+    folder = artifact_dir()
+    folder.mkdir(exist_ok=True)
+    files = artifact_files(kbs)
     written = []
-    artifact_dir().mkdir(exist_ok=True)
-    for scenario in scenarios or scenario_names():
-        kb = compile_kb(OwlModules(scenario, ontology_dir()), digest)
-        path = artifact_path(scenario)
-        write_atomically(path, to_json(kb))
-        written.append(path)
+    for name, text in files.items():
+        write_atomically(folder / name, text)
+        written.append(folder / name)
+    for path in sorted(folder.glob("*.json")):
+        if path.name not in files:
+            path.unlink()  # a scenario's own file from before it shared another's
     return written
 
 
@@ -496,15 +585,27 @@ def stale_artifacts() -> list[str]:
     """Scenarios whose artifact is missing or was compiled from other modules."""
     digest = source_digest()
     out = []
+    try:
+        entries = _index_entries()
+    except (OSError, ValueError, KeyError, TypeError):
+        entries = {}
     for scenario in scenario_names():
-        path = artifact_path(scenario)
-        try:
-            found = json.loads(path.read_text(encoding="utf-8")).get("digest")
-        except (OSError, ValueError):
-            found = None
-        if found != digest:
+        if _artifact_digest(scenario, entries.get(scenario)) != digest:
             out.append(scenario)
     return out
+
+
+def _artifact_digest(scenario: str, entry: Any) -> str | None:
+    """The digest of the file the index entry names, if it can be read as
+    ``scenario``'s (only the digest: loading every artifact whole would take
+    seconds)."""
+    try:
+        doc = json.loads((artifact_dir() / entry["artifact"]).read_text(encoding="utf-8"))
+        if doc["scenario"] != scenario and "module" not in entry:
+            return None  # another scenario's file, and no module of its own to put back
+        return str(doc["digest"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
 
 
 def main(argv: list[str] | None = None) -> int:

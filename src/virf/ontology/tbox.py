@@ -341,7 +341,7 @@ def _files_digest(paths: tuple[str, ...]) -> str:
 def _load(
     scenario: str, extras: tuple[str, ...], extras_digest: str, cache_dir: str | None
 ) -> TBox:
-    from virf.ontology.compile import artifact_path, compile_kb, from_json, source_digest, to_json
+    from virf.ontology.compile import compile_kb, from_json, read_artifact, source_digest, to_json
     from virf.ontology.seal import local_key, seal, unseal
 
     digest = source_digest()
@@ -350,24 +350,25 @@ def _load(
     # user's key (virf.ontology.seal), else compiled again.  The built-in
     # artifacts ship inside the package, trusted like its code.
     key: bytes | None = None
-    artifact: Path | None = artifact_path(scenario)
+    artifact: Path | None = None  # the workspace's sealed cache
     if extras:
         digest = f"{digest}+{extras_digest}"
         key = local_key() if cache_dir is not None else None
-        artifact = None
         if cache_dir is not None and key is not None:
             artifact = Path(cache_dir) / f"compiled-{scenario}.json"
-    if artifact is not None:
-        try:
-            text = artifact.read_text(encoding="utf-8")
-            opened = unseal(text, key) if key is not None else text
+    kb: CompiledKB | None = None
+    try:
+        if not extras:
+            kb = read_artifact(scenario)
+        elif artifact is not None and key is not None:
+            opened = unseal(artifact.read_text(encoding="utf-8"), key)
             kb = from_json(opened) if opened is not None else None
-        except (OSError, ValueError, KeyError, TypeError, AttributeError):
-            kb = None  # missing, unreadable or unsealed: compile the modules instead
-        if kb is not None and kb.digest == digest and kb.scenario == scenario:
-            tbox = TBox(kb)
-            tbox.extra_modules = extras
-            return tbox
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        kb = None  # missing, unreadable or unsealed: compile the modules instead
+    if kb is not None and kb.digest == digest and kb.scenario == scenario:
+        tbox = TBox(kb)
+        tbox.extra_modules = extras
+        return tbox
     from virf.ontology.owlapi import OwlModules
 
     owl = OwlModules(scenario, ontology_dir(), extras)
