@@ -48,7 +48,8 @@ from virf.perception.graph import (
 )
 from virf.perception.replies import Detection
 from virf.verify.questions import materials
-from virf.world.scene import VALUE_WORDS, build_scene
+from virf.world.scene import build_scene
+from virf.world.values import VALUE_WORDS
 
 DEFAULT_THRESHOLD: Final = 0.5
 # The model's relationship words (compared by term_key), as the scene's
