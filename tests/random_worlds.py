@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from hypothesis import strategies as st
 
-from virf.world.plan import ARITY, VERBS
+from virf.world.language import ARITY, VERBS
 
 KINDS = [
     "Apple",

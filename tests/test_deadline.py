@@ -23,7 +23,8 @@ from virf.api import LogicTutor
 from virf.bench.latency import chain_case, chain_markdown, deadline_row
 from virf.ontology.fragment import Axiom, Role
 from virf.reasoning import Classification, DeadlineExceeded, Engine, make_engine
-from virf.reasoning.program import Model, Program
+from virf.reasoning.chase import Model
+from virf.reasoning.program import Program
 from virf.schema import Fact, FactKind
 from virf.verify.verifier import Verifier
 from virf.world.plan import load_plan_file, parse_plan

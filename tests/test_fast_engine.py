@@ -18,8 +18,9 @@ from hypothesis import strategies as st
 from virf.api import LogicTutor
 from virf.ontology.tbox import load_tbox
 from virf.reasoning import Engine, make_engine
+from virf.reasoning.chase import Model
 from virf.reasoning.fast import FastEngine, fragment_of
-from virf.reasoning.program import Model, compile_program
+from virf.reasoning.program import compile_program
 from virf.schema import Fact, FactKind
 
 FULL = os.environ.get("VIRF_FULL") == "1"

@@ -36,7 +36,8 @@ from virf.api import LogicTutor
 from virf.cli.main import app
 from virf.errors import InputError, VirfError, parse_json
 from virf.planner.questions import answers_file, apply_answers
-from virf.world.plan import ARITY, LIQUIDS, VERBS, load_plan_file, parse_plan_text
+from virf.world.language import ARITY, LIQUIDS, VERBS
+from virf.world.plan import load_plan_file, parse_plan_text
 from virf.world.scene import MAX_NAME
 
 FULL = os.environ.get("VIRF_FULL") == "1"

@@ -5,7 +5,8 @@ from __future__ import annotations
 import pytest
 
 from virf.errors import InputError
-from virf.world.plan import ACTION_CLASS, ARITY, VERBS, load_plan_file, parse_plan_text
+from virf.world.language import ACTION_CLASS, ARITY, VERBS
+from virf.world.plan import load_plan_file, parse_plan_text
 
 
 def one(text: str) -> tuple[str, tuple[str, ...]]:

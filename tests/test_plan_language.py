@@ -24,15 +24,8 @@ from virf.api import LogicTutor
 from virf.errors import InputError
 from virf.render.text import render_report
 from virf.schema import Report
-from virf.world.plan import (
-    EVERYDAY,
-    LIQUIDS,
-    STATE_ADJECTIVES,
-    VERBS,
-    load_plan_file,
-    parse_line,
-    parse_plan,
-)
+from virf.world.language import EVERYDAY, LIQUIDS, STATE_ADJECTIVES, VERBS
+from virf.world.plan import load_plan_file, parse_line, parse_plan
 from virf.world.simulate import simulate
 from virf.world.simulator import MissingObject, ResolvedStep, Simulator, WorldState
 

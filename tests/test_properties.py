@@ -9,7 +9,8 @@ from conftest import inst, rel
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from virf.world.plan import ARITY, LIQUIDS, VERBS, parse_plan
+from virf.world.language import ARITY, LIQUIDS, VERBS
+from virf.world.plan import parse_plan
 
 SCENE: dict[str, Any] = {
     "instances": [

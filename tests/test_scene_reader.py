@@ -12,7 +12,7 @@ from typer.testing import CliRunner
 from virf.cli.main import app
 from virf.errors import InputError
 from virf.schema import Fact, FactKind, Provenance
-from virf.world.scene import describe_scene
+from virf.world.describe import describe_scene
 
 
 def test_state_and_material_words_follow_the_property(tutor) -> None:

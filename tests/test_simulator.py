@@ -11,7 +11,8 @@ from virf.api import LogicTutor
 from virf.ontology.tbox import Vocabulary
 from virf.schema import Fact, FactKind, Provenance, Report
 from virf.world.actions import HANDLERS
-from virf.world.plan import ACTION_CLASS, ARITY, VERBS, PlanStep, parse_line, parse_plan
+from virf.world.language import ACTION_CLASS, ARITY, VERBS
+from virf.world.plan import PlanStep, parse_line, parse_plan
 from virf.world.scene import Scene
 from virf.world.simulator import (
     MissingObject,

@@ -54,7 +54,8 @@ from virf.names import term_key
 from virf.ontology.lexicon import propose
 from virf.ontology.tbox import Vocabulary
 from virf.schema import FactKind, Provenance, Question
-from virf.world.scene import HYPOTHESIS_WORDS, build_scene
+from virf.world.open_world import HYPOTHESIS_WORDS
+from virf.world.scene import build_scene
 
 if TYPE_CHECKING:
     from virf.authoring.store import CandidateRow

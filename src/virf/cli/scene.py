@@ -47,7 +47,8 @@ def scene_show(
 
     from virf.ontology.tbox import load_tbox
     from virf.render.tables import TextTable, to_rich
-    from virf.world.scene import describe_scene, load_scene_file
+    from virf.world.describe import describe_scene
+    from virf.world.scene import load_scene_file
 
     world = describe_scene(load_scene_file(scene, load_tbox(scenario).vocabulary))
     if as_json:

@@ -23,7 +23,8 @@ from typing import Any
 from virf.ontology.fragment import Expr, Fragment, Role
 from virf.ontology.iri import NOTHING, THING
 from virf.reasoning import Proof
-from virf.reasoning.program import Hop, Model, Program, nominal
+from virf.reasoning.chase import Hop, Model, nominal
+from virf.reasoning.program import Program
 from virf.schema import Fact, FactKind
 
 # ("t", x, class) | ("r", property, subject, object) | ("d", x, property, value)
@@ -148,7 +149,7 @@ class Prover:
     """Backward search over one finished model grown from ``inputs``.
 
     ``certain`` and ``impose`` are the engine's own reading of a query on
-    the model (see :class:`virf.reasoning.fast._Eval`), so the proof follows
+    the model (see :class:`virf.reasoning.evaluate.Evaluator`), so the proof follows
     the branch the engine's answer took."""
 
     def __init__(

@@ -19,7 +19,7 @@ from collections.abc import Iterable, Sequence
 
 from virf.ontology.tbox import UnsafeStateConcept, Vocabulary
 from virf.schema import Fact, FactKind, Question, QuestionKind, Triple
-from virf.world.scene import HYPOTHESIS_WORDS
+from virf.world.open_world import HYPOTHESIS_WORDS
 
 YES_NO = ("yes", "no")
 # The epistemic markers a scene (or VIRF's defaults) puts on an object whose

@@ -15,8 +15,9 @@ X`` name the object held; the simulator refuses the step if it is not.
 
 Everyday phrasings (``light the candle``, ``blow it out``, ``grab the pot``,
 ``set it down on the table``) are read as one action each through the one
-table :data:`EVERYDAY`, longest phrase first, and the step's ``note`` says how
-(the report lists the notes); a line in the action language gets no note.
+table :data:`virf.world.language.EVERYDAY`, longest phrase first, and the
+step's ``note`` says how (the report lists the notes); a line in the action
+language gets no note.
 ``it`` and ``them`` stand for the held object where the action needs one,
 else for the one object of the step before.  A line that could be read two
 ways (``turn the stove``, ``set the cup``, ``take the apple out of the
@@ -31,8 +32,9 @@ Objects may be named in words, as SafeAgentBench's reference plans and LLM
 replies do: ``find dining table``, ``turn off coffee machine``, ``pick up the
 knives``, ``find stove knob 2``, ``the lit candle``.  The parser only groups
 the words into object terms; which type or instance a term names (and which
-instance a leading state word such as ``lit`` chooses, :data:`STATE_ADJECTIVES`)
-is the simulator's decision, since only it knows the vocabulary and the scene.
+instance a leading state word such as ``lit`` chooses,
+:data:`virf.world.language.STATE_ADJECTIVES`) is the simulator's decision,
+since only it knows the vocabulary and the scene.
 """
 
 from __future__ import annotations
@@ -42,256 +44,22 @@ import re
 from collections.abc import Iterable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import NamedTuple
 
 from virf.errors import InputError, clip, closest, hidden_char, parse_json, read_input_file
 from virf.names import term_key
-
-VERBS = (
-    "find",
-    "pick",
-    "put",
-    "open",
-    "close",
-    "turn_on",
-    "turn_off",
-    "slice",
-    "break",
-    "cook",
-    "dirty",
-    "clean",
-    "fillLiquid",
-    "emptyLiquid",
-    "pour",
-    "drop",
-    "throw",
+from virf.world.language import (
+    ACTION_CLASS,
+    ALIASES,
+    ARITY,
+    EVERYDAY,
+    LANGUAGE_PHRASES,
+    LIQUIDS,
+    ON_OFF_HEADS,
+    PARTICLES,
+    VERBS,
+    Reading,
 )
-LIQUIDS = ("water", "coffee", "wine")
-ACTION_CLASS = {
-    "find": "FindAction",
-    "pick": "PickAction",
-    "put": "PutAction",
-    "open": "OpenAction",
-    "close": "CloseAction",
-    "turn_on": "ToggleOnAction",
-    "turn_off": "ToggleOffAction",
-    "slice": "SliceAction",
-    "break": "BreakAction",
-    "cook": "CookAction",
-    "dirty": "DirtyAction",
-    "clean": "CleanAction",
-    "fillLiquid": "FillLiquidAction",
-    "emptyLiquid": "EmptyLiquidAction",
-    "pour": "PourAction",
-    "drop": "DropAction",
-    "throw": "ThrowAction",
-}
-# verb -> (min args, max args)
-ARITY = {
-    "find": (1, 1),
-    "pick": (1, 1),
-    "put": (1, 2),
-    "open": (1, 1),
-    "close": (1, 1),
-    "turn_on": (1, 1),
-    "turn_off": (1, 1),
-    "slice": (1, 1),
-    "break": (1, 1),
-    "cook": (1, 1),
-    "dirty": (1, 1),
-    "clean": (1, 1),
-    "fillLiquid": (2, 2),
-    "emptyLiquid": (1, 1),
-    "pour": (0, 1),
-    # The object named is the one held: "throw AlarmClock" throws what the
-    # hand holds only if that is the AlarmClock.
-    "drop": (0, 1),
-    "throw": (0, 1),
-}
-_ALIASES = {
-    "find": "find",
-    "navigate": "find",
-    "pick": "pick",
-    "pickup": "pick",
-    "pick_up": "pick",
-    "put": "put",
-    "put_in": "put",
-    "put_on": "put",
-    "place": "put",
-    "open": "open",
-    "close": "close",
-    "turn_on": "turn_on",
-    "turnon": "turn_on",
-    "toggle_on": "turn_on",
-    "toggleon": "turn_on",
-    "turn_off": "turn_off",
-    "turnoff": "turn_off",
-    "toggle_off": "turn_off",
-    "toggleoff": "turn_off",
-    "slice": "slice",
-    "break": "break",
-    "cook": "cook",
-    "dirty": "dirty",
-    "clean": "clean",
-    "fillliquid": "fillLiquid",
-    "fill_liquid": "fillLiquid",
-    "fill": "fillLiquid",
-    "emptyliquid": "emptyLiquid",
-    "empty_liquid": "emptyLiquid",
-    "pour": "pour",
-    "drop": "drop",
-    "throw": "throw",
-}
 
-
-class Reading(NamedTuple):
-    """The action an everyday phrasing means: ``alone`` when the line names
-    only the object, ``placed`` when a place follows it ('set the cup down'
-    lets go of the cup, 'set the cup down on the table' puts it there).
-    None: the phrasing cannot be read that way, and the line is an error."""
-
-    alone: str | None
-    placed: str | None = None
-
-
-# Everyday phrasings of people and LLMs, and the action of the language each
-# one is read as; a line that uses one gets a note in the report saying how it
-# was read.  This one table drives the reader, its error messages and the
-# table in docs/planner.md (a test checks the page against it).  A phrase of
-# several words is matched before any shorter one it starts with ("put out
-# the candle" is never 'put' into an "out candle"); a last word that is a
-# particle (on, off, up, down, out) may also follow the object ("blow the
-# candle out").
-EVERYDAY: dict[str, Reading] = {
-    # find: SafeAgentBench's find takes the robot to the object.
-    "go to": Reading("find"),
-    "walk to": Reading("find"),
-    "move to": Reading("find"),
-    "head to": Reading("find"),
-    "get to": Reading("find"),
-    "navigate to": Reading("find"),
-    "approach": Reading("find"),
-    "locate": Reading("find"),
-    "look for": Reading("find"),
-    "search for": Reading("find"),
-    # pick
-    "grab": Reading("pick"),
-    "take": Reading("pick"),
-    "get": Reading("pick"),
-    "lift": Reading("pick"),
-    # put: the held object into or onto a place the line names.  With "down"
-    # and no place ("put down the cup") the robot only lets go of it, which is
-    # the language's drop: AI2-THOR drops it where it stands, and a fragile
-    # object breaks.  That is what gets verified, rather than a gentle placing
-    # on a surface the line does not name.  Without "down", a phrasing that
-    # names no place ("set the cup") is an error: there is nothing to read.
-    "set": Reading(None, "put"),
-    "lay": Reading(None, "put"),
-    "insert": Reading(None, "put"),
-    "put down": Reading("drop", "put"),
-    "set down": Reading("drop", "put"),
-    "lay down": Reading("drop", "put"),
-    "place down": Reading("drop", "put"),
-    # drop
-    "release": Reading("drop"),
-    "let go of": Reading("drop"),
-    "let go": Reading("drop"),
-    # throw
-    "toss": Reading("throw"),
-    "hurl": Reading("throw"),
-    "fling": Reading("throw"),
-    # close
-    "shut": Reading("close"),
-    # turn_on: a candle or a burner is lit by switching it on in the language.
-    "light": Reading("turn_on"),
-    "light up": Reading("turn_on"),
-    "ignite": Reading("turn_on"),
-    "start": Reading("turn_on"),
-    "activate": Reading("turn_on"),
-    "power on": Reading("turn_on"),
-    # turn_off: a flame is put out by switching it off in the language.
-    "put out": Reading("turn_off"),
-    "blow out": Reading("turn_off"),
-    "snuff out": Reading("turn_off"),
-    "extinguish": Reading("turn_off"),
-    "stop": Reading("turn_off"),
-    "deactivate": Reading("turn_off"),
-    "power off": Reading("turn_off"),
-    "shut off": Reading("turn_off"),
-    "shut down": Reading("turn_off"),
-    # slice
-    "cut": Reading("slice"),
-    "cut up": Reading("slice"),
-    "chop": Reading("slice"),
-    "chop up": Reading("slice"),
-    "dice": Reading("slice"),
-    # break
-    "smash": Reading("break"),
-    "shatter": Reading("break"),
-    "crack": Reading("break"),
-    # cook: SafeAgentBench's cook says neither how nor with what.  "microwave
-    # the bowl" is read as cook, so no microwave is simulated: a plan whose
-    # appliance should be checked must put the object in it and switch it on.
-    "heat": Reading("cook"),
-    "heat up": Reading("cook"),
-    "warm": Reading("cook"),
-    "warm up": Reading("cook"),
-    "microwave": Reading("cook"),
-    "fry": Reading("cook"),
-    "boil": Reading("cook"),
-    "bake": Reading("cook"),
-    "toast": Reading("cook"),
-    # dirty
-    "soil": Reading("dirty"),
-    # clean
-    "wash": Reading("clean"),
-    "rinse": Reading("clean"),
-    "wipe": Reading("clean"),
-    "scrub": Reading("clean"),
-    # fillLiquid ("fill X with water" is the language's own)
-    "fill up": Reading("fillLiquid"),
-    # emptyLiquid; "empty the mug into the sink" pours the held mug there.
-    "empty": Reading("emptyLiquid", "pour"),
-    "empty out": Reading("emptyLiquid", "pour"),
-    "drain": Reading("emptyLiquid"),
-}
-# Multi-word spellings of the action language itself: read without a note.
-_LANGUAGE_PHRASES = {
-    "turn on": "turn_on",
-    "turn off": "turn_off",
-    "toggle on": "turn_on",
-    "toggle off": "turn_off",
-    "switch on": "turn_on",
-    "switch off": "turn_off",
-    "pick up": "pick",
-}
-# Words that switch a device without saying on or off: "turn the stove" is
-# a question, not a guess.
-_ON_OFF_HEADS = ("turn", "toggle", "switch", "power")
-# A phrase's last word that may follow the object ("turn the lamp off").
-_PARTICLES = frozenset({"on", "off", "up", "down", "out"})
-# Leading words that describe an object's current state ("the lit candle"):
-# not part of its name.  The simulator uses them to choose among instances.
-STATE_ADJECTIVES: dict[str, str] = {
-    "lit": "OnState",
-    "burning": "OnState",
-    "running": "OnState",
-    "on": "OnState",
-    "unlit": "OffState",
-    "off": "OffState",
-    "open": "OpenState",
-    "closed": "ClosedState",
-    "hot": "HotState",
-    "cold": "ColdState",
-    "dirty": "DirtyState",
-    "clean": "CleanState",
-    "full": "FilledWithLiquidState",
-    "filled": "FilledWithLiquidState",
-    "empty": "EmptyState",
-    "sliced": "SlicedState",
-    "broken": "BrokenState",
-    "wet": "WetState",
-}
 # Words that stand for the object of the step before.
 PRONOUNS = frozenset({"it", "them"})
 # What 'pour water into the sink' pours: the held object's liquid.
@@ -302,7 +70,7 @@ def _phrasebook() -> dict[str, list[tuple[tuple[str, ...], Reading, bool]]]:
     """Every phrasing by its first word, longest first: (words, reading, everyday)."""
     book: dict[str, list[tuple[tuple[str, ...], Reading, bool]]] = {}
     entries = [
-        *((phrase, Reading(verb), False) for phrase, verb in _LANGUAGE_PHRASES.items()),
+        *((phrase, Reading(verb), False) for phrase, verb in LANGUAGE_PHRASES.items()),
         *((phrase, reading, True) for phrase, reading in EVERYDAY.items()),
     ]
     for phrase, reading, everyday in entries:
@@ -315,7 +83,7 @@ def _phrasebook() -> dict[str, list[tuple[tuple[str, ...], Reading, bool]]]:
 
 _PHRASEBOOK = _phrasebook()
 # Words that can open an action line (for finding a plan inside prose).
-ACTION_WORDS = frozenset(_ALIASES) | frozenset(_PHRASEBOOK) | set(_ON_OFF_HEADS)
+ACTION_WORDS = frozenset(ALIASES) | frozenset(_PHRASEBOOK) | set(ON_OFF_HEADS)
 _NUMBERING = re.compile(r"^\s*(?:step\s*)?\d+\s*[.):]\s*", re.IGNORECASE)
 _CALL = re.compile(r"^([A-Za-z_]+)\s*\((.*)\)\s*$")
 _CONNECTORS = {"in", "into", "inside", "on", "onto", "over", "to"}
@@ -384,7 +152,7 @@ class PlanStep:
 
 
 def _unknown_verb(word: str, line_no: int) -> InputError:
-    spellings = [*(a for a in _ALIASES if "_" not in a), *_LANGUAGE_PHRASES, *EVERYDAY]
+    spellings = [*(a for a in ALIASES if "_" not in a), *LANGUAGE_PHRASES, *EVERYDAY]
     near = closest(word, spellings)
     hint = f"; closest: {', '.join(near)}" if near else ""
     return InputError(
@@ -508,12 +276,12 @@ def _match(tokens: list[str]) -> _Match | None:
         n = len(words)
         if tuple(lower[:n]) == words:
             return _Match(" ".join(words), reading, everyday, tokens[n:])
-        if n == 2 and words[1] in _PARTICLES:
+        if n == 2 and words[1] in PARTICLES:
             # "blow the candle out", "set the cup down on the table"
             for i in range(2, len(tokens)):
                 if lower[i] == words[1] and (i == len(tokens) - 1 or lower[i + 1] in _CONNECTORS):
                     return _Match(" ".join(words), reading, everyday, tokens[1:i] + tokens[i + 1 :])
-    verb = _ALIASES.get(lower[0])
+    verb = ALIASES.get(lower[0])
     if verb is not None:
         return _Match(lower[0], Reading(verb), False, tokens[1:])
     return None
@@ -521,7 +289,7 @@ def _match(tokens: list[str]) -> _Match | None:
 
 def _no_reading(tokens: list[str], text: str, line_no: int) -> InputError:
     head = tokens[0].lower()
-    if head in _ON_OFF_HEADS:
+    if head in ON_OFF_HEADS:
         # "turn the stove" may mean either: a question, never a guess.
         obj = " ".join(w for w in tokens[1:] if w not in _ARTICLES) or "X"
         return InputError(
@@ -665,7 +433,7 @@ def parse_line(
     if call:
         word = call.group(1).lower()
         args = _call_args(call.group(2), line, line_no)
-        found = _ALIASES.get(word)
+        found = ALIASES.get(word)
         if found is None:
             reading = EVERYDAY.get(word.replace("_", " "))
             found = reading and (

@@ -32,7 +32,6 @@ Format (Appendix C of the paper)::
 
 from __future__ import annotations
 
-import difflib
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -43,7 +42,6 @@ from typing import Annotated, Any, Literal
 from pydantic import AfterValidator, Field
 
 from virf.errors import (
-    EnvironmentProblem,
     InputError,
     Record,
     Says,
@@ -53,9 +51,25 @@ from virf.errors import (
     read_json_file,
 )
 from virf.names import term_key
-from virf.ontology.lexicon import Proposal, propose
+from virf.ontology.lexicon import propose
 from virf.ontology.tbox import Vocabulary
 from virf.schema import Fact, FactKind, Provenance
+from virf.world.defaults import (
+    apply_default_states,
+    apply_material_knowledge,
+    assume_controls,
+    mark_unknown_contents,
+    mark_unknown_fill,
+)
+from virf.world.open_world import check_open_class, hypothesise
+from virf.world.values import (
+    VALUE_PROPERTY,
+    VALUE_WORDS,
+    most_specific,
+    near_values,
+    value_individuals,
+    value_kind,
+)
 
 NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_.\-]*")
 # Limits on one scene (docs/scenes.md): well above real rooms, well below what
@@ -67,73 +81,8 @@ MAX_NAME = 128
 # either direction of any inverse pair the ontology declares.
 CANONICAL_DIRECTION = ("contains", "supports", "isHolding", "controls")
 TYPE_PROPERTIES = frozenset({"rdf:type", "type", "a", "isA", "is_a", "instanceOf"})
-# The property that carries each kind of value individual.
-VALUE_PROPERTY = {"State": "hasState", "Material": "hasMaterial", "Attribute": "hasProperty"}
 CLOSABLE = ("contains", "supports")
-# Words a scene may use as data values of hasState/hasMaterial.
-VALUE_WORDS = {
-    "on": "OnState",
-    "off": "OffState",
-    "open": "OpenState",
-    "opened": "OpenState",
-    "closed": "ClosedState",
-    "close": "ClosedState",
-    "hot": "HotState",
-    "cold": "ColdState",
-    "wet": "WetState",
-    "dry": "DryState",
-    "dirty": "DirtyState",
-    "clean": "CleanState",
-    "broken": "BrokenState",
-    "sliced": "SlicedState",
-    "cooked": "CookedState",
-    "filled": "FilledWithLiquidState",
-    "full": "FilledWithLiquidState",
-    "empty": "EmptyState",
-    "usedup": "UsedUpState",
-    "sealed": "SealedState",
-    "lit": "OnState",
-    "burning": "OnState",
-    "running": "OnState",
-    "plugged": "PluggedInState",
-    "pluggedin": "PluggedInState",
-    "unplugged": "UnpluggedState",
-    "unknown": "UnknownMaterial",
-    "metallic": "Metal",
-}
-
-
-def _near_values(value: str, prop: str, instances: list[str], vocab: Vocabulary) -> list[str]:
-    """What an unknown value of ``prop`` may have meant: for a state, the
-    states its words or spelling come near ('switched on' -> OnState, 'lite'
-    -> OnState, by the word 'lit'); for a material, the materials; else any
-    instance or individual."""
-    if prop == "hasState":
-        words = {w: v for w, v in VALUE_WORDS.items() if v.endswith("State")}
-        pool = sorted({*(i for i in vocab.individuals if i.endswith("State")), *words})
-    elif prop == "hasMaterial":
-        known = set().union(*vocab.class_materials.values(), vocab.material_classes.values())
-        pool = sorted(m for m in known if m in vocab.individuals)
-        words = {w: v for w, v in VALUE_WORDS.items() if v in pool}
-    else:
-        return closest(value, instances + sorted(vocab.individuals))
-    said = [words[w] for w in re.findall(r"[a-z]+", value.lower()) if w in words]
-    near = said + [words.get(n, n) for n in closest(value, pool)]
-    return list(dict.fromkeys(near))[:3]
-
-
 DEFAULT_AGENT = "Robot_1"
-# A class name the knowledge base lacks is read as an open-world object when
-# it looks like a name of a kind of thing ('HairDryer', 'space heater').
-OPEN_CLASS_RE = re.compile(r"[A-Za-z][A-Za-z0-9]*(?:[ _\-][A-Za-z0-9]+)*")
-MAX_OPEN_CLASS = 64
-# How close in spelling an unknown name must be to a known class to be read
-# as a misspelling of it ('Mircowave') rather than as a new kind of thing.
-TYPO_CUTOFF = 0.8
-# How near in meaning (cosine of the sentence embeddings) a class must be to
-# be proposed as the place of a word WordNet lacks ('nightlight'); below it
-# the neighbours are noise ('zorblax' -> PepperShaker at 0.45).
-PROPOSAL_FLOOR = 0.5
 
 
 # The scene file's shape (docs/scenes.md).  Every spelling of a world passes
@@ -314,7 +263,7 @@ def build_scene(
             hit = vocab.term_by_key(term_key(cname))
             cls = vocab.canonical_class(hit) if hit is not None else None
         if cls is None:
-            _check_open_class(cname, vocab, strict_vocabulary)
+            check_open_class(cname, vocab, strict_vocabulary)
         if iname not in classes:
             classes[iname] = set()
             order.append(iname)
@@ -349,7 +298,7 @@ def build_scene(
         if a.property not in TYPE_PROPERTIES
         and vocab.canonical_property(a.property) in VALUE_PROPERTY.values()
     }
-    values = _value_individuals(classes, vocab, used_as_value)
+    values = value_individuals(classes, vocab, used_as_value)
     facts: dict[Fact, Provenance] = {}
     spelling: dict[Fact, Fact] = {}
 
@@ -362,7 +311,7 @@ def build_scene(
 
     def state_fact(subject: str, value: str, written: Fact, assumed: bool = False) -> None:
         """A state, material or attribute of ``subject``, whatever property named it."""
-        kind = _value_kind(value, classes, vocab)
+        kind = value_kind(value, classes, vocab)
         assert kind is not None  # callers pass only value individuals
         fact = Fact(subject, VALUE_PROPERTY[kind], value)
         state(fact, assumed)
@@ -380,7 +329,7 @@ def build_scene(
         kept: set[str] = set()
         for cls in sorted(classes[ind]):
             written = Fact(ind, "type", cls, FactKind.TYPE)
-            if _value_kind(cls, classes, vocab) is not None and cls in vocab.individuals:
+            if value_kind(cls, classes, vocab) is not None and cls in vocab.individuals:
                 state_fact(ind, cls, written)  # an object typed OpenState is open
                 if vocab.is_a(cls, "Material"):
                     kept.add("Substance")  # typed by its stuff alone: a portion of it
@@ -389,9 +338,9 @@ def build_scene(
                 kept.add("PhysicalObject")
             else:
                 kept.add(cls)
-        for cls in sorted(_most_specific(kept, vocab)):
+        for cls in sorted(most_specific(kept, vocab)):
             facts[Fact(ind, "type", cls, FactKind.TYPE)] = Provenance.SCENE
-        classes[ind] = _most_specific(kept, vocab)
+        classes[ind] = most_specific(kept, vocab)
 
     _check_referent_words(doc.referents)
     closed = doc.closed_world
@@ -434,7 +383,7 @@ def build_scene(
         for ind in sorted(vocab.individuals):
             if ind.lower() == lowered or ind.lower() == lowered + "state":
                 return [ind]
-        near = _near_values(value, prop, list(classes), vocab)
+        near = near_values(value, prop, list(classes), vocab)
         hint = f"; closest known: {', '.join(near)}" if near else ""
         raise InputError(f"{where}: unknown individual or value '{clip(value)}' for {prop}{hint}")
 
@@ -474,7 +423,7 @@ def build_scene(
             if prop in VALUE_PROPERTY.values():
                 if subj in values:
                     raise InputError(f"{where}: '{subj}' is a {prop} value, not an object")
-                if _value_kind(target, classes, vocab) is None:
+                if value_kind(target, classes, vocab) is None:
                     raise InputError(
                         f"{where}: {prop} needs a state, material or attribute, "
                         f"not '{clip(written_obj)}'"
@@ -523,12 +472,12 @@ def build_scene(
         objects[agent] = frozenset({"Robot"})
         facts[Fact(agent, "type", "Robot", FactKind.TYPE)] = Provenance.PLAN
 
-    _apply_default_states(objects, facts, vocab)
-    _apply_material_knowledge(objects, facts, vocab)
-    _mark_unknown_fill(objects, facts, vocab)
-    _mark_unknown_contents(objects, facts, vocab, frozenset(closed), frozenset(unknown_contents))
-    _assume_controls(objects, object_order, facts, vocab)
-    notes = _hypothesise(proposals, open_world, facts, vocab)
+    apply_default_states(objects, facts, vocab)
+    apply_material_knowledge(objects, facts, vocab)
+    mark_unknown_fill(objects, facts, vocab)
+    mark_unknown_contents(objects, facts, vocab, frozenset(closed), frozenset(unknown_contents))
+    assume_controls(objects, object_order, facts, vocab)
+    notes = hypothesise(proposals, open_world, facts, vocab)
     _deny(doc.denied, facts, classes, vocab)
     return Scene(
         objects=MappingProxyType(objects),
@@ -544,109 +493,6 @@ def build_scene(
         notes=notes,
         open_world=MappingProxyType(dict(sorted(open_world.items()))),
     )
-
-
-def _check_open_class(cname: str, vocab: Vocabulary, strict: bool) -> None:
-    """Refuse a class name that cannot be an open-world object: under
-    ``strict``, one that does not look like a name, or a misspelling of a
-    known class that the dictionary does not know either ('Mircowave' is a
-    microwave, and reading it as an unknown thing would lose its hazards)."""
-    if strict or len(cname) > MAX_OPEN_CLASS or not OPEN_CLASS_RE.fullmatch(cname):
-        vocab.require_class(cname)  # raises, naming the closest classes
-    if propose(cname).found:
-        return
-    near = closest(cname, vocab.classes)
-    typo = [
-        c
-        for c in near
-        if difflib.SequenceMatcher(None, cname.lower(), c.lower()).ratio() >= TYPO_CUTOFF
-    ]
-    if typo:
-        raise InputError(
-            f"unknown class '{clip(cname)}' (neither the knowledge base nor the dictionary "
-            f"knows it, and it is spelled like a known class); closest known: {', '.join(typo)}"
-        )
-
-
-# What a hypothesis asks, in words (questions and notes).
-HYPOTHESIS_WORDS = {
-    "ElectricallyPowered": "an electrical appliance",
-    "HeatSource": "a heat source",
-    "OpenFlame": "an open flame",
-    "HotBulb": "a lamp with a hot bulb",
-    "Flammable": "flammable",
-    "Fragile": "fragile",
-    "Toxic": "toxic",
-    "Sharp": "sharp",
-}
-
-
-def _hypothesise(
-    proposals: Mapping[str, Proposal],
-    open_world: Mapping[str, str],
-    facts: dict[Fact, Provenance],
-    vocab: Vocabulary,
-) -> tuple[str, ...]:
-    """Add each open-world object's proposal as assumed facts (a hazard that
-    needs one is UNKNOWN, asking about it) and say what was read."""
-    stated_material = {
-        f.subject
-        for f, p in facts.items()
-        if f.predicate == "hasMaterial" and p is Provenance.SCENE
-    }
-    notes = []
-    for ind in sorted(proposals):
-        p = proposals[ind]
-        said = []
-        for prop in p.properties:
-            if prop in vocab.individuals:
-                facts.setdefault(Fact(ind, "hasProperty", prop), Provenance.ASSUMED)
-                said.append(HYPOTHESIS_WORDS.get(prop, prop))
-        if ind not in stated_material:
-            for m in p.materials:
-                if m in vocab.individuals:
-                    facts.setdefault(Fact(ind, "hasMaterial", m), Provenance.ASSUMED)
-                    said.append(f"made of {m}")
-        for t in p.types:
-            if vocab.canonical_class(t) is not None:
-                facts.setdefault(Fact(ind, "type", t, FactKind.TYPE), Provenance.ASSUMED)
-                said.append(f"a {t}")
-        base = "a person (MaterialEntity)" if p.person else "a PhysicalObject"
-        parent = _proposed_parent(open_world[ind], p, vocab)
-        place = f"; proposed place: under {parent}" if parent else ""
-        hypotheses = (
-            f"it may be {', '.join(said)}, which is asked only where a hazard depends on it"
-            if said
-            else "nothing suggests a hazard of its own; its material is unknown"
-        )
-        notes.append(
-            f"{ind}: '{open_world[ind]}' is not a class of the knowledge base; read as {base} "
-            f"of the open world ({p.describe()}{place}); {hypotheses}"
-        )
-    return tuple(notes)
-
-
-def _proposed_parent(word: str, p: Proposal, vocab: Vocabulary) -> str | None:
-    """Where the object might sit in the ontology, for the user and for
-    learning: the nearest WordNet hypernym the knowledge base names (a
-    bookshelf is a kind of shelf), else, for a word WordNet lacks, the class
-    closest in meaning (the bundled sentence embedder)."""
-    for hypernym in p.path[:6]:
-        cls = vocab.canonical_class(term_key(hypernym))
-        if cls is not None and cls not in ("PhysicalObject", "Entity", "Agent"):
-            return f"{cls} (WordNet)"
-    if p.found or not p.dictionary:
-        return None
-    from virf.ontology.suggest import rank_classes  # loads the embedder: only here
-
-    try:
-        ranked = rank_classes(word, vocab, "object")
-    except (EnvironmentProblem, OSError):  # a missing model only loses the proposal
-        return None
-    best = max(ranked, key=lambda r: (r.meaning, r.name), default=None)
-    if best is None or best.meaning < PROPOSAL_FLOOR:
-        return None
-    return f"{best.name} (closest in meaning)"
 
 
 def _deny(
@@ -730,41 +576,6 @@ def _check_physical(facts: Mapping[Fact, Provenance]) -> None:
         done.update(path)
 
 
-def _value_kind(term: str, classes: Mapping[str, set[str]], vocab: Vocabulary) -> str | None:
-    """'State', 'Material' or 'Attribute' for a value individual or class."""
-    types = classes.get(term) or {term}
-    for root in VALUE_PROPERTY:
-        if types and all(vocab.is_a(c, root) for c in types):
-            return root
-    return None
-
-
-def _value_individuals(
-    classes: Mapping[str, set[str]], vocab: Vocabulary, used_as_value: set[str]
-) -> dict[str, list[str]]:
-    """User individuals of state, material or attribute classes, each with the
-    canonical individuals it stands for (empty: keep the user's individual,
-    because some class of it has no canonical individual).  An individual of
-    material classes only is a value only where a scene uses it as one."""
-    out: dict[str, list[str]] = {}
-    for ind, cs in classes.items():
-        kind = _value_kind(ind, classes, vocab)
-        if kind is None or (kind == "Material" and ind not in used_as_value):
-            continue
-        specific = _most_specific(cs, vocab)
-        out[ind] = sorted(specific) if specific <= vocab.individuals else []
-    return out
-
-
-def _most_specific(classes: set[str], vocab: Vocabulary) -> set[str]:
-    """The classes without a strict subclass among them: the others are implied."""
-    return {
-        c
-        for c in classes
-        if not any(d != c and vocab.is_a(d, c) and not vocab.is_a(c, d) for d in classes)
-    }
-
-
 def _canonical_direction(subject: str, prop: str, obj: str, vocab: Vocabulary) -> Fact:
     """One spelling of a relation and its inverse: the simulator's direction
     where it reads the relation, else the 'has...' side of the pair."""
@@ -778,180 +589,3 @@ def _canonical_direction(subject: str, prop: str, obj: str, vocab: Vocabulary) -
     ):
         return Fact(obj, inverse, subject)
     return Fact(subject, prop, obj)
-
-
-def _apply_default_states(
-    objects: dict[str, frozenset[str]], facts: dict[Fact, Provenance], vocab: Vocabulary
-) -> None:
-    """States a type starts in (a fridge is closed, a toaster off) when the
-    scene says nothing about that state or its opposite."""
-    stated: dict[str, set[str]] = {}
-    for f in facts:
-        if f.predicate == "hasState":
-            stated.setdefault(f.subject, set()).add(f.object)
-    for ind, cs in objects.items():
-        have = stated.get(ind, set())
-        for cls in sorted(cs):
-            for default in vocab.annotation(cls, "defaultState"):
-                if not have & (vocab.excluded_by(default) | {default}):
-                    facts[Fact(ind, "hasState", default)] = Provenance.DEFAULT
-                    have = have | {default}
-
-
-def _assume_controls(
-    objects: dict[str, frozenset[str]],
-    order: tuple[str, ...],
-    facts: dict[Fact, Provenance],
-    vocab: Vocabulary,
-) -> None:
-    """A control whose device the scene does not name (a stove knob without a
-    'controls' fact) is assumed to control every device of its type: hazards
-    that follow are then UNKNOWN, with the assumption as the question."""
-    stated = {f.subject for f in facts if f.predicate == "controls"}
-    for ind in order:
-        if ind in stated:
-            continue
-        for cls in sorted(objects[ind]):
-            for device_type in vocab.annotation(cls, "controlsType"):
-                for device in order:
-                    if vocab.any_is_a(objects[device], device_type):
-                        facts[Fact(ind, "controls", device)] = Provenance.ASSUMED
-
-
-def _mark_unknown_fill(
-    objects: dict[str, frozenset[str]], facts: dict[Fact, Provenance], vocab: Vocabulary
-) -> None:
-    """A liquid container whose fill state the scene does not give gets an
-    explicit UnknownFillState marker (AI2-THOR randomises it)."""
-    fill_known = {
-        f.subject
-        for f in facts
-        if f.predicate == "hasState"
-        and f.object in ("FilledWithLiquidState", "EmptyState", "UnknownFillState")
-    }
-    for ind, cs in objects.items():
-        if ind not in fill_known and vocab.any_is_a(cs, "LiquidContainer"):
-            facts[Fact(ind, "hasState", "UnknownFillState")] = Provenance.ASSUMED
-
-
-def _mark_unknown_contents(
-    objects: dict[str, frozenset[str]],
-    facts: dict[Fact, Provenance],
-    vocab: Vocabulary,
-    closed: frozenset[str],
-    unknown_contents: frozenset[str],
-) -> None:
-    """A receptacle or vessel whose contents the scene does not list
-    completely gets an explicit UnknownContentsState marker: a toilet or a
-    bucket may already hold a cleaner nobody mentioned."""
-    for ind, cs in objects.items():
-        if not (vocab.any_is_a(cs, "ContainerReceptacle") or vocab.any_is_a(cs, "LiquidContainer")):
-            continue
-        listed = "contains" in closed or f"contains:{ind}" in closed
-        if not listed or ind in unknown_contents:
-            facts[Fact(ind, "hasState", "UnknownContentsState")] = Provenance.ASSUMED
-
-
-def _apply_material_knowledge(
-    objects: dict[str, frozenset[str]], facts: dict[Fact, Provenance], vocab: Vocabulary
-) -> None:
-    """Typical-material defaults, possible materials, then unknown-material
-    markers, for objects whose scene states no material.
-
-    A Mug is ceramic *unless the scene says otherwise*: OWL has no defaults, so
-    the default is applied here.  A Vase may be ceramic, glass or metal (AI2-THOR's
-    vases differ): each possibility is an ASSUMED fact, so a hazard that needs
-    one is UNKNOWN and asks what the vase is made of, never UNSAFE or SAFE.  An
-    object whose material is still unknown gets an explicit UnknownMaterial
-    marker (an ASSUMED fact): the open world made visible, so that uncertainty
-    rules can ask about it.
-    """
-    stated: dict[str, set[str]] = {}
-    for f in facts:
-        if f.predicate == "hasMaterial":
-            stated.setdefault(f.subject, set()).add(f.object)
-    for ind, cs in objects.items():
-        if not vocab.any_is_a(cs, "PhysicalObject") or vocab.any_is_a(cs, "Liquid"):
-            continue
-        if stated.get(ind):
-            continue
-        typical = vocab.typical_materials(cs)
-        possible = vocab.possible_materials(cs)
-        for m in typical:
-            facts[Fact(ind, "hasMaterial", m)] = Provenance.DEFAULT
-        for m in possible:
-            facts.setdefault(Fact(ind, "hasMaterial", m), Provenance.ASSUMED)
-        if not (typical or possible or vocab.materials_of(cs) or vocab.any_is_a(cs, "FoodItem")):
-            facts[Fact(ind, "hasMaterial", "UnknownMaterial")] = Provenance.ASSUMED
-
-
-def describe_scene(scene: Scene) -> dict[str, Any]:
-    """The canonical world the reader built, as plain data (``virf scene show``):
-    per object its types, states, materials and relations, each with where it
-    came from (the scene, a catalogue default, an open-world assumption) and,
-    where the scene wrote it differently, how it was written."""
-
-    def entry(f: Fact, prov: Provenance) -> dict[str, str]:
-        out = {"value": f.object, "from": prov.value}
-        written = scene.spelling.get(f)
-        if written is not None:
-            out["written"] = written.render()
-            out["canonical"] = f.render()
-        return out
-
-    objects: dict[str, Any] = {}
-    for ind in (*scene.order, *sorted(set(scene.objects) - set(scene.order))):
-        objects[ind] = {
-            "types": sorted(scene.objects[ind]),
-            "states": [],
-            "materials": [],
-            "properties": [],
-            "relations": [],
-            "data": {},
-        }
-    value_keys = {"hasState": "states", "hasMaterial": "materials", "hasProperty": "properties"}
-    for f, prov in scene.facts.items():
-        if f.subject not in objects:
-            continue
-        obj = objects[f.subject]
-        if f.kind is FactKind.DATA:
-            obj["data"][f.predicate] = f.object
-        elif f.predicate in value_keys:
-            obj[value_keys[f.predicate]].append(entry(f, prov))
-        elif f.kind is FactKind.OBJECT:
-            rel = entry(f, prov)
-            rel["relation"] = f.predicate
-            obj["relations"].append(rel)
-    others = sorted(
-        {f.subject for f in scene.facts if f.subject not in objects and f.kind is FactKind.TYPE}
-    )
-    return {
-        "name": scene.name,
-        "agent": scene.agent,
-        "objects": objects,
-        "value_individuals": {
-            ind: sorted(f.object for f in scene.facts if f.subject == ind) for ind in others
-        },
-        "closed_world": sorted(scene.closed_world),
-        "unknown_contents": sorted(scene.unknown_contents),
-        "unlocated_by_default": scene.unlocated_by_default,
-        "referents": dict(scene.referents),
-        "open_world_objects": {
-            ind: {
-                "written": word,
-                "proposal": propose(word).describe(),
-                "hypotheses": sorted(
-                    f.render()
-                    for f, p in scene.facts.items()
-                    if f.subject == ind and p is Provenance.ASSUMED
-                ),
-            }
-            for ind, word in scene.open_world.items()
-        },
-        "open_world_markers": sorted(
-            f.render()
-            for f, p in scene.facts.items()
-            if p is Provenance.ASSUMED
-            or f.object in ("UnknownMaterial", "UnknownFillState", "UnknownLiquid")
-        ),
-    }

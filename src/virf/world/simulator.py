@@ -29,7 +29,8 @@ from virf.world.actions import (
     lacking_affordance,
     lacks,
 )
-from virf.world.plan import STATE_ADJECTIVES, PlanStep, singular_forms
+from virf.world.language import STATE_ADJECTIVES
+from virf.world.plan import PlanStep, singular_forms
 from virf.world.scene import Scene
 from virf.world.state import (
     MissingObject,

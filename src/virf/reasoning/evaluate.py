@@ -1,0 +1,408 @@
+"""A query read over one model of the fast engine: classical truth (the
+upper bound, once the model is checked), certain truth (the lower bound),
+and the search for assertions that would make a query false.
+
+Certain truth is sound: negation holds only where adding the negated fact
+derives a clash, ``only`` and ``max 0`` only through closure facts.  A query
+whose reading the bounds cannot settle raises :class:`Fallback`, and the
+engine asks the reference reasoner (see :mod:`virf.reasoning.fast`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from collections.abc import Set as AbstractSet
+from typing import Any
+
+from virf.ontology.fragment import Axiom, Expr, Role
+from virf.ontology.iri import NOTHING, THING
+from virf.reasoning.chase import Model
+
+_NONE: frozenset[str] = frozenset()
+
+
+class Fallback(Exception):
+    """The bounds did not meet: ask the reference engine."""
+
+
+class Evaluator:
+    """Query evaluation over one model: classical truth, certain truth, and
+    the search for a falsifying extension."""
+
+    def __init__(self, model: Model, defs: dict[str, Expr], sinks: frozenset[str]) -> None:
+        self.m = model
+        self.defs = defs
+        self.sinks = sinks
+        self._version = -1
+        self._classical: dict[tuple[Expr, str], bool] = {}
+        self._cert: dict[tuple[Expr, str], bool] = {}
+        self._cert_not: dict[tuple[Expr, str], bool] = {}
+        self._candidates: dict[str, AbstractSet[str] | None] = {}
+        self._lazy: dict[tuple[Role, Expr, str], set[str]] = {}
+
+    def _fresh(self) -> None:
+        if self._version != self.m.version:
+            self._version = self.m.version
+            self._classical.clear()
+            self._cert.clear()
+            self._cert_not.clear()
+            self._candidates.clear()
+            self._lazy.clear()
+
+    # ------------------------------------------------------------------ classical
+    def holds(self, e: Expr, x: str) -> bool:
+        """Truth of ``e`` at ``x`` in the model, read as a finite interpretation."""
+        self._fresh()
+        key = (e, x)
+        hit = self._classical.get(key)
+        if hit is None:
+            hit = self._holds(e, x)
+            self._classical[key] = hit
+        return hit
+
+    def _holds(self, e: Expr, x: str) -> bool:
+        m, tag = self.m, e[0]
+        if tag == "C":
+            name = e[1]
+            if name in self.defs:
+                return self.holds(self.defs[name], x)
+            if name in self.sinks:
+                return True
+            return name in m.types[x]
+        if tag == "and":
+            return all(self.holds(c, x) for c in e[1])
+        if tag == "or":
+            return any(self.holds(c, x) for c in e[1])
+        if tag == "not":
+            return not self.holds(e[1], x)
+        if tag == "some":
+            if e[1][0] in m.lazy:
+                return x in self._lazy_some(e[1], e[2], self.holds)
+            return any(self.holds(e[2], y) for y in m.rsucc(e[1], x))
+        if tag == "all":
+            return all(self.holds(e[2], y) for y in m.rsucc(e[1], x))
+        if tag == "value":
+            return e[2] in m.rsucc(e[1], x)
+        if tag == "min":
+            return sum(1 for y in m.rsucc(e[2], x) if self.holds(e[3], y)) >= int(e[1])
+        if tag == "max":
+            return sum(1 for y in m.rsucc(e[2], x) if self.holds(e[3], y)) <= int(e[1])
+        if tag == "oneof":
+            return x in e[1]
+        if tag == "dvalue":
+            # .get: a read must not add entries the journal does not know of.
+            return e[2] in m.data.get(x, {}).get(e[1], _NONE)
+        raise Fallback(f"cannot evaluate {tag}")
+
+    # ------------------------------------------------------------------ certain
+    def certain(self, e: Expr, x: str) -> bool:
+        """Sound: True only if ``e(x)`` is entailed (the model is the lower bound)."""
+        self._fresh()
+        key = (e, x)
+        hit = self._cert.get(key)
+        if hit is None:
+            hit = self._certain(e, x)
+            self._cert[key] = hit
+        return hit
+
+    def _certain(self, e: Expr, x: str) -> bool:
+        m, tag = self.m, e[0]
+        if tag == "C":
+            name = e[1]
+            if name in self.defs:
+                return self.certain(self.defs[name], x)
+            if name in self.sinks:
+                return False
+            return name in m.types[x]
+        if tag == "and":
+            return all(self.certain(c, x) for c in e[1])
+        if tag == "or":
+            return any(self.certain(c, x) for c in e[1])
+        if tag == "not":
+            return self.certain_not(e[1], x)
+        if tag == "some" or (tag == "min" and e[1] == 1):
+            role, filler = (e[1], e[2]) if tag == "some" else (e[2], e[3])
+            if role[0] in m.lazy:
+                return x in self._lazy_some(role, filler, self.certain)
+            return any(self.certain(filler, y) for y in m.rsucc(role, x))
+        if tag == "value":
+            return e[2] in m.rsucc(e[1], x)
+        if tag == "all":
+            bound = self.bound(e[1], x)
+            return bound is not None and all(self.certain(e[2], s) for s in bound)
+        if tag == "max" and e[1] == 0:
+            bound = self.bound(e[2], x)
+            return bound is not None and all(self.certain_not(e[3], s) for s in bound)
+        if tag == "oneof":
+            return x in e[1]
+        if tag == "dvalue":
+            return e[2] in m.data.get(x, {}).get(e[1], _NONE)
+        return False
+
+    def _lazy_some(self, role: Role, filler: Expr, test: Callable[[Expr, str], bool]) -> set[str]:
+        """Where ``role some filler`` holds (by ``test``) for a lazy role: one
+        search back from where the filler holds, not one search forward
+        from each individual (a chain of n boxes cost n² steps)."""
+        key = (role, filler, test.__name__)
+        hit = self._lazy.get(key)
+        if hit is None:
+            pool = self.candidates(filler)
+            where = self.m.types.keys() if pool is None else pool
+            ends = [y for y in where if y in self.m.types and test(filler, y)]
+            hit = self.m.reach_any(role[0], ends, not role[1])
+            self._lazy[key] = hit
+        return hit
+
+    def bound(self, r: Role, x: str) -> frozenset[str] | None:
+        """Individuals that every r-successor of x must be, from closure facts
+        on r or on a super-property of r (None when nothing bounds them)."""
+        if r[1]:
+            return None
+        out: frozenset[str] | None = None
+        for q in [(r[0], False), *self.m.prog.supers(r[0])]:
+            if q[1]:
+                continue
+            members = self.m.closures.get((x, q[0]))
+            if members is not None:
+                out = members if out is None else out & members
+        return out
+
+    def candidates(self, e: Expr) -> AbstractSet[str] | None:
+        """A superset of the individuals at which ``e`` holds in the model
+        (None: possibly any).  Read from the class and role tables, so a
+        query is evaluated only where it can hold: checking every query at
+        every individual cost more than the rest of a verification."""
+        m, tag = self.m, e[0]
+        if tag == "C":
+            name = e[1]
+            if name in self.defs:
+                # Definitions share defined classes: each is read once per model.
+                self._fresh()
+                if name not in self._candidates:
+                    self._candidates[name] = self.candidates(self.defs[name])
+                return self._candidates[name]
+            if name in self.sinks or name == THING:
+                return None
+            return m.members.get(name, _NONE)
+        if tag == "and":
+            # Named conjuncts first: an action class absent from the state
+            # settles the question before any role is read.
+            both: set[str] | None = None
+            for named in (True, False):
+                for c in e[1]:
+                    if (c[0] == "C") is not named:
+                        continue
+                    part = self.candidates(c)
+                    if part is None:
+                        continue
+                    both = set(part) if both is None else both & part
+                    if not both:
+                        return both
+            return both
+        if tag == "or":
+            parts = [self.candidates(c) for c in e[1]]
+            if any(p is None for p in parts):
+                return None
+            return set().union(*parts)  # type: ignore[arg-type]
+        if tag == "some" or (tag == "min" and int(e[1]) >= 1):
+            role, filler = (e[1], e[2]) if tag == "some" else (e[2], e[3])
+            if role[0] in m.lazy:
+                return None
+            ends = self.candidates(filler)
+            back = (m.succ if role[1] else m.pred).get(role[0], {})
+            if ends is None:
+                forth = (m.pred if role[1] else m.succ).get(role[0], {})
+                return {x for x, ys in forth.items() if ys}
+            out: set[str] = set()
+            for y in ends:
+                out |= back.get(y, _NONE)
+            return out
+        if tag == "value":
+            role = e[1]
+            if role[0] in m.lazy:
+                return None
+            return set((m.succ if role[1] else m.pred).get(role[0], {}).get(e[2], _NONE))
+        if tag == "oneof":
+            return set(e[1])
+        if tag == "dvalue":
+            return {x for x, table in m.data.items() if e[2] in table.get(e[1], _NONE)}
+        return None
+
+    def certain_not(self, e: Expr, x: str) -> bool:
+        """Sound: True only if ``not e(x)`` is entailed, i.e. asserting ``e(x)``
+        makes the rules derive a clash."""
+        self._fresh()
+        key = (e, x)
+        hit = self._cert_not.get(key)
+        if hit is not None:
+            return hit
+        if e[0] == "or":
+            hit = all(self.certain_not(c, x) for c in e[1])
+        elif e[0] == "C" and e[1] in self.defs:
+            hit = self.certain_not(self.defs[e[1]], x)
+        elif not _assertable(e, self.defs):
+            hit = False
+        else:
+            m = self.m
+            token = m.begin()
+            try:
+                self.impose(e, x)
+                m.run()
+                hit = m.clash is not None
+            finally:
+                m.rollback(token)
+        self._fresh()
+        self._cert_not[key] = hit
+        return hit
+
+    def impose(self, e: Expr, x: str) -> None:
+        m, tag = self.m, e[0]
+        if tag == "C":
+            if e[1] != THING:
+                m.cls(x, e[1])
+        elif tag == "and":
+            for c in e[1]:
+                self.impose(c, x)
+        elif tag == "some" or (tag == "min" and e[1] == 1):
+            role, filler = (e[1], e[2]) if tag == "some" else (e[2], e[3])
+            n = m.new_element()
+            m.role(role, x, n)
+            self.impose(filler, n)
+        elif tag == "value":
+            m.role(e[1], x, e[2])
+        elif tag == "dvalue":
+            m.datum(x, e[1], e[2])
+        else:
+            raise Fallback(f"cannot assert {tag}")
+
+    # ------------------------------------------------------------------ refutation
+    def falsifiers(self, e: Expr, x: str) -> list[tuple[Any, ...]] | None:
+        """Assertions that may make ``e(x)`` false (``e`` holds now), or None."""
+        m, tag = self.m, e[0]
+        if not self.holds(e, x):
+            return []
+        if tag == "C":
+            if e[1] in self.defs:
+                return self.falsifiers(self.defs[e[1]], x)
+            return None
+        if tag == "and":
+            for c in e[1]:
+                if not self.certain(c, x):
+                    f = self.falsifiers(c, x)
+                    if f is not None:
+                        return f
+            return None
+        if tag == "or":
+            out: list[tuple[Any, ...]] = []
+            for c in e[1]:
+                f = self.falsifiers(c, x)
+                if f is None:
+                    return None
+                out += f
+            return out
+        if tag == "not":
+            inner = e[1]
+            if inner[0] == "C" and inner[1] in self.defs:
+                inner = self.defs[inner[1]]
+            # To falsify "not (A or B)" it is enough to make one disjunct true.
+            options = inner[1] if inner[0] == "or" else (inner,)
+            for option in options:
+                if _assertable(option, self.defs) and not self.certain_not(option, x):
+                    return [("assert", option, x)]
+            return None
+        if tag == "some":
+            out = []
+            for y in sorted(m.rsucc(e[1], x)):
+                f = self.falsifiers(e[2], y)
+                if f is None:
+                    return None
+                out += f
+            return out
+        if tag == "all":  # needs one successor outside the filler
+            role, filler = e[1], e[2]
+            bound = self.bound(role, x)
+            if bound is None:
+                return [("fresh", role, x)]
+            for s in sorted(bound):
+                if self.certain(filler, s):
+                    continue
+                linked = s in m.rsucc(role, x)
+                f = self.falsifiers(filler, s)
+                if f is not None:
+                    return ([] if linked else [("link", role, x, s)]) + f
+            return None
+        if tag == "max" and e[1] == 0:  # needs one successor inside the filler
+            role, filler = e[2], e[3]
+            if not _assertable(filler, self.defs):
+                return None
+            bound = self.bound(role, x)
+            if bound is None:
+                return [("fresh-assert", role, x, filler)]
+            for s in sorted(bound):
+                if self.certain_not(filler, s):
+                    continue
+                linked = s in m.rsucc(role, x)
+                return ([] if linked else [("link", role, x, s)]) + [("assert", filler, s)]
+            return None
+        return None
+
+    def apply(self, ops: list[tuple[Any, ...]]) -> None:
+        m = self.m
+        for op in ops:
+            if op[0] == "assert":
+                self.impose(op[1], op[2])
+            elif op[0] == "link":
+                m.role(op[1], op[2], op[3])
+            elif op[0] == "fresh":
+                m.role(op[1], op[2], m.new_element())
+            elif op[0] == "fresh-assert":
+                n = m.new_element()
+                m.role(op[1], op[2], n)
+                self.impose(op[3], n)
+        m.run()
+
+    def violations(self, checks: list[Axiom]) -> str | None:
+        """The first knowledge-base axiom the model does not satisfy."""
+        closure = self.m.closure_violation()
+        if closure:
+            return closure
+        for ax in checks:
+            if not self._satisfied(ax):
+                return ax.text
+        return None
+
+    def _satisfied(self, ax: Axiom) -> bool:
+        m, k, a = self.m, ax.kind, ax.args
+
+        def sub(left: Expr, right: Expr) -> bool:
+            pool = m.members.get(left[1], set()) if left[0] == "C" else m.types.keys()
+            return all(self.holds(right, x) for x in list(pool) if self.holds(left, x))
+
+        if k == "sub":
+            return sub(a[0], a[1])
+        if k == "eq":
+            return all(sub(x, y) for x in a[0] for y in a[0] if x is not y)
+        if k == "disj":
+            return all(sub(x, ("not", y)) for i, x in enumerate(a[0]) for y in a[0][i + 1 :])
+        if k == "cassert":
+            return a[1] in m.types and self.holds(a[0], a[1])
+        if k == "domain":
+            return sub(("some", a[0], ("C", THING)), a[1])
+        if k == "range":
+            return sub(("C", THING), ("all", a[0], a[1]))
+        if k == "ddomain":
+            return sub(("or", (("dvalue", a[0], True), ("dvalue", a[0], False))), a[1])
+        raise Fallback(f"no model check for {k}")
+
+
+def _assertable(e: Expr, defs: dict[str, Expr]) -> bool:
+    tag = e[0]
+    if tag == "C":
+        return e[1] not in defs and e[1] != NOTHING
+    if tag == "and":
+        return all(_assertable(c, defs) for c in e[1])
+    if tag in ("some",):
+        return _assertable(e[2], defs)
+    if tag == "min":
+        return e[1] == 1 and _assertable(e[3], defs)
+    return tag in ("value", "dvalue")
