@@ -31,7 +31,7 @@ from virf.planner import (
     export_replay,
     make_apprentice,
 )
-from virf.planner.clients import LOCAL_PLACEHOLDER_KEY
+from virf.planner.chat import LOCAL_PLACEHOLDER_KEY
 
 MESSAGES = [
     {"role": "system", "content": "You are a household robot planner."},

@@ -13,7 +13,8 @@ from virf.planner.apprentices import (
     export_replay,
     load_replay,
 )
-from virf.planner.clients import ClientSettings, Endpoint, OpenAIApprentice
+from virf.planner.chat import ClientSettings, Endpoint
+from virf.planner.clients import OpenAIApprentice
 from virf.planner.deadline import Deadline
 from virf.planner.factory import make_apprentice
 from virf.planner.runlog import MIGRATIONS, CallRecord, RunLog

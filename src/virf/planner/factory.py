@@ -9,12 +9,8 @@ from typing import Any, Final
 
 from virf.errors import InputError, clip
 from virf.planner.apprentices import Apprentice, ReplayApprentice, ScriptedApprentice
-from virf.planner.clients import (
-    BASE_URL_ENV,
-    DEFAULT_API_KEY_ENV,
-    ClientSettings,
-    OpenAIApprentice,
-)
+from virf.planner.chat import BASE_URL_ENV, DEFAULT_API_KEY_ENV, ClientSettings
+from virf.planner.clients import OpenAIApprentice
 from virf.planner.config import RUN_KEYS, planner_settings
 from virf.planner.runlog import RunLog
 

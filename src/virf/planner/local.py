@@ -31,7 +31,7 @@ from typing import Any, Final
 
 from virf.errors import EnvironmentProblem, InputError, clip
 from virf.planner.apprentices import Apprentice, Proposal, ProposalRequest, sum_known
-from virf.planner.clients import int_at_least, number_in, read_reply
+from virf.planner.chat import int_at_least, number_in, read_reply
 from virf.planner.prompting import template
 
 INSTALL: Final = "run 'make local-llm' (installs llama-cpp-python and the model weights)"
