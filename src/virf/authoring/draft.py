@@ -13,12 +13,11 @@ from __future__ import annotations
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
-from functools import cache
-from importlib import resources
 from typing import TYPE_CHECKING, Final
 
 from virf.authoring.drafts import Draft, parse_reply
 from virf.errors import InputError
+from virf.files import read_prompt
 from virf.ontology.tbox import Vocabulary
 
 if TYPE_CHECKING:
@@ -52,13 +51,8 @@ def task_id(query: str) -> str:
     return f"draft:{slug or 'query'}"
 
 
-@cache
 def _template() -> str:
-    return (
-        resources.files("virf.authoring")
-        .joinpath("prompts/draft_system.txt")
-        .read_text(encoding="utf-8")
-    )
+    return read_prompt("virf.authoring", "draft_system.txt")
 
 
 def _below(vocab: Vocabulary, root: str) -> list[str]:

@@ -25,11 +25,11 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cache
-from importlib import resources
 from pathlib import Path
 from typing import Any, Final
 
 from virf.errors import EnvironmentProblem, InputError, clip
+from virf.files import read_prompt
 from virf.planner.apprentices import Apprentice, Proposal, ProposalRequest, sum_known
 from virf.planner.chat import int_at_least, number_in, read_reply
 from virf.planner.prompting import template
@@ -125,9 +125,8 @@ def few_shot(reasoning: bool) -> tuple[tuple[str, str], ...]:
     its answer: a small model copies the form of what it has just seen, so
     when the task asks for REASONING and PLAN (the thinking methods), so do
     the examples."""
-    text = resources.files("virf.planner").joinpath("prompts", "few_shot.json").read_text("utf-8")
     out: list[tuple[str, str]] = []
-    for example in json.loads(text):
+    for example in json.loads(read_prompt("virf.planner", "few_shot.json")):
         prompt = template("apprentice").format(
             instruction=example["instruction"],
             objects="\n".join(f"- {o}" for o in example["objects"]),
