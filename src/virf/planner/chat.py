@@ -212,4 +212,3 @@ def read_reply(body: str) -> ReplyContent:
     if problem and isinstance(refusal, str) and refusal.strip():
         problem = f"the model refused: {one_line(refusal, 120)}"
     return ReplyContent(None if problem else text, problem, *tokens)
-

@@ -123,7 +123,6 @@ class _Reply:
     reask: bool = True
 
 
-
 class _ReplyDeadline(openai.OpenAIError):
     """A reply still arriving when its attempt's time was up.
 
