@@ -106,6 +106,10 @@ def ask_drafter(
 ) -> Drafted:
     """One request to the drafter; a reply that is not a usable draft is
     reported, not raised, so the audit can count it."""
+    # Here, not at the top: the rest of authoring runs without the planner's
+    # clients, and an apprentice in hand means they are loaded already.
+    from virf.planner.apprentices import Purpose
+
     if not hits:
         raise InputError("no evidence retrieved for the question; add documents to the corpus")
     proposal = apprentice.propose(
@@ -116,6 +120,7 @@ def ask_drafter(
         task_id=task_id(query),
         iteration=1,
         method=METHOD,
+        purpose=Purpose.DRAFT,
     )
     if not proposal.ok or proposal.text is None:
         return Drafted(None, proposal.reason or "no reply", None)

@@ -446,6 +446,7 @@ class TimedCritic(Apprentice):
                 task_id=request.task_id,
                 iteration=request.iteration,
                 method=request.method,
+                purpose=request.purpose,
                 deadline=request.deadline,  # the run's: a silent critic cannot outlive it
             )
         finally:

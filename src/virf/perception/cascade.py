@@ -34,7 +34,7 @@ from virf.perception.replies import (
     read_detections,
     read_locations,
 )
-from virf.planner import Apprentice, Attachment, Deadline
+from virf.planner import Apprentice, Attachment, Deadline, Purpose
 
 STATE_WORDS: Final = (
     "on, off, open, closed, hot, cold, wet, dry, dirty, clean, broken, sliced, cooked, "
@@ -190,6 +190,7 @@ class Cascade:
             task_id=view.key,
             iteration=1,
             method=method,
+            purpose=Purpose.PERCEIVE,
             deadline=self.deadline,
             images=images,
         )

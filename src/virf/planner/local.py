@@ -9,8 +9,9 @@ fails with one line naming that target.
 The model sees the prompts every apprentice sees, through the model's own
 chat template.  A small model copies form better than it follows
 instructions, so a worked example exchange (``prompts/few_shot.json``) goes
-before the task.  The reply is read by the chat-completions client's own
-reader, re-asked once when it is empty, and logged like any model call.
+before the task of every request whose purpose is a plan.  The reply is read
+by the chat-completions client's own reader, re-asked once when it is empty,
+and logged like any model call.
 Generation is greedy (temperature 0) with a fixed seed: the same prompt
 gives the same plan.
 """
@@ -115,10 +116,6 @@ class LocalSettings:
         return max(1, os.cpu_count() or 1)
 
 
-# How every apprentice prompt begins; only such a request gets the examples.
-APPRENTICE_OPENING: Final = template("apprentice").split("\n", 1)[0]
-
-
 @cache
 def few_shot(reasoning: bool) -> tuple[tuple[str, str], ...]:
     """Worked examples, each a task prompt in the apprentice's own form and
@@ -194,15 +191,14 @@ class LocalApprentice(Apprentice):
     def _sent(self, request: ProposalRequest) -> ProposalRequest:
         """The request as the model gets it (and the log records it): the
         examples after the system message, before the task."""
-        if not self.settings.few_shot:
+        if not self.settings.few_shot or not request.purpose.asks_for_plan:
+            # A critic's review or a knowledge draft: plan examples would only
+            # pull the reply towards a plan.
             return request
         pairs = list(request.messages)
         at = 1 if pairs and pairs[0][0] == "system" else 0
         task = next((c for r, c in pairs[at:] if r == "user"), "")
-        if not task.startswith(APPRENTICE_OPENING):
-            # A critic's review or a knowledge draft: plan examples would only
-            # pull the reply towards a plan.
-            return request
+        # The examples take the form the task asks for, with or without REASONING.
         pairs[at:at] = few_shot(template("thinker").strip() in task)
         return dataclasses.replace(request, messages=tuple(pairs))
 
