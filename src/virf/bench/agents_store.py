@@ -22,6 +22,7 @@ from virf.errors import EnvironmentProblem, InputError
 from virf.migrations import Migration
 from virf.planner.config import planner_settings
 from virf.planner.runlog import MIGRATIONS, RunLog
+from virf.planner.spec import PlannerSpec
 
 # Bumped when a change to the harness would make stored rows incomparable with
 # new ones; it is part of the configuration id, so old rows are not resumed.
@@ -108,20 +109,19 @@ def source_digest(path: str | Path) -> str:
         raise InputError(f"cannot read {path}: {exc.strerror}") from None
 
 
-def canonical_planner(spec: str | None) -> str | None:
-    """A planner spec as it enters the configuration id: a replay file by its
-    content (the same recording under another path is the same run; an
-    edited recording is not)."""
+def canonical_planner(spec: str | PlannerSpec | None) -> str | None:
+    """A planner spec as it enters the configuration id: its canonical
+    spelling, or, for a planner whose answers come from a file (a replay, a
+    GGUF model), that file's content: the same recording under another path
+    is the same run; an edited recording, or another model file under the
+    same path, is not."""
     if spec is None:
         return None
-    kind, sep, rest = spec.strip().partition(":")
-    if kind == "replay" and sep and rest.strip():
-        return f"replay:sha256={source_digest(rest.strip())}"
-    if kind == "local" and sep and rest.strip().lower().endswith(".gguf"):
-        # A model file by its content, as a recording: another file under the
-        # same path is another model.
-        return f"local:sha256={source_digest(Path(rest.strip()).expanduser())}"
-    return spec.strip()
+    planner = PlannerSpec.parse(spec)
+    source = planner.source_file()
+    if source is not None:
+        return f"{planner.kind}:sha256={source_digest(source)}"
+    return str(planner)
 
 
 @dataclass(frozen=True)
@@ -143,9 +143,9 @@ class AgentConfig:
     @classmethod
     def build(
         cls,
-        planner: str,
+        planner: str | PlannerSpec,
         *,
-        critic: str | None = None,
+        critic: str | PlannerSpec | None = None,
         base_url: str | None = None,
         max_iter: int = 5,
         answers: str | Path | None = None,
@@ -153,7 +153,8 @@ class AgentConfig:
         sampling: Mapping[str, Any] | None = None,
     ) -> AgentConfig:
         env = os.environ if environ is None else environ
-        online = any(s is not None and s.strip().startswith("openai:") for s in (planner, critic))
+        specs = [PlannerSpec.parse(s) for s in (planner, critic) if s is not None]
+        online = any(s.over_http for s in specs)
         # The server is part of the run only when a model is asked over HTTP.
         # Resolved as the client resolves it: option, environment, user config.
         user = planner_settings(env) if online else {}
@@ -162,8 +163,7 @@ class AgentConfig:
         chosen = {k: v for k, v in user.items() if k not in ("api_key", "base_url")}
         # A local model takes the command line's sampling too (not the user
         # config's, which is the HTTP client's).
-        local = any(s is not None and s.strip().startswith("local:") for s in (planner, critic))
-        if online or local:
+        if any(s.sampling for s in specs):
             chosen.update(sampling or {})
         planner_key = canonical_planner(planner)
         assert planner_key is not None

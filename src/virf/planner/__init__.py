@@ -19,6 +19,7 @@ from virf.planner.clients import OpenAIApprentice
 from virf.planner.deadline import Deadline
 from virf.planner.factory import make_apprentice
 from virf.planner.runlog import MIGRATIONS, CallRecord, RunLog
+from virf.planner.spec import PlannerKind, PlannerSpec
 
 __all__ = [
     "MIGRATIONS",
@@ -30,6 +31,8 @@ __all__ = [
     "Endpoint",
     "Migration",
     "OpenAIApprentice",
+    "PlannerKind",
+    "PlannerSpec",
     "Proposal",
     "ProposalRequest",
     "Purpose",
