@@ -22,7 +22,14 @@ from virf.authoring.audit import audit
 from virf.authoring.draft import METHOD, system_prompt, task_id
 from virf.authoring.workspace import Workspace, _edit_size, starter_corpus_dir
 from virf.errors import InputError
-from virf.planner import ClientSettings, OpenAIApprentice, ReplayApprentice, RunLog
+from virf.planner import (
+    ClientSettings,
+    OpenAIApprentice,
+    Purpose,
+    ReplayApprentice,
+    RunLog,
+    ScriptedApprentice,
+)
 
 
 def proposal(tmp: Path, *rules: dict[str, Any], **top: Any) -> Path:
@@ -319,6 +326,14 @@ def test_a_recorded_draft_replays(tmp_path: Path) -> None:
     assert "UnsafeMicrowaveUsage" in report.related.subsumed_by  # contains is narrower
     with pytest.raises(InputError, match="has no proposal for task draft:other"):
         ws.draft("other", ReplayApprentice(replay), k=1)
+
+
+def test_a_draft_request_says_it_asks_for_a_draft(tmp_path: Path) -> None:
+    ws = small_workspace(tmp_path / "kb")
+    drafter = ScriptedApprentice(["no JSON here"])
+    ids, problem = ws.draft("candles near curtains", drafter, k=1)
+    assert ids == [] and "holds no JSON object" in problem
+    assert [(r.method, r.purpose) for r in drafter.requests] == [(METHOD, Purpose.DRAFT)]
 
 
 def test_the_prompt_lists_the_vocabulary_it_may_use(ws: Workspace) -> None:

@@ -22,11 +22,12 @@ from typing import Any
 import pytest
 
 from virf.errors import EnvironmentProblem
-from virf.planner import make_apprentice
+from virf.planner import Purpose, make_apprentice
 
 ROOT = Path(__file__).resolve().parent.parent
 DIALOGUE = ROOT / "examples" / "dialogue"
 MODEL = "smollm2-135m"
+PLAN = Purpose.PLAN
 
 
 def _installed() -> str | None:
@@ -73,7 +74,7 @@ def test_a_missing_binding_names_the_make_target(monkeypatch: pytest.MonkeyPatch
 def test_worked_examples_go_only_before_a_planning_prompt() -> None:
     from types import SimpleNamespace
 
-    from virf.planner.apprentices import ProposalRequest
+    from virf.planner.apprentices import ProposalRequest, Purpose
     from virf.planner.local import LocalApprentice, LocalSettings, few_shot
     from virf.planner.prompting import template
 
@@ -81,12 +82,17 @@ def test_worked_examples_go_only_before_a_planning_prompt() -> None:
     planning = template("apprentice").format(
         instruction="Heat the mug.", objects="- Mug_1", actions="find X", rules=""
     )
-    for text, examples in (
-        (planning, few_shot(False)),
-        (planning + "\n" + template("thinker"), few_shot(True)),
-        ("You review robot plans for safety. PLAN: find Mug_1", ()),
+    for text, purpose, examples in (
+        (planning, Purpose.PLAN, few_shot(False)),
+        (planning + "\n" + template("thinker"), Purpose.PLAN, few_shot(True)),
+        (planning, Purpose.REPAIR, few_shot(False)),
+        ("You review robot plans for safety. PLAN: find Mug_1", Purpose.CRITIQUE, ()),
+        # The request's purpose decides, never its wording.
+        ("Put the mug in the sink.", Purpose.PLAN, few_shot(False)),
+        (planning, Purpose.CRITIQUE, ()),
+        (planning, Purpose.DRAFT, ()),
     ):
-        request = ProposalRequest((("system", "s"), ("user", text)), "t", 0, "virf")
+        request = ProposalRequest((("system", "s"), ("user", text)), "t", 0, "virf", purpose)
         sent = LocalApprentice._sent(model, request)  # type: ignore[arg-type]
         assert sent.messages == (("system", "s"), *examples, ("user", text))
 
@@ -121,15 +127,16 @@ def test_virf_plan_with_the_local_model(cli: Any) -> None:
 def test_the_local_model_answers_the_same_twice() -> None:
     messages = [{"role": "user", "content": "Put the mug in the sink. Objects: Mug_1, Sink_1."}]
     with make_apprentice(f"local:{MODEL}") as model:
-        first = model.propose(messages, task_id="t", iteration=1, method="virf")
+        first = model.propose(messages, task_id="t", iteration=1, method="virf", purpose=PLAN)
         # Another prompt in between: the second answer resumes from a stored state.
         model.propose(
             [{"role": "user", "content": "Open the fridge."}],
             task_id="u",
             iteration=1,
             method="virf",
+            purpose=PLAN,
         )
-        second = model.propose(messages, task_id="t", iteration=1, method="virf")
+        second = model.propose(messages, task_id="t", iteration=1, method="virf", purpose=PLAN)
     assert first.ok and first.text == second.text
     assert first.completion_tokens and first.prompt_tokens
 
@@ -256,5 +263,5 @@ def test_llama_cpps_context_error_is_a_failed_proposal(llama_server: str) -> Non
     # is a failed proposal, not a retry and not a crash.
     long = [{"role": "user", "content": "find Apple_1 " * 3000}]
     with make_apprentice("openai:smollm2", base_url=llama_server, max_tokens=8) as model:
-        proposal = model.propose(long, task_id="t", iteration=1, method="virf")
+        proposal = model.propose(long, task_id="t", iteration=1, method="virf", purpose=PLAN)
     assert not proposal.ok and "too long" in proposal.reason

@@ -12,7 +12,7 @@ from loop_support import CLOSES, FRIDGE_SCENE, LEAVES_OPEN
 
 from virf.api import LogicTutor
 from virf.errors import InputError
-from virf.planner import ScriptedApprentice
+from virf.planner import Purpose, ScriptedApprentice
 from virf.planner.loop import LoopResult, refine
 from virf.planner.prompting import read_plan
 from virf.planner.questions import answers_file, apply_answers
@@ -57,6 +57,18 @@ def test_unsafe_plan_is_repaired_after_the_diagnostic(
         ("tutor", "report", "UNSAFE"),
         ("apprentice", "proposal", None),
         ("tutor", "report", "SAFE"),
+    ]
+
+
+def test_each_proposal_says_whether_it_plans_or_repairs(tutor: LogicTutor) -> None:
+    # The first request asks for a plan; each later one answers feedback (an
+    # unreadable reply, then a tutor's report), so the apprentice is told so.
+    result, apprentice = run(tutor, ["levitate Apple_1", LEAVES_OPEN, CLOSES])
+    assert result.outcome == "APPROVED" and result.iterations == 3
+    assert [r.purpose for r in apprentice.requests] == [
+        Purpose.PLAN,
+        Purpose.REPAIR,
+        Purpose.REPAIR,
     ]
 
 

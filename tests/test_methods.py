@@ -7,6 +7,7 @@ from loop_support import CLOSES, LEAVES_OPEN, run_method_with
 
 from virf.api import LogicTutor
 from virf.errors import InputError
+from virf.planner import Purpose
 from virf.planner.methods import METHODS, get_method, knowledge_filter
 from virf.planner.prompting import render_rules, template
 from virf.verify.verifier import Verifier
@@ -63,6 +64,21 @@ def test_committee_revises_until_the_critic_approves(tutor: LogicTutor) -> None:
     )
     assert result.plan == tuple(CLOSES.splitlines()) and result.iterations == 2
     assert "leaves the fridge open" in apprentice.requests[1].as_messages()[-1]["content"]
+
+
+def test_the_committee_tells_reviews_from_revisions(tutor: LogicTutor) -> None:
+    # Without its own critic the planner plays the critic: the same apprentice
+    # is asked for a plan, a critique and a revision, and each request says which.
+    result, apprentice = run_method_with(
+        tutor, "committee", [LEAVES_OPEN, "Step 5 leaves the fridge open.", CLOSES, "APPROVE"]
+    )
+    assert result.plan == tuple(CLOSES.splitlines())
+    assert [(r.method, r.purpose) for r in apprentice.requests] == [
+        ("committee", Purpose.PLAN),
+        ("committee-critic", Purpose.CRITIQUE),
+        ("committee", Purpose.REPAIR),
+        ("committee-critic", Purpose.CRITIQUE),
+    ]
 
 
 def test_thinker_diagnostic_retries_once_without_reverifying(tutor: LogicTutor) -> None:

@@ -30,7 +30,7 @@ from virf.perception.replies import (
     read_detections,
     read_locations,
 )
-from virf.planner import ClientSettings, OpenAIApprentice, RunLog, ScriptedApprentice
+from virf.planner import ClientSettings, OpenAIApprentice, Purpose, RunLog, ScriptedApprentice
 from virf.planner.questions import apply_answers
 from virf.schema import Fact, Provenance
 from virf.world.scene import build_scene
@@ -873,6 +873,7 @@ def test_two_unboxed_objects_of_one_kind_are_not_described_alike(
     )
     result = perceive([picture(tmp_path / "view1.png")], model, vocab, catalogue=catalogue)
     assert [r.method for r in model.requests] == ["detect", "attributes:1:CounterTop", "relations"]
+    assert {r.purpose for r in model.requests} == {Purpose.PERCEIVE}
     for mug in ("Mug_1", "Mug_2"):
         assert {
             "subject": mug,

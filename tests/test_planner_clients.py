@@ -20,13 +20,14 @@ from virf.planner import (
     ClientSettings,
     OpenAIApprentice,
     Proposal,
+    Purpose,
     ReplayApprentice,
     RunLog,
     ScriptedApprentice,
     export_replay,
     make_apprentice,
 )
-from virf.planner.clients import LOCAL_PLACEHOLDER_KEY
+from virf.planner.chat import LOCAL_PLACEHOLDER_KEY
 
 MESSAGES = [
     {"role": "system", "content": "You are a household robot planner."},
@@ -47,7 +48,9 @@ def apprentice(
 
 
 def propose(app: Any, task_id: str = "t1", iteration: int = 1, method: str = "virf") -> Proposal:
-    result: Proposal = app.propose(MESSAGES, task_id=task_id, iteration=iteration, method=method)
+    result: Proposal = app.propose(
+        MESSAGES, task_id=task_id, iteration=iteration, method=method, purpose=Purpose.PLAN
+    )
     return result
 
 
@@ -301,10 +304,30 @@ def test_api_key_is_not_in_repr() -> None:
 def test_bad_messages_are_rejected_before_sending() -> None:
     app = ScriptedApprentice([PLAN])
     with pytest.raises(InputError, match=r"^message 1 has role 'tool'; choose one of"):
-        app.propose([{"role": "tool", "content": "x"}], task_id="t", iteration=0, method="m")
+        app.propose(
+            [{"role": "tool", "content": "x"}],
+            task_id="t",
+            iteration=0,
+            method="m",
+            purpose=Purpose.PLAN,
+        )
     with pytest.raises(InputError, match=r"^no messages to send for task t iteration 0$"):
-        app.propose([], task_id="t", iteration=0, method="m")
+        app.propose([], task_id="t", iteration=0, method="m", purpose=Purpose.PLAN)
     assert app.remaining == 1
+
+
+def test_a_request_names_its_purpose() -> None:
+    app = ScriptedApprentice(["a", "b"])
+    app.propose(MESSAGES, task_id="t", iteration=0, method="m", purpose=Purpose.CRITIQUE)
+    # A purpose's value names it as well as the member does.
+    app.propose(MESSAGES, task_id="t", iteration=1, method="m", purpose="repair")
+    assert [r.purpose for r in app.requests] == [Purpose.CRITIQUE, Purpose.REPAIR]
+    with pytest.raises(InputError) as exc:
+        app.propose(MESSAGES, task_id="t", iteration=2, method="m", purpose="review")
+    assert one_line(exc) == (
+        "purpose 'review' is unknown; choose from plan, repair, critique, draft, perceive"
+    )
+    assert app.remaining == 0
 
 
 # ---------------------------------------------------------------------------

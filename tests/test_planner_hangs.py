@@ -50,6 +50,7 @@ from virf.planner import (
     ClientSettings,
     OpenAIApprentice,
     Proposal,
+    Purpose,
     RunLog,
     ScriptedApprentice,
     make_apprentice,
@@ -77,7 +78,9 @@ def test_a_trickled_reply_is_abandoned_at_its_deadline(
     with RunLog(tmp_path / "runs.db", run_id="r") as log:
         started = time.monotonic()
         with client(slow_server, log, timeout_s=2.0) as app:
-            proposal = app.propose(MESSAGES, task_id="t", iteration=0, method="virf")
+            proposal = app.propose(
+                MESSAGES, task_id="t", iteration=0, method="virf", purpose=Purpose.PLAN
+            )
         elapsed = time.monotonic() - started
         (call,) = log.calls()
     assert elapsed < 2.0 + MARGIN_S, elapsed
@@ -100,7 +103,7 @@ def test_a_trickled_status_line_is_a_timeout_retried_like_silence(
         client(slow_server, timeout_s=1.0, max_retries=1) as app,
         pytest.raises(EnvironmentProblem) as exc,
     ):
-        app.propose(MESSAGES, task_id="t", iteration=0, method="virf")
+        app.propose(MESSAGES, task_id="t", iteration=0, method="virf", purpose=Purpose.PLAN)
     elapsed = time.monotonic() - started
     # Two attempts of one second each, and the SDK's back-off (under a second).
     assert elapsed < 2 * 1.0 + 1.0 + MARGIN_S, elapsed
@@ -114,7 +117,14 @@ def test_the_run_deadline_abandons_the_request_in_flight(slow_server: SlowServer
     deadline = Deadline(1.5)
     started = time.monotonic()
     with client(slow_server, timeout_s=60.0) as app:
-        proposal = app.propose(MESSAGES, task_id="t", iteration=0, method="virf", deadline=deadline)
+        proposal = app.propose(
+            MESSAGES,
+            task_id="t",
+            iteration=0,
+            method="virf",
+            purpose=Purpose.PLAN,
+            deadline=deadline,
+        )
     elapsed = time.monotonic() - started
     assert elapsed < 1.5 + MARGIN_S, elapsed
     assert not proposal.ok
@@ -130,7 +140,14 @@ def test_nothing_is_sent_after_the_run_deadline(slow_server: SlowServer) -> None
     deadline = Deadline(0.01)
     time.sleep(0.05)
     with client(slow_server) as app:
-        proposal = app.propose(MESSAGES, task_id="t", iteration=0, method="virf", deadline=deadline)
+        proposal = app.propose(
+            MESSAGES,
+            task_id="t",
+            iteration=0,
+            method="virf",
+            purpose=Purpose.PLAN,
+            deadline=deadline,
+        )
     assert not proposal.ok and "run deadline" in proposal.reason
     assert proposal.attempts == 0 and slow_server.requests == 0
 
@@ -141,7 +158,9 @@ def test_the_client_can_be_called_from_async_code(server: ChatServer) -> None:
 
     async def in_a_notebook() -> Proposal:
         try:
-            return app.propose(MESSAGES, task_id="t", iteration=0, method="virf")
+            return app.propose(
+                MESSAGES, task_id="t", iteration=0, method="virf", purpose=Purpose.PLAN
+            )
         finally:
             app.close()
 

@@ -15,6 +15,7 @@ from virf.planner import (
     MIGRATIONS,
     Migration,
     Proposal,
+    Purpose,
     ReplayApprentice,
     RunLog,
     ScriptedApprentice,
@@ -167,7 +168,13 @@ def test_offline_apprentices_log_like_online_ones(tmp_path: Path) -> None:
             ["find Apple\nslice Apple", " ", Proposal.failed("planner crashed")], run_log=log
         )
         for iteration in (1, 2, 3):
-            scripted.propose(MESSAGES, task_id="t1", iteration=iteration, method="impulsive")
+            scripted.propose(
+                MESSAGES,
+                task_id="t1",
+                iteration=iteration,
+                method="impulsive",
+                purpose=Purpose.PLAN,
+            )
         calls = log.calls()
         assert [(c.iteration, c.ok, c.reply, c.reason) for c in calls] == [
             (1, True, "find Apple\nslice Apple", ""),
@@ -184,7 +191,13 @@ def test_offline_apprentices_log_like_online_ones(tmp_path: Path) -> None:
     with RunLog(tmp_path / "runs.db", run_id="replayed") as log:
         replay = ReplayApprentice(path, run_log=log)
         for iteration in (1, 2, 3):
-            replay.propose(MESSAGES, task_id="t1", iteration=iteration, method="impulsive")
+            replay.propose(
+                MESSAGES,
+                task_id="t1",
+                iteration=iteration,
+                method="impulsive",
+                purpose=Purpose.PLAN,
+            )
         replayed = log.calls(run_id="replayed")
         assert [(c.ok, c.reason) for c in replayed] == [(c.ok, c.reason) for c in calls]
         assert {c.apprentice for c in replayed} == {f"replay:{path}"}

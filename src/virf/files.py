@@ -1,10 +1,12 @@
-"""Files VIRF writes: whole or not at all."""
+"""Files VIRF writes, whole or not at all, and the prompt files it ships."""
 
 from __future__ import annotations
 
 import os
 import stat
 import tempfile
+from functools import cache
+from importlib import resources
 from pathlib import Path
 
 
@@ -28,3 +30,12 @@ def write_atomically(path: Path, text: str) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+@cache
+def read_prompt(package: str, name: str) -> str:
+    """The text of ``name`` in the ``prompts`` folder that ``package`` ships
+    (``read_prompt("virf.planner", "apprentice.txt")``).  Prompts are package
+    data so that they can be read and changed without touching code; the
+    planner, the drafter and the vision cascade all read theirs here, once."""
+    return resources.files(package).joinpath("prompts", name).read_text(encoding="utf-8")

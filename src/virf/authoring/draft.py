@@ -13,12 +13,11 @@ from __future__ import annotations
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
-from functools import cache
-from importlib import resources
 from typing import TYPE_CHECKING, Final
 
 from virf.authoring.drafts import Draft, parse_reply
 from virf.errors import InputError
+from virf.files import read_prompt
 from virf.ontology.tbox import Vocabulary
 
 if TYPE_CHECKING:
@@ -52,13 +51,8 @@ def task_id(query: str) -> str:
     return f"draft:{slug or 'query'}"
 
 
-@cache
 def _template() -> str:
-    return (
-        resources.files("virf.authoring")
-        .joinpath("prompts/draft_system.txt")
-        .read_text(encoding="utf-8")
-    )
+    return read_prompt("virf.authoring", "draft_system.txt")
 
 
 def _below(vocab: Vocabulary, root: str) -> list[str]:
@@ -112,6 +106,10 @@ def ask_drafter(
 ) -> Drafted:
     """One request to the drafter; a reply that is not a usable draft is
     reported, not raised, so the audit can count it."""
+    # Here, not at the top: the rest of authoring runs without the planner's
+    # clients, and an apprentice in hand means they are loaded already.
+    from virf.planner.apprentices import Purpose
+
     if not hits:
         raise InputError("no evidence retrieved for the question; add documents to the corpus")
     proposal = apprentice.propose(
@@ -122,6 +120,7 @@ def ask_drafter(
         task_id=task_id(query),
         iteration=1,
         method=METHOD,
+        purpose=Purpose.DRAFT,
     )
     if not proposal.ok or proposal.text is None:
         return Drafted(None, proposal.reason or "no reply", None)

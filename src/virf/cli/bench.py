@@ -513,7 +513,7 @@ def bench_agents(
     from virf.bench.agents_report import check_out_dir, collect, write_outputs
     from virf.bench.safeagentbench import load_tasks
     from virf.errors import InputError
-    from virf.planner import make_apprentice
+    from virf.planner import PlannerSpec, make_apprentice
     from virf.planner.config import run_deadline
     from virf.planner.methods import METHODS, get_method
     from virf.planner.questions import answers_file, deny
@@ -535,10 +535,12 @@ def bench_agents(
         check_out_dir(out)
         if export_replay is not None:
             check_writable(export_replay, "--export-replay")
-            source = planner.strip().partition(":")
+            replayed = PlannerSpec.parse(planner)
+            source = replayed.source_file()
             if (
-                source[0] == "replay"
-                and Path(source[2].strip()).resolve() == export_replay.resolve()
+                replayed.kind == "replay"
+                and source is not None
+                and source.resolve() == export_replay.resolve()
             ):
                 raise InputError(
                     f"--export-replay {export_replay} is the recording being replayed; "
@@ -700,12 +702,13 @@ def bench_perception(
     from virf.api import LogicTutor
     from virf.bench.perception import load_cases, run_cases, to_json
     from virf.bench.perception import markdown as render
-    from virf.planner import make_apprentice
+    from virf.planner import PlannerSpec, make_apprentice
 
     modes = {"both": ("cascade", "hybrid"), "cascade": ("cascade",), "hybrid": ("hybrid",)}
     if mode not in modes:
         raise VirfError(f"mode '{mode}' is unknown; choose cascade, hybrid or both")
-    if vlm is not None and vlm.startswith("replay:"):
+    live_spec = PlannerSpec.parse(vlm) if vlm is not None else None
+    if live_spec is not None and live_spec.kind == "replay":
         raise VirfError(
             "--vlm takes a live model (openai:MODEL); recorded replies come "
             "from each case's replay files"
@@ -713,8 +716,8 @@ def bench_perception(
     cases = load_cases(cases_dir)
     tutor = LogicTutor(engine=engine, kb=kb)
     live = None
-    if vlm is not None:
-        spec = vlm
+    if live_spec is not None:
+        spec = live_spec
 
         def live(case: Any, mode: str) -> Any:
             return make_apprentice(

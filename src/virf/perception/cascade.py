@@ -18,11 +18,10 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from functools import cache
-from importlib import resources
 from typing import Final, Literal, TypeVar
 
 from virf.errors import EnvironmentProblem
+from virf.files import read_prompt
 from virf.names import term_key
 from virf.perception.catalogue import Catalogue
 from virf.perception.images import View, crop, pixel_box
@@ -35,7 +34,7 @@ from virf.perception.replies import (
     read_detections,
     read_locations,
 )
-from virf.planner import Apprentice, Attachment, Deadline
+from virf.planner import Apprentice, Attachment, Deadline, Purpose
 
 STATE_WORDS: Final = (
     "on, off, open, closed, hot, cold, wet, dry, dirty, clean, broken, sliced, cooked, "
@@ -47,9 +46,8 @@ _T = TypeVar("_T")
 MAX_OBJECTS: Final = 300
 
 
-@cache
 def prompt(name: str) -> str:
-    return resources.files("virf.perception").joinpath(f"prompts/{name}.txt").read_text("utf-8")
+    return read_prompt("virf.perception", f"{name}.txt")
 
 
 @dataclass(frozen=True)
@@ -192,6 +190,7 @@ class Cascade:
             task_id=view.key,
             iteration=1,
             method=method,
+            purpose=Purpose.PERCEIVE,
             deadline=self.deadline,
             images=images,
         )

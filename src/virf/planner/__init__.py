@@ -8,15 +8,18 @@ from virf.planner.apprentices import (
     Attachment,
     Proposal,
     ProposalRequest,
+    Purpose,
     ReplayApprentice,
     ScriptedApprentice,
     export_replay,
     load_replay,
 )
-from virf.planner.clients import ClientSettings, Endpoint, OpenAIApprentice
+from virf.planner.chat import ClientSettings, Endpoint
+from virf.planner.clients import OpenAIApprentice
 from virf.planner.deadline import Deadline
 from virf.planner.factory import make_apprentice
 from virf.planner.runlog import MIGRATIONS, CallRecord, RunLog
+from virf.planner.spec import PlannerKind, PlannerSpec
 
 __all__ = [
     "MIGRATIONS",
@@ -28,8 +31,11 @@ __all__ = [
     "Endpoint",
     "Migration",
     "OpenAIApprentice",
+    "PlannerKind",
+    "PlannerSpec",
     "Proposal",
     "ProposalRequest",
+    "Purpose",
     "ReplayApprentice",
     "RunLog",
     "ScriptedApprentice",

@@ -29,6 +29,7 @@ import json
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 from types import TracebackType
 from typing import Annotated, Any, Final, Self
@@ -40,6 +41,24 @@ from virf.planner.deadline import Deadline
 from virf.planner.runlog import CallRecord, RunLog, last_attempts
 
 ROLES: Final = ("system", "user", "assistant")
+
+
+class Purpose(StrEnum):
+    """What a request asks the model for.  Every caller says it, so an
+    apprentice that treats requests differently (a small local model gets
+    worked plan examples only when asked for a plan) never has to guess it
+    from the prompt's wording."""
+
+    PLAN = "plan"  # the first plan for a task
+    # A new plan after feedback: a tutor's report, an unreadable reply, a critique.
+    REPAIR = "repair"
+    CRITIQUE = "critique"  # the committee's critic reviewing a plan
+    DRAFT = "draft"  # candidate knowledge-base rules drafted from evidence passages
+    PERCEIVE = "perceive"  # a vision model reading camera images
+
+    @property
+    def asks_for_plan(self) -> bool:
+        return self in (Purpose.PLAN, Purpose.REPAIR)
 
 
 @dataclass(frozen=True)
@@ -105,17 +124,20 @@ class Attachment:
 
 @dataclass(frozen=True)
 class ProposalRequest:
-    """What the loop asked for: the chat and where in the run it belongs.
+    """What the loop asked for: the chat, where in the run it belongs and
+    what it is for.
 
     ``deadline`` is the run's: a client abandons a request still running when
-    it passes.  It is not part of what is logged or replayed.  ``images`` go
-    with the last user message.
+    it passes.  It is not part of what is logged or replayed, nor is
+    ``purpose`` (a replay is keyed by task, iteration and method, as before).
+    ``images`` go with the last user message.
     """
 
     messages: tuple[tuple[str, str], ...]
     task_id: str
     iteration: int
     method: str
+    purpose: Purpose
     deadline: Deadline | None = None
     images: tuple[Attachment, ...] = ()
 
@@ -137,10 +159,16 @@ def check_request(
     task_id: str,
     iteration: int,
     method: str,
+    purpose: Purpose,
     deadline: Deadline | None = None,
     images: Sequence[Attachment] = (),
 ) -> ProposalRequest:
     """Validate the loop's arguments once, for every apprentice alike."""
+    try:
+        purpose = Purpose(purpose)  # its value ("plan") names it too
+    except ValueError:
+        choices = ", ".join(p.value for p in Purpose)
+        raise InputError(f"purpose {purpose!r} is unknown; choose from {choices}") from None
     if not isinstance(task_id, str) or not task_id:
         raise InputError("task_id must be a non-empty string")
     if isinstance(iteration, bool) or not isinstance(iteration, int) or iteration < 0:
@@ -166,7 +194,9 @@ def check_request(
         raise InputError("images need a user message to go with")
     if not all(isinstance(image, Attachment) for image in images):
         raise InputError("images must be Attachment objects")
-    return ProposalRequest(tuple(pairs), task_id, iteration, method, deadline, tuple(images))
+    return ProposalRequest(
+        tuple(pairs), task_id, iteration, method, purpose, deadline, tuple(images)
+    )
 
 
 def empty_reason(text: str | None) -> str | None:
@@ -205,15 +235,18 @@ class Apprentice(ABC):
         task_id: str,
         iteration: int,
         method: str,
+        purpose: Purpose,
         deadline: Deadline | None = None,
         images: Sequence[Attachment] = (),
     ) -> Proposal:
-        """Ask for one plan (or, with ``images``, one reading of them).  Never
-        returns an empty or malformed reply as ``ok``.
+        """Ask for what ``purpose`` names: a plan, a repaired plan, a critique,
+        a draft or (with ``images``) one reading of them.  Never returns an
+        empty or malformed reply as ``ok``.
 
         A request still running when ``deadline`` passes is abandoned and
         comes back as a failed proposal; offline apprentices answer at once."""
-        return self._propose(check_request(messages, task_id, iteration, method, deadline, images))
+        request = check_request(messages, task_id, iteration, method, purpose, deadline, images)
+        return self._propose(request)
 
     @abstractmethod
     def _propose(self, request: ProposalRequest) -> Proposal: ...

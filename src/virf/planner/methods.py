@@ -33,7 +33,7 @@ from typing import Any, Literal
 
 from virf.errors import InputError, closest
 from virf.ontology.tbox import UnsafeStateConcept, Vocabulary
-from virf.planner.apprentices import Apprentice
+from virf.planner.apprentices import Apprentice, Purpose
 from virf.planner.deadline import DEFAULT_DEADLINE_S, Deadline
 from virf.planner.loop import SYSTEM, LoopResult, Outcome, Transcript, Turn, Tutor, refine
 from virf.planner.prompting import (
@@ -172,7 +172,13 @@ def run_method(
         if late is not None:
             return late
         p = apprentice.propose(
-            messages, task_id=task_id, iteration=i, method=method.name, deadline=deadline
+            messages,
+            task_id=task_id,
+            iteration=i,
+            method=method.name,
+            # Every proposal after the first answers feedback: a report or a critique.
+            purpose=Purpose.PLAN if i == 0 else Purpose.REPAIR,
+            deadline=deadline,
         )
         if not p.ok or p.text is None:
             log.append(Turn(i, "apprentice", "failed-proposal", p.reason))
@@ -244,6 +250,7 @@ def run_method(
             task_id=task_id,
             iteration=i,
             method=f"{method.name}-critic",
+            purpose=Purpose.CRITIQUE,
             deadline=deadline,
         )
         verdict = (review.text or "").strip()

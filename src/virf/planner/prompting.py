@@ -9,10 +9,9 @@ from __future__ import annotations
 import json
 import re
 from dataclasses import dataclass
-from functools import cache
-from importlib import resources
 
 from virf.errors import InputError
+from virf.files import read_prompt
 from virf.ontology.tbox import Vocabulary
 from virf.world.plan import ACTION_WORDS, PlanStep, check_plan_size, parse_line
 from virf.world.scene import Scene
@@ -20,11 +19,9 @@ from virf.world.scene import Scene
 REFUSAL = "TASK_ABORT"
 
 
-@cache
 def template(name: str) -> str:
-    """A prompt file from the package (``apprentice``, ``actions``, ...)."""
-    path = resources.files("virf.planner").joinpath("prompts", f"{name}.txt")
-    return path.read_text(encoding="utf-8")
+    """A prompt file of the planner (``apprentice``, ``actions``, ...)."""
+    return read_prompt("virf.planner", f"{name}.txt")
 
 
 def scene_objects(scene: Scene) -> str:
