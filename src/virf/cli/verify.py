@@ -135,8 +135,12 @@ def verify(
 
 def demo(
     folder: Annotated[
-        Path, typer.Argument(help="Folder of examples: one sub-folder per scene.json + plan.txt.")
-    ] = Path("examples"),
+        Path | None,
+        typer.Argument(
+            help="Folder of examples: one sub-folder per scene.json + plan.txt.",
+            show_default="./examples if there is one, else the examples VIRF ships",
+        ),
+    ] = None,
     engine: EngineOpt = "fast",
     kb: KbOpt = None,
 ) -> None:
@@ -146,9 +150,15 @@ def demo(
     from rich.table import Table
 
     from virf.api import LogicTutor
+    from virf.bundled import bundled_examples
     from virf.errors import read_json_file
     from virf.render.text import render_report
 
+    if folder is None:
+        # ./examples first, as before the examples were shipped; an installed
+        # VIRF run from any other folder still has its own.
+        here = Path("examples")
+        folder = here if here.is_dir() else bundled_examples() or here
     cases = sorted(p.parent for p in folder.glob("*/plan.txt")) if folder.is_dir() else []
     if not cases:
         raise _fail(f"no examples in {folder} (expected <name>/scene.json and <name>/plan.txt)")

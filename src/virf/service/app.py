@@ -26,6 +26,7 @@ from typing import Any, Final
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, RedirectResponse, Response, StreamingResponse
+from fastapi_offline import FastAPIOffline
 from pydantic import BaseModel, ConfigDict
 
 from virf.api import LogicTutor
@@ -49,6 +50,9 @@ from virf.world.scene import Scene
 # A scene of MAX_INSTANCES objects with their relations is far below this.
 MAX_REQUEST_BYTES: Final = MAX_BODY_BYTES
 API_KEY_HEADER: Final = "x-api-key"
+# Where the API docs' scripts and styles are served (not under /v1/: the
+# docs pages need no API key, as /openapi.json needs none).
+DOCS_ASSETS: Final = "/docs-assets"
 
 
 class VerifyRequest(BaseModel):
@@ -180,10 +184,16 @@ def create_app(
         deadline_s=deadline_s,
     )
     default, _ = tutors.get(None, None)
-    app = FastAPI(
+    # /docs and /redoc with their scripts and styles served by the service
+    # itself (fastapi-offline ships them): FastAPI's own pages load them
+    # from a CDN, and a robot's network often reaches none.  No validator
+    # either: Swagger UI would send the API description to a public one.
+    app = FastAPIOffline(
         title="VIRF Logic Tutor",
         summary="Verify robot task plans against an OWL 2 DL safety ontology.",
         version="1",
+        static_url=DOCS_ASSETS,
+        swagger_ui_parameters={"validatorUrl": None},
     )
     # Every JSON body is read as the CLI reads a file (virf.web).
     app.router.route_class = StrictJsonRoute

@@ -23,9 +23,10 @@ from fastapi import FastAPI
 from fastapi.responses import JSONResponse
 from pydantic import Field
 
+from virf.bundled import bundled_examples
 from virf.errors import InputError, clip, closest
 from virf.service.app import Tutors
-from virf.service.pages import _Body, checkout_examples
+from virf.service.pages import _Body
 from virf.web import problem
 
 if TYPE_CHECKING:
@@ -102,7 +103,7 @@ def add_learning(app: FastAPI, tutors: Tutors, workspace: Workspace | None) -> N
             tuple(s.text for s in steps),
         )
         outcomes, skipped = learning.learn(
-            workspace, source, settled.answered, who, examples=checkout_examples()
+            workspace, source, settled.answered, who, examples=bundled_examples()
         )
         here = tutors.kb is not None and Path(tutors.kb).resolve() == workspace.root.resolve()
         return {

@@ -5,7 +5,7 @@ verifies a scene and plan through ``POST /v1/verify`` and reads the rules from
 ``GET /v1/rules``; what the report alone cannot show comes from these:
 
 * ``GET /v1/examples``: the bundled examples, ``[{"name", "description"}]``
-  (empty when the package runs without its checkout, e.g. from a wheel);
+  (a checkout's ``examples/``, or the copy an installed wheel carries);
 * ``GET /v1/examples/{name}``: one of them, ``{"name", "description",
   "scene", "plan"}`` (the scene as JSON, the plan file's text);
 * ``POST /v1/state`` ``{scene, plan, step, scenario?, engine?}``: the facts
@@ -35,25 +35,13 @@ from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, ConfigDict, model_validator
 from pydantic_core import PydanticCustomError
 
-import virf
+from virf.bundled import bundled_examples
 from virf.errors import InputError, clip, closest, read_input_file, read_json_file
 from virf.planner.questions import apply_answers
 from virf.service.app import Tutors
 from virf.web import problem
 
 STATIC_DIR: Final = Path(__file__).resolve().parent / "static"
-
-
-def checkout_examples() -> Path | None:
-    """``examples/`` of the source checkout this package runs from, if any.
-
-    Only a checkout has it (``src/virf`` next to ``pyproject.toml`` and
-    ``examples``); an installed package has no examples to offer."""
-    root = Path(virf.__file__).resolve().parent.parent.parent
-    folder = root / "examples"
-    if (root / "pyproject.toml").is_file() and folder.is_dir():
-        return folder
-    return None
 
 
 class _Body(BaseModel):
@@ -109,8 +97,8 @@ def _description(scene: object) -> str:
 
 def add_pages(app: FastAPI, tutors: Tutors, *, examples: Path | None = None) -> None:
     """Serve the page at ``/`` and its endpoints; ``examples`` defaults to the
-    checkout's ``examples/`` (none when the package is installed)."""
-    folder = examples if examples is not None else checkout_examples()
+    bundled examples (:func:`virf.bundled.bundled_examples`)."""
+    folder = examples if examples is not None else bundled_examples()
 
     def read_example(name: str) -> dict[str, Any] | JSONResponse:
         names = _example_names(folder)
@@ -130,7 +118,7 @@ def add_pages(app: FastAPI, tutors: Tutors, *, examples: Path | None = None) -> 
 
     @app.get("/v1/examples")
     def examples_list() -> list[dict[str, str]]:
-        """The bundled examples (``examples/`` of a checkout; none when installed)."""
+        """The bundled examples (``examples/`` of a checkout, or the installed copy)."""
         out = []
         for name in _example_names(folder):
             assert folder is not None
