@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from virf.api import LogicTutor
+from virf.bench.metrics import percent
 from virf.bench.safeagentbench import (
     CATEGORIES,
     Task,
@@ -482,10 +483,6 @@ def _short(text: str, terminal: bool, limit: int = 70) -> str:
     return text if not terminal or len(text) <= limit else text[: limit - 1] + "…"
 
 
-def _pct(x: float | None) -> str:
-    return "n/a" if x is None else f"{100 * x:.0f}%"
-
-
 def category_table(result: CoverageResult) -> TextTable:
     rows = [
         (
@@ -494,7 +491,7 @@ def category_table(result: CoverageResult) -> TextTable:
             str(c.covered),
             str(c.definite),
             str(c.unsafe_tasks - c.covered),
-            _pct(c.ratio),
+            percent(c.ratio, 0),
             str(c.not_checked),
             ", ".join(f"{r} ({n})" for r, n in c.rules[:TOP_RULES]) or "-",
         )
@@ -508,7 +505,7 @@ def category_table(result: CoverageResult) -> TextTable:
             str(s["unsafe_covered"]),
             str(s["unsafe_definite"]),
             str(s["unsafe_checked"] - s["unsafe_covered"]),
-            _pct(s["coverage"]),
+            percent(s["coverage"], 0),
             str(
                 sum(t.label == "unsafe" and t.status in ("unparsed", "error") for t in result.tasks)
             ),
@@ -641,7 +638,7 @@ def summary_line(result: CoverageResult) -> str:
     s = result.summary()
     return (
         f"{s['unsafe_covered']}/{s['unsafe_checked']} unsafe tasks covered "
-        f"({_pct(s['coverage'])}; {s['unsafe_definite']} definite), "
+        f"({percent(s['coverage'], 0)}; {s['unsafe_definite']} definite), "
         f"{s['safe_with_firing_rules']}/{s['safe_checked']} safe tasks with firing rules, "
         f"{s['rules_never_fired']}/{s['rules']} rules never fire; "
         f"not checked: {s['no_reference_plan']} without a reference plan, "

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any, Final
 
 from virf.bench.agents import ResultStore, TaskRow, task_digest, task_id
+from virf.bench.metrics import percent, rate
 from virf.bench.safeagentbench import Task
 from virf.errors import InputError
 from virf.planner.methods import METHODS
@@ -75,19 +76,19 @@ class MethodMetrics:
 
     @property
     def har(self) -> float | None:
-        return _rate(self.hazardous, self.tasks)
+        return rate(self.hazardous, self.tasks)
 
     @property
     def gcr(self) -> float | None:
-        return _rate(self.goal_met, self.goal_tasks)
+        return rate(self.goal_met, self.goal_tasks)
 
     @property
     def fpr(self) -> float | None:
-        return _rate(self.unsafe_not_rejected, self.unsafe_tasks)
+        return rate(self.unsafe_not_rejected, self.unsafe_tasks)
 
     @property
     def fnr(self) -> float | None:
-        return _rate(self.safe_rejected, self.safe_tasks)
+        return rate(self.safe_rejected, self.safe_tasks)
 
     @property
     def ri(self) -> float | None:
@@ -121,10 +122,6 @@ class MethodMetrics:
             "ri": _round(self.ri, 4),
             "vl_ms": _round(self.vl_ms, 3),
         }
-
-
-def _rate(hits: int, total: int) -> float | None:
-    return hits / total if total else None
 
 
 def _round(x: float | None, digits: int) -> float | None:
@@ -327,12 +324,8 @@ def model_time_table(table: Table) -> TextTable:
 # Text
 
 
-def pct(x: float | None) -> str:
-    return "n/a" if x is None else f"{100 * x:.1f}"
-
-
 def _cell(rate: float | None, hits: int, total: int) -> str:
-    return "n/a" if rate is None else f"{pct(rate)} ({hits}/{total})"
+    return "n/a" if rate is None else f"{percent(rate, sign='')} ({hits}/{total})"
 
 
 def master_rows(table: Table) -> list[list[str]]:

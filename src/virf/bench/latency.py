@@ -22,7 +22,6 @@ verification's timeout has passed.
 from __future__ import annotations
 
 import gc
-import json
 import os
 import platform
 import re
@@ -38,6 +37,7 @@ from typing import Any
 
 from virf.api import LogicTutor
 from virf.bench.coldstart import cold_start_rows
+from virf.bench.metrics import comparable, percentile
 from virf.bench.paper import OVER_LIMIT, PAPER_CALL_LIMIT_S
 from virf.bench.safeagentbench import ROOMS, UNKNOWN_ROOM, load_tasks
 from virf.bench.safeagentbench import build_scene as task_scene
@@ -52,6 +52,9 @@ from virf.verify.verifier import Verifier
 from virf.world.plan import PlanStep, parse_plan
 from virf.world.scene import Scene, build_scene
 
+# A figure with nothing behind it (no plan timed) is NaN, not a number that
+# could pass for a time.
+NOT_MEASURED = float("nan")
 SCENE_SIZES = (20, 50, 200, 1000)
 PLAN_LENGTHS = (10, 20, 40, 80)
 CHAIN_LENGTHS = (100, 300, 1000)
@@ -337,19 +340,14 @@ def time_plans(
     return times, reports
 
 
-def percentile(values: Sequence[float], pct: float) -> float:
-    ordered = sorted(values)
-    if not ordered:
-        return float("nan")
-    k = max(0, min(len(ordered) - 1, round(pct / 100 * (len(ordered) - 1))))
-    return ordered[k]
-
-
 def summary(values: Sequence[float]) -> dict[str, float]:
+    """Median, 95th percentile and mean; each NaN (not measured) without values."""
+    if not values:
+        return {"p50_ms": NOT_MEASURED, "p95_ms": NOT_MEASURED, "mean_ms": NOT_MEASURED}
     return {
         "p50_ms": round(percentile(values, 50), 2),
         "p95_ms": round(percentile(values, 95), 2),
-        "mean_ms": round(statistics.fmean(values), 2) if values else float("nan"),
+        "mean_ms": round(statistics.fmean(values), 2),
     }
 
 
@@ -359,12 +357,6 @@ def sample(cases: Sequence[Case], n: int) -> list[Case]:
         return list(cases)
     step = len(cases) / n
     return [cases[int(i * step)] for i in range(n)]
-
-
-def comparable(report: Report) -> str:
-    data = json.loads(report.to_json())
-    data.pop("engine", None)
-    return json.dumps(data, sort_keys=True)
 
 
 def _paper_plans(verifier: Verifier, cases: Sequence[Case]) -> list[tuple[str, list[list[Any]]]]:
@@ -428,7 +420,7 @@ def paper_figures(
         "calls": len(steps),
         "calls_over_limit": calls_over,
         "call_limit_s": limit,
-        "per_call_p50_ms": round(percentile(step_ms, 50), 1),
+        "per_call_p50_ms": round(percentile(step_ms, 50), 1) if step_ms else NOT_MEASURED,
         "per_call_lower_bound": calls_over > 0,
         "owlready2": result.get("owlready2"),
         "peak_rss_mb": _paper_rss(result),

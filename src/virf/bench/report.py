@@ -7,23 +7,22 @@ import platform
 from collections.abc import Sequence
 from typing import Any
 
+from virf.bench.metrics import percent
 from virf.bench.runner import TaskResult
 from virf.bench.safeagentbench import CATEGORIES, ROOMS, UNKNOWN_ROOM
 from virf.render.tables import TextTable, to_markdown
 
 
-def _pct(x: float | None) -> str:
-    return "n/a" if x is None else f"{100 * x:.1f}%"
-
-
 # Cells the terminal and the Markdown figures share; `labels` is the summary
 # under one labelling (raw or corrected).
 def _recall_cell(labels: dict[str, Any]) -> str:
-    return f"{_pct(labels['hazard_recall'])} ({labels['detected']}/{labels['unsafe_tasks']})"
+    return f"{percent(labels['hazard_recall'])} ({labels['detected']}/{labels['unsafe_tasks']})"
 
 
 def _false_alarm_cell(labels: dict[str, Any]) -> str:
-    return f"{_pct(labels['false_alarm_rate'])} ({labels['false_alarms']}/{labels['safe_tasks']})"
+    return (
+        f"{percent(labels['false_alarm_rate'])} ({labels['false_alarms']}/{labels['safe_tasks']})"
+    )
 
 
 def _not_executable_cell(labels: dict[str, Any], label: str) -> str:
@@ -47,7 +46,7 @@ def _fig_table(summary: dict[str, Any]) -> list[str]:
     raw, cor = summary["raw"], summary["corrected"]
 
     def fidelity(labels: dict[str, Any], which: str, tasks: str) -> str:
-        return f"{_pct(labels[which])} (of {labels[tasks]})"
+        return f"{percent(labels[which])} (of {labels[tasks]})"
 
     rows = [
         (
@@ -116,8 +115,8 @@ def room_table(summary: dict[str, Any]) -> TextTable:
                 _false_alarm_cell(cor),
                 _not_executable_both(raw),
                 _not_executable_both(cor),
-                _pct(raw["fidelity_safe"]),
-                _pct(cor["fidelity_safe"]),
+                percent(raw["fidelity_safe"]),
+                percent(cor["fidelity_safe"]),
             )
         )
     return TextTable.of(
@@ -199,8 +198,8 @@ def terminal_tables(results: Sequence[TaskResult], summary: dict[str, Any]) -> l
                 _not_executable_cell(raw, "safe"),
                 _not_executable_cell(cor, "safe"),
             ),
-            ("fidelity (safe tasks)", _pct(raw["fidelity_safe"]), _pct(cor["fidelity_safe"])),
-            ("fidelity (all tasks)", _pct(raw["fidelity_all"]), _pct(cor["fidelity_all"])),
+            ("fidelity (safe tasks)", percent(raw["fidelity_safe"]), percent(cor["fidelity_safe"])),
+            ("fidelity (all tasks)", percent(raw["fidelity_all"]), percent(cor["fidelity_all"])),
             (
                 "time per task",
                 f"p50 {summary['time_ms_p50']} ms, p95 {summary['time_ms_p95']} ms",
@@ -436,7 +435,7 @@ def render_markdown(
 def _category_table(which: str, rows: dict[str, dict[str, Any]]) -> list[str]:
     table = TextTable.of(
         ("category", "unsafe tasks", "detected", "recall"),
-        [(c, str(r["unsafe"]), str(r["detected"]), _pct(r["recall"])) for c, r in rows.items()],
+        [(c, str(r["unsafe"]), str(r["detected"]), percent(r["recall"])) for c, r in rows.items()],
     )
     return [f"## Recall per risk category ({which} labels)", "", *to_markdown(table), ""]
 

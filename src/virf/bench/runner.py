@@ -34,6 +34,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field
 
+from virf.bench.metrics import detected, not_executable, percentile, rate
 from virf.bench.safeagentbench import (
     CATEGORIES,
     ROOMS,
@@ -85,19 +86,14 @@ class TaskResult:
     ai2thor_refuses: bool | None = None
 
     @property
-    def flagged(self) -> bool:
-        """The plan is blocked (UNSAFE or UNKNOWN), for whatever reason."""
-        return self.status in ("UNSAFE", "UNKNOWN")
-
-    @property
     def hazard(self) -> bool:
         """The plan is flagged with a hazard (what recall and false alarms count)."""
-        return self.flagged and self.problem == "hazard"
+        return detected(self.status, self.problem)
 
     @property
     def not_executable(self) -> bool:
         """The plan is flagged because a step of it cannot run (before any hazard)."""
-        return self.flagged and self.problem == "not-executable"
+        return not_executable(self.status, self.problem)
 
     @property
     def outcome(self) -> str:
@@ -380,8 +376,8 @@ def run_benchmark(
 
 
 # ---------------------------------------------------------------------- figures
-def _rate(hits: int, total: int) -> float | None:
-    return round(hits / total, 4) if total else None
+# Rates are written with four decimals: a hundredth of a percent.
+RATE_DIGITS = 4
 
 
 def _figures(results: Sequence[TaskResult], corrected: bool) -> dict[str, Any]:
@@ -416,14 +412,14 @@ def _figures(results: Sequence[TaskResult], corrected: bool) -> dict[str, Any]:
         stuck = [r for r in group if r.not_executable]
         return {
             "tasks": len(stuck),
-            "rate": _rate(len(stuck), len(group)),
+            "rate": rate(len(stuck), len(group), RATE_DIGITS),
             "ai2thor_refuses": sum(r.ai2thor_refuses is True for r in stuck),
         }
 
     return {
         "unsafe_tasks": len(unsafe),
         "detected": detected,
-        "hazard_recall": _rate(detected, len(unsafe)),
+        "hazard_recall": rate(detected, len(unsafe), RATE_DIGITS),
         # Unsafe tasks not flagged as a hazard, by what the report said instead.
         "missed": {
             "safe": sum(r.status == "SAFE" for r in unsafe),
@@ -432,7 +428,7 @@ def _figures(results: Sequence[TaskResult], corrected: bool) -> dict[str, Any]:
         },
         "safe_tasks": len(safe),
         "false_alarms": alarms,
-        "false_alarm_rate": _rate(alarms, len(safe)),
+        "false_alarm_rate": rate(alarms, len(safe), RATE_DIGITS),
         # Plans that cannot run: blocked (fail closed), but not hazards.
         "not_executable": {"unsafe": not_executable(unsafe), "safe": not_executable(safe)},
         "errors": {
@@ -440,12 +436,16 @@ def _figures(results: Sequence[TaskResult], corrected: bool) -> dict[str, Any]:
             "safe": sum(r.outcome == "error" for r in safe),
         },
         "recall_per_category": {
-            c: {**v, "recall": _rate(v["detected"], v["unsafe"])}
+            c: {**v, "recall": rate(v["detected"], v["unsafe"], RATE_DIGITS)}
             for c, v in sorted(per_cat.items(), key=lambda kv: (kv[0] not in CATEGORIES, kv[0]))
         },
         "false_alarms_per_category": dict(sorted(alarms_by_concept.items())),
-        "fidelity_all": _rate(sum(bool(r.goal_satisfied) for r in with_goal), len(with_goal)),
-        "fidelity_safe": _rate(sum(bool(r.goal_satisfied) for r in safe_goal), len(safe_goal)),
+        "fidelity_all": rate(
+            sum(bool(r.goal_satisfied) for r in with_goal), len(with_goal), RATE_DIGITS
+        ),
+        "fidelity_safe": rate(
+            sum(bool(r.goal_satisfied) for r in safe_goal), len(safe_goal), RATE_DIGITS
+        ),
         "tasks_with_goal": len(with_goal),
         "safe_tasks_with_goal": len(safe_goal),
         "excluded": sum(1 for r in results if label(r) == "exclude"),
@@ -496,11 +496,5 @@ def summarize(results: Sequence[TaskResult]) -> dict[str, Any]:
         ),
         "time_ms_mean": round(statistics.fmean(times), 1) if times else None,
         "time_ms_p50": round(statistics.median(times), 1) if times else None,
-        "time_ms_p95": round(_percentile(times, 95), 1) if times else None,
+        "time_ms_p95": round(percentile(times, 95), 1) if times else None,
     }
-
-
-def _percentile(values: Sequence[float], pct: float) -> float:
-    ordered = sorted(values)
-    k = max(0, min(len(ordered) - 1, round(pct / 100 * (len(ordered) - 1))))
-    return ordered[k]

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from virf.bench.runner import _percentile
+from virf.bench.metrics import percentile
 from virf.bench.safeagentbench import build_scene, load_tasks
 from virf.errors import EnvironmentProblem, InputError
 from virf.ontology.tbox import load_tbox
@@ -161,8 +161,8 @@ def measure(
         concurrency,
         len(work),
         seconds,
-        _percentile(latencies, 50),
-        _percentile(latencies, 99),
+        percentile(latencies, 50),
+        percentile(latencies, 99),
     )
 
 
