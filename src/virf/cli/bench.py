@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
@@ -28,6 +28,9 @@ from virf.cli.app import (
 )
 from virf.errors import VirfError
 from virf.processes import Terminated
+
+if TYPE_CHECKING:
+    from virf.bench.perception import PerceptionRun
 
 bench_app = typer.Typer(help="Evaluate the Logic Tutor on benchmarks.", no_args_is_help=True)
 
@@ -741,57 +744,14 @@ def bench_perception(
         err.print(f"wrote {markdown}")
 
 
-def _print_perception(run: Any) -> None:
+def _print_perception(run: PerceptionRun) -> None:
     from rich.console import Console
-    from rich.table import Table
 
-    from virf.bench.perception import percent
+    from virf.bench.perception import case_table, missing_lines, totals_table
+    from virf.render.tables import to_rich
 
     console = Console(highlight=False, width=130)
-    table = Table(
-        "case",
-        "mode",
-        "objects P/R",
-        "attributes P/R",
-        "relations P/R",
-        "safety facts",
-        "gold",
-        "perceived",
-        title="Perception, case by case",
-    )
-    for s in run.scores:
-        table.add_row(
-            s.case,
-            s.mode,
-            f"{percent(s.objects.precision)} / {percent(s.objects.recall)}",
-            f"{percent(s.attributes.precision)} / {percent(s.attributes.recall)}",
-            f"{percent(s.relations.precision)} / {percent(s.relations.recall)}",
-            f"{s.safety_recovered}/{s.safety_facts}",
-            s.gold_verdict or "-",
-            (s.perceived_verdict or "-") + (" (hazard lost)" if s.hazard_lost else ""),
-        )
-    console.print(table)
-    totals = Table(
-        "mode",
-        "objects F1",
-        "attributes F1",
-        "relations F1",
-        "safety facts recovered",
-        "same verdict",
-        "hazards lost",
-        title="Totals",
-    )
-    for t in run.as_json()["totals"]:
-        totals.add_row(
-            t["mode"],
-            percent(t["objects"]["f1"]),
-            percent(t["attributes"]["f1"]),
-            percent(t["relations"]["f1"]),
-            f"{t['safety_recovered']}/{t['safety_facts']}",
-            f"{t['same_verdict']}/{t['verdicts_compared']}",
-            str(t["hazards_lost"]),
-        )
-    console.print(totals)
-    lost = [s for s in run.scores if s.missing]
-    for s in lost:
-        console.print(f"{s.case} ({s.mode}): the tutor needed {', '.join(s.missing)}", markup=False)
+    console.print(to_rich(case_table(run, terminal=True)))
+    console.print(to_rich(totals_table(run, terminal=True)))
+    for line in missing_lines(run):
+        console.print(line, markup=False)
