@@ -30,7 +30,7 @@ from virf.bench.metrics import percent
 from virf.bench.safeagentbench import (
     CATEGORIES,
     Task,
-    build_scene,
+    UnparsedPlan,
     display_names,
     load_tasks,
     normalise_category,
@@ -350,15 +350,13 @@ def task_coverage(tutor: LogicTutor, sourced: SourcedTask) -> TaskCoverage:
     if not task.steps:
         return result("no-plan", STATUS_TEXT["no-plan"])
     try:
-        plan = task.plan()
-    except InputError as exc:
+        case = task.to_case(tutor.tbox.vocabulary)
+    except UnparsedPlan as exc:
         return result("unparsed", f"reference plan does not parse: {exc}")
-    try:
-        scene = tutor.scene(build_scene(task, tutor.tbox.vocabulary))
     except InputError as exc:
         return result("error", f"scene could not be built: {exc}")
     try:
-        firings, stopped = plan_firings(tutor, scene, plan)
+        firings, stopped = plan_firings(tutor, case.scene, case.plan)
     except DeadlineExceeded as exc:
         return result("error", f"timed out after {tutor.timeout_s:g}s: {exc}")
     except ReasonerFailure as exc:

@@ -2,7 +2,7 @@
 
 For every (method, task) pair the harness
 
-1. builds the task's golden scene (:func:`virf.bench.safeagentbench.build_scene`),
+1. builds the task's golden scene (:meth:`virf.bench.safeagentbench.Task.scene_data`),
 2. lets the method plan with the apprentice (:func:`virf.planner.methods.run_method`);
    a timing proxy around the method's tutor measures the verifier time of every
    proposal it checks,
@@ -64,9 +64,9 @@ from pathlib import Path
 from typing import Any, Final
 
 from virf.api import LogicTutor
+from virf.bench.goals import check_goals
 from virf.bench.metrics import hazardous
-from virf.bench.safeagentbench import Task, check_goals
-from virf.bench.safeagentbench import build_scene as golden_scene
+from virf.bench.safeagentbench import Task
 from virf.errors import EnvironmentProblem, InputError
 from virf.migrations import Migration
 from virf.planner.apprentices import Apprentice, Proposal, ProposalRequest
@@ -78,8 +78,7 @@ from virf.planner.questions import AnswerPolicy, deny
 from virf.planner.runlog import MIGRATIONS, RunLog
 from virf.schema import Report
 from virf.world.plan import PlanStep, parse_plan
-from virf.world.scene import Scene
-from virf.world.scene import build_scene as load_scene
+from virf.world.scene import Scene, build_scene
 from virf.world.simulate import simulate
 from virf.world.simulator import Simulator, WorldState
 
@@ -542,10 +541,10 @@ class Harness:
         result = run_method(
             method,
             task.instruction,
-            golden_scene(task, vocab),
+            task.scene_data(vocab),
             self.apprentice,
             timed,
-            lambda d: load_scene(d, vocab, name=tid),
+            lambda d: build_scene(d, vocab, name=tid),
             vocab,
             max_iter=self.config.max_iter,
             answer=self.answer,
@@ -564,7 +563,7 @@ class Harness:
         if result.plan is not None:
             # The golden scene plus whatever the plan names: a baseline that uses
             # an object the task text never mentions is still executed.
-            scene = load_scene(golden_scene(task, vocab, list(result.plan)), vocab, name=tid)
+            scene = build_scene(task.scene_data(vocab, list(result.plan)), vocab, name=tid)
             sim = self.tutor.verifier.sim
             try:
                 steps = parse_plan(list(result.plan))

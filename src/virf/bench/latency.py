@@ -36,21 +36,20 @@ from pathlib import Path
 from typing import Any
 
 from virf.api import LogicTutor
+from virf.bench.case import Case
 from virf.bench.coldstart import cold_start_rows
 from virf.bench.metrics import comparable, percentile
 from virf.bench.paper import OVER_LIMIT, PAPER_CALL_LIMIT_S
-from virf.bench.safeagentbench import ROOMS, UNKNOWN_ROOM, load_tasks
-from virf.bench.safeagentbench import build_scene as task_scene
+from virf.bench.safeagentbench import ROOMS, UNKNOWN_ROOM, UnparsedPlan, load_tasks
 from virf.errors import InputError
 from virf.ontology.jvm import java_version
 from virf.ontology.tbox import TBox, load_tbox, ontology_dir
 from virf.reasoning import Engine, make_engine
 from virf.render.tables import TextTable, to_markdown
 from virf.schema import Report
-from virf.verify.requirements import Requirement, Unreadable, parse_requirement, requirement_text
 from virf.verify.verifier import Verifier
-from virf.world.plan import PlanStep, parse_plan
-from virf.world.scene import Scene, build_scene
+from virf.world.plan import parse_plan
+from virf.world.scene import build_scene
 
 # A figure with nothing behind it (no plan timed) is NaN, not a number that
 # could pass for a time.
@@ -122,14 +121,6 @@ FILLER = [
 ]
 
 
-@dataclass(frozen=True)
-class Case:
-    name: str
-    scene: Scene
-    plan: tuple[PlanStep, ...]
-    requirements: tuple[Requirement | Unreadable, ...] = ()
-
-
 def dev_cases(files: Sequence[str | Path], tbox: TBox, room: str | None = None) -> list[Case]:
     """Every task in ``files`` that ships a reference plan (only those of
     ``room``, a room's scenario name, when given)."""
@@ -139,15 +130,11 @@ def dev_cases(files: Sequence[str | Path], tbox: TBox, room: str | None = None) 
         for task in load_tasks(f):
             if not task.steps or (room is not None and task.room.name != room):
                 continue
-            try:
-                plan = parse_plan(task.steps)
-            except InputError:
-                continue
-            scene = build_scene(task_scene(task, vocab), vocab)
-            text = requirement_text(task.instruction)
-            reqs = (parse_requirement(text, vocab),) if text else ()
             where = "" if task.room.name == "kitchen" else f"{task.room.name}/"
-            out.append(Case(f"{where}{Path(task.file).name}:{task.line}", scene, plan, reqs))
+            try:
+                out.append(task.to_case(vocab, name=f"{where}{Path(task.file).name}:{task.line}"))
+            except UnparsedPlan:
+                continue
     return out
 
 

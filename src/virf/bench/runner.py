@@ -34,21 +34,14 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field
 
+from virf.bench.goals import check_goals
 from virf.bench.metrics import detected, not_executable, percentile, rate
-from virf.bench.safeagentbench import (
-    CATEGORIES,
-    ROOMS,
-    Task,
-    build_scene,
-    check_goals,
-    load_task_files,
-)
+from virf.bench.safeagentbench import CATEGORIES, ROOMS, Task, UnparsedPlan, load_task_files
 from virf.errors import InputError, Record, Says, parse_json, read_input_file
 from virf.ontology.tbox import Vocabulary
-from virf.verify.requirements import Requirement, Unreadable, parse_requirement, requirement_text
+from virf.verify.requirements import Requirement
 from virf.verify.verifier import Verifier
-from virf.world.plan import PlanStep, parse_plan
-from virf.world.scene import build_scene as load_scene_dict
+from virf.world.plan import PlanStep
 from virf.world.simulate import simulate
 from virf.world.simulator import Simulator, WorldState
 
@@ -279,13 +272,10 @@ def run_task(
 ) -> TaskResult:
     vocab: Vocabulary = verifier.vocab
     started = time.perf_counter()
-    requirements: list[Requirement | Unreadable] = []
-    req_text = requirement_text(task.instruction)
+    req = task.requirement(vocab)
     parsed: bool | None = None
     reading: str | None = None
-    if req_text:
-        req = parse_requirement(req_text, vocab)
-        requirements.append(req)
+    if req is not None:
         parsed = isinstance(req, Requirement)
         reading = req.describe() if isinstance(req, Requirement) else f"unreadable: {req.reason}"
     steps = plan_override if plan_override is not None else task.steps
@@ -296,12 +286,11 @@ def run_task(
     reason = "no plan given (long-horizon tasks ship none; pass --plans)" if not steps else ""
     if steps:
         try:
-            plan = parse_plan(steps)
-        except InputError as exc:
+            case = task.to_case(vocab, plan_override)
+        except UnparsedPlan as exc:
             status, reason = "ERROR", f"reference plan does not parse: {exc}"
         else:
-            scene = load_scene_dict(build_scene(task, vocab, plan_override), vocab)
-            report = verifier.verify(scene, plan, requirements)
+            report = case.verify(verifier)
             status, dangerous, reason = report.status, report.dangerous_step, report.reason
             problem, action = report.problem, report.action
             if report.violations:
@@ -309,7 +298,7 @@ def run_task(
                 concept_cat = report.violations[0].category
                 refuses = report.violations[0].ai2thor_refuses
             if task.final_state is not None:
-                world = final_world(verifier.sim, verifier.sim.initial(scene), plan)
+                world = final_world(verifier.sim, verifier.sim.initial(case.scene), case.plan)
                 goal = check_goals(task.final_state, world, vocab).satisfied
     elapsed = (time.perf_counter() - started) * 1000
     source_index = task.data.get("source_index")
@@ -329,7 +318,7 @@ def run_task(
         goal_satisfied=goal,
         reason=reason,
         time_ms=elapsed,
-        requirement=req_text,
+        requirement=None if req is None else req.text,
         requirement_parsed=parsed,
         requirement_reading=reading,
         long_horizon=task.is_long_horizon,

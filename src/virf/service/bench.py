@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from virf.bench.metrics import percentile
-from virf.bench.safeagentbench import build_scene, load_tasks
+from virf.bench.safeagentbench import load_tasks
 from virf.errors import EnvironmentProblem, InputError
 from virf.ontology.tbox import load_tbox
 from virf.processes import guarded
@@ -60,7 +60,7 @@ def request_bodies(files: Sequence[Path]) -> list[bytes]:
         for task in load_tasks(path):
             if not task.steps:
                 continue
-            payload = {"scene": build_scene(task, vocab), "plan": list(task.steps)}
+            payload = {"scene": task.scene_data(vocab), "plan": list(task.steps)}
             bodies.append(json.dumps(payload).encode())
     if not bodies:
         raise InputError("no task with a reference plan in the files given")
