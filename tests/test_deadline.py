@@ -20,7 +20,9 @@ import pytest
 from conftest import EXAMPLES_DIR, inst, rel
 
 from virf.api import LogicTutor
-from virf.bench.latency import chain_case, chain_markdown, deadline_row
+from virf.bench.latency import deadline_row
+from virf.bench.latency_cases import chain_case
+from virf.bench.latency_report import chain_markdown
 from virf.ontology.fragment import Axiom, Role
 from virf.reasoning import Classification, DeadlineExceeded, Engine, make_engine
 from virf.reasoning.program import Model, Program

@@ -15,13 +15,8 @@ import pytest
 from conftest import ROOT
 
 from virf.api import LogicTutor
-from virf.bench.latency import (
-    SYNTHETIC_CYCLE,
-    render_markdown,
-    sample,
-    synthetic_case,
-    synthetic_modules,
-)
+from virf.bench.latency_cases import SYNTHETIC_CYCLE, sample, synthetic_case, synthetic_modules
+from virf.bench.latency_report import render_markdown
 from virf.ontology.tbox import load_tbox
 from virf.reasoning.fast import fragment_of
 from virf.world.simulate import simulate

@@ -26,13 +26,8 @@ import pytest
 from conftest import ROOT, interruptible
 from process_support import WITHIN_S, alive, gone
 
-from virf.bench.latency import (
-    latency_table,
-    paper_figures,
-    ratio_text,
-    render_markdown,
-    scaling_table,
-)
+from virf.bench.latency import paper_figures
+from virf.bench.latency_report import latency_table, ratio_text, render_markdown, scaling_table
 from virf.bench.paper import OVER_LIMIT, run_paper_baseline
 from virf.render.tables import to_markdown
 from virf.schema import Fact, FactKind

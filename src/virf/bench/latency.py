@@ -24,31 +24,36 @@ from __future__ import annotations
 import gc
 import os
 import platform
-import re
 import resource
 import statistics
 import tempfile
 import time
 import tracemalloc
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from virf.api import LogicTutor
 from virf.bench.case import Case
 from virf.bench.coldstart import cold_start_rows
+from virf.bench.latency_cases import (
+    CHAIN_PLAN,
+    chain_case,
+    hazard_chain_case,
+    room_groups,
+    sample,
+    synthetic_case,
+    synthetic_modules,
+    synthetic_scene,
+)
 from virf.bench.metrics import comparable, percentile
 from virf.bench.paper import OVER_LIMIT, PAPER_CALL_LIMIT_S
-from virf.bench.safeagentbench import ROOMS, UNKNOWN_ROOM, UnparsedPlan, load_tasks
 from virf.errors import InputError
 from virf.ontology.jvm import java_version
-from virf.ontology.tbox import TBox, load_tbox, ontology_dir
+from virf.ontology.tbox import TBox, load_tbox
 from virf.reasoning import Engine, make_engine
-from virf.render.tables import TextTable, to_markdown
 from virf.schema import Report
 from virf.verify.verifier import Verifier
-from virf.world.plan import parse_plan
 from virf.world.scene import build_scene
 
 # A figure with nothing behind it (no plan timed) is NaN, not a number that
@@ -57,217 +62,10 @@ NOT_MEASURED = float("nan")
 SCENE_SIZES = (20, 50, 200, 1000)
 PLAN_LENGTHS = (10, 20, 40, 80)
 CHAIN_LENGTHS = (100, 300, 1000)
-# Moves the outermost box of a chain and puts it back: the whole chain moves
-# with it, and every snapshot holds the chain.
-CHAIN_PLAN = ("find Box_0", "pick Box_0", "find CounterTop_1", "put CounterTop_1")
 # The deadline rows: chains that take each engine several times the timeout.
 DEADLINE_S = 0.5
 DEADLINE_CHAINS = (("fast", 4000), ("reference", 3000))
-# Ten safe steps that put everything back where it was, so a plan of any
-# multiple of ten steps is the cycle repeated (after the first pass, which also
-# marks objects as found and near, every pass ends in the same state).
-SYNTHETIC_CYCLE = (
-    "find Apple_1",
-    "pick Apple_1",
-    "find Fridge_1",
-    "open Fridge_1",
-    "put Fridge_1",
-    "find Apple_1",
-    "pick Apple_1",
-    "close Fridge_1",
-    "find CounterTop_1",
-    "put CounterTop_1",
-)
-# Harmless things to fill a kitchen with (only types the catalogue knows are used).
-FILLER = [
-    "Apple",
-    "Bread",
-    "Tomato",
-    "Potato",
-    "Lettuce",
-    "Egg",
-    "Mug",
-    "Cup",
-    "Bowl",
-    "Plate",
-    "Fork",
-    "Spoon",
-    "ButterKnife",
-    "Spatula",
-    "Ladle",
-    "SaltShaker",
-    "PepperShaker",
-    "DishSponge",
-    "PaperTowelRoll",
-    "Bottle",
-    "Book",
-    "CreditCard",
-    "Vase",
-    "Statue",
-    "Kettle",
-    "Pan",
-    "Pot",
-    "WineBottle",
-    "SoapBottle",
-    "Newspaper",
-    "KeyChain",
-    "CellPhone",
-    "Pen",
-    "Pencil",
-    "Watch",
-    "TissueBox",
-    "Box",
-    "Candle",
-]
-
-
-def dev_cases(files: Sequence[str | Path], tbox: TBox, room: str | None = None) -> list[Case]:
-    """Every task in ``files`` that ships a reference plan (only those of
-    ``room``, a room's scenario name, when given)."""
-    vocab = tbox.vocabulary
-    out = []
-    for f in files:
-        for task in load_tasks(f):
-            if not task.steps or (room is not None and task.room.name != room):
-                continue
-            where = "" if task.room.name == "kitchen" else f"{task.room.name}/"
-            try:
-                out.append(task.to_case(vocab, name=f"{where}{Path(task.file).name}:{task.line}"))
-            except UnparsedPlan:
-                continue
-    return out
-
-
-@dataclass(frozen=True)
-class RoomGroup:
-    """One room's dev plans, with verifiers over the room's rules."""
-
-    room: str
-    cases: list[Case]
-    fast: Verifier
-    reference: Verifier
-
-
-def room_groups(
-    files: Sequence[str | Path], kitchen: TBox, fast: Engine, reference: Engine
-) -> list[RoomGroup]:
-    """The tasks with a reference plan in ``files``, by room (the kitchen's
-    with the given engines, each other room's with engines of its own)."""
-    groups = []
-    for room in (*ROOMS, UNKNOWN_ROOM):
-        tbox = kitchen if room.name == "kitchen" else load_tbox(room.name)
-        cases = dev_cases(files, tbox, room=room.name)
-        if not cases:
-            continue
-        engines = (
-            (fast, reference)
-            if tbox is kitchen
-            else (
-                make_engine("fast", tbox),
-                make_engine("reference", tbox),
-            )
-        )
-        verifiers = [LogicTutor.over(tbox, engine).verifier for engine in engines]
-        groups.append(RoomGroup(room.name, cases, *verifiers))
-    return groups
-
-
-def synthetic_scene(objects: int, tbox: TBox) -> dict[str, Any]:
-    """A kitchen with ``objects`` objects on which the synthetic plan runs safely."""
-    vocab = tbox.vocabulary
-    fixed = [
-        ("Fridge", "Fridge_1"),
-        ("DiningTable", "DiningTable_1"),
-        ("Microwave", "Microwave_1"),
-        ("Sink", "Sink_1"),
-        ("Faucet", "Faucet_1"),
-        ("Apple", "Apple_1"),
-        ("Mug", "Mug_1"),
-    ]
-    if objects < len(fixed) + 2:
-        raise InputError(f"a synthetic scene needs at least {len(fixed) + 2} objects")
-    instances = [{"class_name": c, "instance_name": n} for c, n in fixed]
-    assertions: list[dict[str, str]] = [
-        {"subject": "Fridge_1", "property": "hasState", "object": "ClosedState"},
-        {"subject": "Microwave_1", "property": "hasState", "object": "ClosedState"},
-        {"subject": "Microwave_1", "property": "hasState", "object": "OffState"},
-        {"subject": "Faucet_1", "property": "hasState", "object": "OffState"},
-        {"subject": "Mug_1", "property": "hasState", "object": "EmptyState"},
-    ]
-    counters = max(1, (objects - len(fixed)) // 10)
-    for i in range(1, counters + 1):
-        instances.append({"class_name": "CounterTop", "instance_name": f"CounterTop_{i}"})
-    assertions.append({"subject": "Apple_1", "property": "isOn", "object": "CounterTop_1"})
-    assertions.append({"subject": "Mug_1", "property": "isOn", "object": "CounterTop_1"})
-    kinds = [k for k in FILLER if k in vocab.classes]
-    seen: dict[str, int] = {"Apple": 1, "Mug": 1}
-    i = 0
-    while len(instances) < objects:
-        kind = kinds[i % len(kinds)]
-        seen[kind] = seen.get(kind, 0) + 1
-        name = f"{kind}_{seen[kind]}"
-        instances.append({"class_name": kind, "instance_name": name})
-        place = f"CounterTop_{i % counters + 1}"
-        assertions.append({"subject": name, "property": "isOn", "object": place})
-        i += 1
-    return {
-        "description": f"synthetic kitchen with {objects} objects",
-        "instances": instances,
-        "assertions": assertions,
-        "unlocated_by_default": True,
-    }
-
-
-def synthetic_case(objects: int, tbox: TBox, steps: int = 10) -> Case:
-    """The synthetic kitchen with the ten-step cycle repeated to ``steps`` steps."""
-    vocab = tbox.vocabulary
-    scene = build_scene(synthetic_scene(objects, tbox), vocab, name=f"synthetic-{objects}")
-    cycles = max(1, steps // len(SYNTHETIC_CYCLE))
-    name = f"synthetic-{objects}" + (f"x{steps}" if steps != len(SYNTHETIC_CYCLE) else "")
-    return Case(name, scene, parse_plan(list(SYNTHETIC_CYCLE) * cycles))
-
-
-def chain_scene(boxes: int) -> dict[str, Any]:
-    """Box_0 on a counter, Box_1 inside it, Box_2 inside Box_1, and so on:
-    containment ``boxes`` deep, whose transitive closure has boxes²/2 pairs."""
-    instances = [{"class_name": "CounterTop", "instance_name": "CounterTop_1"}]
-    instances += [{"class_name": "Box", "instance_name": f"Box_{i}"} for i in range(boxes)]
-    assertions = [{"subject": "Box_0", "property": "isOn", "object": "CounterTop_1"}]
-    assertions += [
-        {"subject": f"Box_{i}", "property": "contains", "object": f"Box_{i + 1}"}
-        for i in range(boxes - 1)
-    ]
-    return {
-        "description": f"{boxes} boxes, each inside the previous one",
-        "instances": instances,
-        "assertions": assertions,
-    }
-
-
-def chain_case(boxes: int, tbox: TBox) -> Case:
-    scene = build_scene(chain_scene(boxes), tbox.vocabulary, name=f"chain-{boxes}")
-    return Case(f"chain-{boxes}", scene, parse_plan(list(CHAIN_PLAN)))
-
-
-HAZARD_CHAIN_PLAN = ("find Box_0", "pick Box_0", "find Vase_1", "drop Box_0")
 HAZARD_CHAINS = (10, 100)
-
-
-def hazard_chain_case(boxes: int, tbox: TBox) -> Case:
-    """The containment chain with a dumbbell in the innermost box and a vase
-    on the counter: dropping Box_0 by the vase is a hazard through the whole
-    chain, so its explanation lists every link (boxes + 5 facts)."""
-    data = chain_scene(boxes)
-    data["instances"] += [
-        {"class_name": "Dumbbell", "instance_name": "Dumbbell_1"},
-        {"class_name": "Vase", "instance_name": "Vase_1"},
-    ]
-    data["assertions"] += [
-        {"subject": f"Box_{boxes - 1}", "property": "contains", "object": "Dumbbell_1"},
-        {"subject": "Vase_1", "property": "isOn", "object": "CounterTop_1"},
-    ]
-    scene = build_scene(data, tbox.vocabulary, name=f"hazard-chain-{boxes}")
-    return Case(f"hazard-chain-{boxes}", scene, parse_plan(list(HAZARD_CHAIN_PLAN)))
 
 
 def deadline_row(tbox: TBox, engine: Engine, boxes: int, timeout_s: float) -> dict[str, Any]:
@@ -275,7 +73,7 @@ def deadline_row(tbox: TBox, engine: Engine, boxes: int, timeout_s: float) -> di
     case = chain_case(boxes, tbox)
     verifier = LogicTutor.over(tbox, engine, timeout_s=timeout_s).verifier
     start = time.perf_counter()
-    report = verifier.verify(case.scene, case.plan)
+    report = case.verify(verifier)
     return {
         "engine": engine.name,
         "objects": boxes,
@@ -283,24 +81,6 @@ def deadline_row(tbox: TBox, engine: Engine, boxes: int, timeout_s: float) -> di
         "status": report.status,
         "elapsed_ms": round((time.perf_counter() - start) * 1000, 1),
     }
-
-
-def synthetic_modules(copies: int, folder: Path) -> tuple[str, ...]:
-    """``copies`` renamed copies of the kitchen domain layer (for TBox scaling)."""
-    source = (ontology_dir() / "kitchen.omn").read_text(encoding="utf-8")
-    names = sorted(set(re.findall(r"^Class: :(\w+)", source, flags=re.M)), key=len, reverse=True)
-    pattern = re.compile(r":(" + "|".join(re.escape(n) for n in names) + r")\b")
-    out = []
-    for k in range(1, copies + 1):
-        text = pattern.sub(lambda m, k=k: f":Syn{k}_{m.group(1)}", source)  # type: ignore[misc]
-        text = text.replace(
-            "<http://virf.dev/ontology/kitchen>", f"<http://virf.dev/ontology/synthetic-{k}>"
-        )
-        text = re.sub(r':id "([^"]+)"', lambda m, k=k: f':id "SYN{k}-{m.group(1)}"', text)  # type: ignore[misc]
-        path = folder / f"synthetic-{k}.omn"
-        path.write_text(text, encoding="utf-8")
-        out.append(str(path))
-    return tuple(out)
 
 
 def time_plans(
@@ -317,7 +97,7 @@ def time_plans(
         report = None
         for _ in range(repeats):
             start = time.perf_counter()
-            report = verifier.verify(case.scene, case.plan, case.requirements)
+            report = case.verify(verifier)
             runs.append((time.perf_counter() - start) * 1000)
         assert report is not None
         times.append(statistics.median(runs))
@@ -336,14 +116,6 @@ def summary(values: Sequence[float]) -> dict[str, float]:
         "p95_ms": round(percentile(values, 95), 2),
         "mean_ms": round(statistics.fmean(values), 2),
     }
-
-
-def sample(cases: Sequence[Case], n: int) -> list[Case]:
-    """``n`` cases spread evenly over the list (all when n <= 0 or n >= len)."""
-    if n <= 0 or n >= len(cases):
-        return list(cases)
-    step = len(cases) / n
-    return [cases[int(i * step)] for i in range(n)]
 
 
 def _paper_plans(verifier: Verifier, cases: Sequence[Case]) -> list[tuple[str, list[list[Any]]]]:
@@ -510,7 +282,7 @@ def run_latency(
     )
     tracemalloc.start()
     for case in rooms[0].cases[:20]:
-        rooms[0].fast.verify(case.scene, case.plan, case.requirements)
+        case.verify(rooms[0].fast)
     fast_heap = tracemalloc.get_traced_memory()[1] / 2**20
     tracemalloc.stop()
     rss_fast = rss_mb()
@@ -519,7 +291,7 @@ def run_latency(
     ref_cases = sample(cases, reference_sample)
     chosen = {c.name for c in ref_cases}
     for case in ref_cases[:3]:
-        vr.verify(case.scene, case.plan, case.requirements)
+        case.verify(vr)
     tick = bar("reference engine", len(ref_cases))
     ref_ms, ref_reports = [], []
     for group in rooms:
@@ -686,468 +458,3 @@ def _paper_rss(result: dict[str, Any]) -> float | None:
     if isinstance(peak, (int, float)):
         return round(peak / 1024, 1)
     return None
-
-
-# The tables below are printed by `virf bench latency` and written into
-# performance.md from the same rows; the terminal words some headers shorter.
-
-
-COLD_TARGET_S = 0.25
-# The figures issue 29 asks for (printed beside the measured ones).
-TARGETS = {
-    "p50_ms": 4.0,
-    "p95_ms": 10.0,
-    "vs_reference": 300.0,
-    "vs_paper": 300.0,
-    "objects_1000_ms": 50.0,
-    "chain_1000_ms": 100.0,
-    "hazard_chain_100_ms": 100.0,
-}
-
-
-def targets_table(fig: dict[str, Any]) -> TextTable:
-    """Each figure issue 29 asks for, beside what this run measured."""
-
-    def row_ms(key: str, objects: int) -> float | None:
-        rows = fig.get(key, [])
-        return next(
-            (r["fast_ms"] for r in rows if r.get("requested_objects", r["objects"]) == objects),
-            None,
-        )
-
-    fast = fig["fast"]
-    cold = next(
-        (r for r in fig.get("cold_start", {}).get("rows", []) if r["engine"] == "fast"), None
-    )
-    rows: list[tuple[str, str, float | None, bool]] = [
-        ("fast p50 per plan, ms", "≤", fast["p50_ms"], True),
-        ("fast p95 per plan, ms", "≤", fast["p95_ms"], True),
-        ("reference / fast (b/c), ×", "≥", fig.get("reference_ratio"), False),
-        ("paper / fast (a/c), ×", "≥", fig.get("ratio"), False),
-        ("cold first verdict, s", "≤", cold["median_s"] if cold else None, True),
-        ("10-step plan, 1,000 objects, ms", "≤", row_ms("scene_scaling", 1000), True),
-        ("1,000-box chain, ms", "≤", row_ms("chain_scaling", 1000), True),
-        ("100-box hazard chain explained, ms", "≤", row_ms("hazard_chains", 100), True),
-    ]
-    goals = [
-        TARGETS["p50_ms"],
-        TARGETS["p95_ms"],
-        TARGETS["vs_reference"],
-        TARGETS["vs_paper"],
-        COLD_TARGET_S,
-        TARGETS["objects_1000_ms"],
-        TARGETS["chain_1000_ms"],
-        TARGETS["hazard_chain_100_ms"],
-    ]
-    table = []
-    for (name, way, value, at_most), goal in zip(rows, goals, strict=True):
-        if value is None or value != value:
-            table.append((name, f"{way} {goal:g}", "not measured", "-"))
-            continue
-        met = value <= goal if at_most else value >= goal
-        shown = f"{value:.0f}" if "×" in name else f"{value:.3g}"
-        if name.startswith("paper") and fig.get("ratio_lower_bound"):
-            shown = f"≥ {shown}"  # a lower bound that meets the goal meets it
-        table.append((name, f"{way} {goal:g}", shown, "yes" if met else "no"))
-    return TextTable.of(("figure", "target", "measured", "met"), table)
-
-
-def reference_ratio(fig: dict[str, Any]) -> str:
-    """How many times faster the fast engine is than the reference engine."""
-    value = fig.get("reference_ratio")
-    return "not measured" if not value else f"{value:g}×"
-
-
-def cold_start_table(fig: dict[str, Any]) -> TextTable:
-    """Cold start to first verdict, one row per engine."""
-    return TextTable.of(
-        ("engine", "verdict", "runs", "median s", "min s", "max s"),
-        [
-            (
-                row["engine"],
-                row["verdict"],
-                str(row["runs"]),
-                f"{row['median_s']:.3f}",
-                f"{row['min_s']:.3f}",
-                f"{row['max_s']:.3f}",
-            )
-            for row in fig.get("cold_start", {}).get("rows", [])
-        ],
-    )
-
-
-def at_least(value: float, lower_bound: bool, digits: int = 0) -> str:
-    """A figure, written "≥ N" when it is a lower bound."""
-    return ("≥ " if lower_bound else "") + f"{value:.{digits}f}"
-
-
-def ratio_text(fig: dict[str, Any], key: str = "ratio") -> str:
-    """Ratio a/c as "N×", "≥ N×" when a plan it was computed from hit the
-    call limit, or "not measured"."""
-    value = fig.get(key)
-    if value is None:
-        return "not measured"
-    return ("≥ " if fig.get("ratio_lower_bound") else "") + f"{value:g}×"
-
-
-def latency_table(fig: dict[str, Any], *, terminal: bool) -> TextTable:
-    """Per-plan latency of (a), (b) and (c); the terminal adds a note per method."""
-    fast, ref, paper = fig["fast"], fig["reference"], fig.get("paper")
-    rows: list[tuple[str, ...]] = []
-    if paper:
-        bound = paper.get("lower_bound", False)
-        per_call = at_least(paper["per_call_p50_ms"], paper.get("per_call_lower_bound", False))
-        over = ""
-        if paper.get("calls_over_limit"):
-            over = (
-                f"; {paper['calls_over_limit']} of {paper['calls']} calls "
-                f"{OVER_LIMIT} ({paper['call_limit_s']:g} s)"
-            )
-        rows.append(
-            (
-                "(a) paper: owlready2 + Pellet per step",
-                str(paper["plans"]),
-                at_least(paper["p50_ms"], bound),
-                at_least(paper["p95_ms"], bound),
-                at_least(paper["mean_ms"], bound),
-                f"per call p50 {per_call} ms{over}; owlready2 {paper['owlready2']}",
-            )
-        )
-    rows += [
-        (
-            "(b) reference engine (HermiT)",
-            str(ref["plans"]),
-            f"{ref['p50_ms']:.0f}",
-            f"{ref['p95_ms']:.0f}",
-            f"{ref['mean_ms']:.0f}",
-            "with minimal explanations",
-        ),
-        (
-            "(c) fast engine",
-            str(fig["plans"]),
-            f"{fast['p50_ms']:.1f}",
-            f"{fast['p95_ms']:.1f}",
-            f"{fast['mean_ms']:.1f}",
-            f"{fast['reasoner_calls']} calls, {fast['fallbacks']} fallbacks",
-        ),
-    ]
-    if terminal:
-        return TextTable.of(
-            ("method", "plans", "p50 ms", "p95 ms", "mean ms", "note"),
-            rows,
-            title=f"Per-plan verification latency ({fig['plans']} SafeAgentBench plans)",
-        )
-    return TextTable.of(
-        ("method", "plans timed", "p50 ms", "p95 ms", "mean ms"), [r[:-1] for r in rows]
-    )
-
-
-def scaling_table(fig: dict[str, Any], key: str, *, terminal: bool) -> TextTable:
-    """``key`` is scene_scaling (per object) or length_scaling (per step)."""
-    per = "objects" if key == "scene_scaling" else "steps"
-    rows = []
-    for row in fig[key]:
-        size = row.get("requested_objects", row["objects"]) if per == "objects" else row["steps"]
-        paper_ms = row.get("paper_ms")
-        rows.append(
-            (
-                str(size),
-                row["status"],
-                f"{row['fast_ms']:.1f}",
-                f"{row['fast_ms'] / size:.3f}",
-                f"{row['reference_ms']:.0f}",
-                f"{row['reference_2_workers_ms']:.0f}",
-                "-"
-                if paper_ms is None
-                else at_least(paper_ms, row.get("paper_lower_bound", False)),
-                "yes" if row["identical"] else "NO",
-            )
-        )
-    one = per.rstrip("s")
-    if terminal:
-        title = {
-            "objects": "Scaling with scene size (10-step plan)",
-            "steps": "Scaling with plan length (50-object scene)",
-        }[per]
-        return TextTable.of(
-            (
-                per,
-                "verdict",
-                "fast ms",
-                f"fast ms/{one}",
-                "reference ms",
-                "reference, 2 workers",
-                "paper ms",
-                "same",
-            ),
-            rows,
-            title=title,
-        )
-    return TextTable.of(
-        (
-            per,
-            "verdict",
-            "fast ms",
-            f"fast ms per {one}",
-            "reference ms",
-            "reference, 2 workers, ms",
-            "paper ms",
-            "reports identical",
-        ),
-        rows,
-    )
-
-
-def tbox_table(fig: dict[str, Any], *, terminal: bool) -> TextTable:
-    rows = [
-        (
-            f"x{row['factor']}",
-            str(row["logical_axioms"]),
-            f"{row['fast_ms']:.1f}",
-            f"{row['reference_ms']:.0f}",
-            "yes" if row["identical"] else "NO",
-        )
-        for row in fig["tbox_scaling"]
-    ]
-    same = "same" if terminal else "reports identical"
-    return TextTable.of(
-        ("TBox", "logical axioms", "fast ms", "reference ms", same),
-        rows,
-        title="Scaling with TBox size (50-object scene, 10-step plan)" if terminal else None,
-    )
-
-
-def chain_markdown(fig: dict[str, Any]) -> list[str]:
-    """The containment-chain and deadline sections of performance.md."""
-    lines: list[str] = []
-    if fig.get("chain_scaling"):
-        lines += [
-            "",
-            "## Scaling with containment depth (fast engine)",
-            "",
-            f"Boxes nested in one another, Box_0 on a counter, and a {len(CHAIN_PLAN)}-step plan",
-            "that moves Box_0 and puts it back. `encloses` is transitive, so the chain's",
-            "closure has n²/2 pairs; the fast engine does not materialise it",
-            "([fast-engine.md](fast-engine.md)).",
-            "",
-        ]
-        chain = TextTable.of(
-            ("boxes", "verdict", "fast ms", "fast ms per box"),
-            [
-                (
-                    str(row["objects"]),
-                    row["status"],
-                    f"{row['fast_ms']:.1f}",
-                    f"{row['fast_ms'] / row['objects']:.3f}",
-                )
-                for row in fig["chain_scaling"]
-            ],
-        )
-        lines += to_markdown(chain)
-    if fig.get("hazard_chains"):
-        lines += [
-            "",
-            "The same chain with a dumbbell in the innermost box and a vase on the counter;",
-            f"the plan ({', '.join(HAZARD_CHAIN_PLAN)}) drops Box_0 by the vase. The hazard",
-            "runs through every link, and the report's minimal explanation lists them all:",
-            "",
-        ]
-        hazard = TextTable.of(
-            ("boxes", "verdict", "facts in the explanation", "fast ms"),
-            [
-                (
-                    str(row["objects"]),
-                    row["status"],
-                    str(row["explained_facts"]),
-                    f"{row['fast_ms']:.1f}",
-                )
-                for row in fig["hazard_chains"]
-            ],
-        )
-        lines += to_markdown(hazard)
-    if fig.get("deadline"):
-        lines += [
-            "",
-            "## The deadline",
-            "",
-            "`--timeout` is one deadline for the whole verification. The engines stop inside",
-            "a step once it passes, and the report is ERROR (fail closed). Chains that take",
-            "each engine several times the timeout:",
-            "",
-        ]
-        deadline = TextTable.of(
-            ("engine", "boxes", "timeout s", "verdict", "stopped after ms"),
-            [
-                (
-                    row["engine"],
-                    str(row["objects"]),
-                    f"{row['timeout_s']:g}",
-                    row["status"],
-                    f"{row['elapsed_ms']:.0f}",
-                )
-                for row in fig["deadline"]
-            ],
-        )
-        lines += to_markdown(deadline)
-    return lines
-
-
-def render_markdown(fig: dict[str, Any], command: str) -> str:
-    """docs/performance.md: the figures of one run, the machine, how to reproduce."""
-    m = fig["machine"]
-    fast = fig["fast"]
-    paper = fig.get("paper")
-    same = fig["identical_reports"]
-    limit = fig.get("paper_call_limit_s") or PAPER_CALL_LIMIT_S
-    lines = [
-        "# Performance",
-        "",
-        "<!-- GENERATED by `virf bench latency --markdown`; edit latency.py, not this file. -->",
-        "",
-        "How long the Logic Tutor takes to verify a plan, measured three ways on the same inputs:",
-        "",
-        "* **(a) the paper's method**: owlready2 0.49 with its bundled Pellet, one reasoner call",
-        "  per plan step on a fresh copy of ontology + ABox, stopping at the first step where",
-        "  it finds a hazard (the paper's loop). It runs in its own virtualenv (`.venv-paper`):",
-        "  owlready2 0.50/0.51 bundle jars built for Java 25 and fail on Java 17.",
-        f"  A reasoner call still running after {limit:g} s (`--paper-call-limit`) is stopped,",
-        "  with its JVM and every process it started, and counts as that long: the plan",
-        "  stops there and its time is a lower bound, written ≥, as is every median, mean",
-        "  and ratio a/c computed from it. A plan whose every call finished is an exact",
-        "  figure; a plan with a call that failed has no time.",
-        "* **(b) the reference engine**: HermiT 1.4 in-process (OWLAPI 5 through JPype), one",
-        "  fresh reasoner per question, including the minimal explanations of the report.",
-        "* **(c) the fast engine** (the default): the same reports from compiled rules and",
-        "  verified candidate models ([fast-engine.md](fast-engine.md)).",
-        "",
-        "(b) and (c) time the whole `Verifier.verify` call: simulation, classification of",
-        "every snapshot, minimal triggering facts, background axioms and the report. (a) times",
-        "only the reasoner calls. The fast engine's time per plan is the median of",
-        f"{fig.get('repeats', 3)} runs after one warm-up pass; the reference engine's and the",
-        "paper method's are single runs. Before each timed phase the benchmark runs",
-        "`gc.collect(); gc.freeze()`, so what earlier phases left on the heap does not tax it.",
-        "",
-        "## Machine",
-        "",
-        f"* {m['cpus']} CPUs, Python {m['python']}, Java {m['java']}",
-        f"* {m['platform']}",
-        "",
-        "## Per-plan latency on the SafeAgentBench dev split",
-        "",
-        f"{fig['plans']} reference plans (every task in the given files that ships one),",
-        "each verified with its room's rules.",
-        "",
-        *to_markdown(latency_table(fig, terminal=False)),
-        "",
-    ]
-    if fig.get("rooms"):
-        by_room = TextTable.of(
-            ("room", "plans", "fast p50 ms", "fast p95 ms"),
-            [
-                (r["room"], str(r["plans"]), f"{r['p50_ms']:.1f}", f"{r['p95_ms']:.1f}")
-                for r in fig["rooms"]
-            ],
-        )
-        lines += ["The fast engine by room:", "", *to_markdown(by_room), ""]
-    lines += [
-        f"* **ratio a/c** (median over the plans timed both ways): **{ratio_text(fig)}**"
-        + (
-            f"; ratio of the medians: {ratio_text(fig, 'ratio_of_medians')}"
-            if fig.get("ratio_of_medians")
-            else ""
-        ),
-        f"* reports of (b) and (c) identical: **{same['identical']}/{same['compared']}**",
-        f"* fast engine: {fast['reasoner_calls']} engine calls, **{fast['fallbacks']}** handed to "
-        "the reference engine",
-    ]
-    if paper:
-        per_call = at_least(paper["per_call_p50_ms"], paper.get("per_call_lower_bound", False))
-        lines.append(
-            f"* paper method: one reasoner call takes {per_call} ms (p50); "
-            "each call starts a JVM and classifies the whole TBox again"
-        )
-        if "calls_over_limit" in paper:
-            lines.append(
-                f"* paper method: **{paper['calls_over_limit']}** of its {paper['calls']} "
-                f"reasoner calls hit the {paper['call_limit_s']:g} s limit and were stopped; "
-                f"{paper['plans_lower_bound']} of the {paper['plans']} plans timed are "
-                "lower bounds"
-            )
-    lines += [
-        "",
-        "Targets (issue 29): with explanations, over the dev plans of every room, fast",
-        f"p50 at most {TARGETS['p50_ms']:g} ms and p95 at most {TARGETS['p95_ms']:g} ms per plan;",
-        f"at least {TARGETS['vs_reference']:g}× faster than the reference engine (b/c) and"
-        f" {TARGETS['vs_paper']:g}× than the paper's method (a/c), each the median of the",
-        f"per-plan ratios over the plans timed both ways. This run: b/c = {reference_ratio(fig)},",
-        f"a/c = {ratio_text(fig)}. Every target beside this run's figure: [Targets](#targets).",
-        "",
-    ]
-    cold = fig.get("cold_start")
-    if cold:
-        lines += [
-            "## Cold start to first verdict",
-            "",
-            f"`virf verify` on `{cold['example']}` as a fresh process, from start to exit:",
-            "interpreter, imports, loading the knowledge base, simulation, classification,",
-            "the printed report. The fast engine reads the compiled knowledge artifact and",
-            "does not start the JVM; the reference engine starts it and loads the modules.",
-            "One uncounted run first fills the file cache and Python's bytecode cache, as",
-            "after any installation.",
-            "",
-            *to_markdown(cold_start_table(fig)),
-            "",
-            f"Target: the fast engine's median at most {COLD_TARGET_S} s.",
-            "",
-        ]
-    lines += [
-        "## Memory",
-        "",
-    ]
-    mem = fig["memory"]
-    lines += [
-        f"* process RSS after loading the TBox (JVM included): {mem['process_rss_after_tbox_mb']:.0f} MB",
-        f"* peak RSS after the fast-engine runs: {mem['process_rss_peak_after_fast_mb']:.0f} MB; "
-        f"Python heap peak of the fast engine (tracemalloc): {mem['fast_python_heap_peak_mb']:.1f} MB",
-        f"* peak RSS after the reference-engine runs: "
-        f"{mem['process_rss_peak_after_reference_mb']:.0f} MB",
-    ]
-    if paper and paper.get("peak_rss_mb"):
-        lines.append(
-            f"* paper method: peak RSS {paper['peak_rss_mb']:.0f} MB (script plus its Pellet JVMs)"
-        )
-    for key, title in (
-        ("scene_scaling", "Scaling with scene size (the same 10-step plan)"),
-        ("length_scaling", "Scaling with plan length (50-object scene)"),
-    ):
-        lines += ["", f"## {title}", "", *to_markdown(scaling_table(fig, key, terminal=False))]
-    lines += chain_markdown(fig)
-    lines += ["", "## Targets", "", *to_markdown(targets_table(fig))]
-    lines += [
-        "",
-        "## Scaling with TBox size (50-object scene, 10-step plan)",
-        "",
-        "x4 adds three synthetic domain modules: copies of the kitchen layer with renamed",
-        "classes, loaded as extra imports.",
-        "",
-        *to_markdown(tbox_table(fig, terminal=False)),
-    ]
-    lines += [
-        "",
-        "## Reproduce",
-        "",
-        "```",
-        "make bench-latency      # creates .venv-paper (owlready2 0.49) on first use",
-        command,
-        "```",
-        "",
-        "`--json` prints every figure as one object (`ratio`, `fast_p50_ms`, `fast_p95_ms`,",
-        "`reference_p50_ms`, `paper_p50_ms`, the scaling rows, memory, machine). Under",
-        "`paper`, `rows` gives each plan's time and each call's, `\"> limit\"` for a call",
-        "stopped; `lower_bound` and `ratio_lower_bound` say which figures are lower bounds.",
-        "`--paper-sample N` times the paper's method on N plans spread over the split",
-        "(0 = all; each of its calls takes seconds to minutes); `--paper-call-limit S` stops",
-        "a call after S seconds; `--no-paper` skips the paper's method.",
-        "",
-    ]
-    return "\n".join(lines)

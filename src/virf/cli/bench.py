@@ -207,6 +207,7 @@ def bench_latency(
     from rich.console import Console
 
     from virf.bench.latency import run_latency
+    from virf.bench.latency_report import print_latency, render_markdown
     from virf.world.plan import MAX_PLAN_STEPS
     from virf.world.scene import MAX_INSTANCES
 
@@ -271,10 +272,8 @@ def bench_latency(
     if as_json:
         typer.echo(json.dumps(figures, sort_keys=True))
     else:
-        _print_latency(figures)
+        print_latency(figures)
     if markdown:
-        from virf.bench.latency import render_markdown
-
         write_output(markdown, render_markdown(figures, " ".join(["virf", *sys.argv[1:]])))
         typer.echo(f"wrote {markdown}", err=True)
 
@@ -288,56 +287,6 @@ def _whole_numbers(option: str, text: str, example: str) -> list[int]:
         return [int(x) for x in text.split(",") if x.strip()]
     except ValueError:
         raise VirfError(f"{option} '{text}': give whole numbers, e.g. {example}") from None
-
-
-def _print_latency(fig: dict[str, Any]) -> None:
-    from rich.console import Console
-
-    from virf.bench.latency import (
-        chain_markdown,
-        cold_start_table,
-        latency_table,
-        ratio_text,
-        scaling_table,
-        tbox_table,
-    )
-    from virf.render.tables import to_rich
-
-    console = Console(highlight=False, width=140)
-    m = fig["machine"]
-    console.print(
-        f"machine: {m['cpus']} CPUs, Python {m['python']}, Java {m['java']}, {m['platform']}"
-    )
-    console.print(to_rich(latency_table(fig, terminal=True)))
-    if fig.get("cold_start"):
-        console.print(f"cold start to first verdict ({fig['cold_start']['example']}):")
-        console.print(to_rich(cold_start_table(fig)))
-    paper = fig.get("paper")
-    same = fig["identical_reports"]
-    console.print(
-        f"ratio a/c (median over plans): {ratio_text(fig)}; "
-        f"reports identical (b vs c): {same['identical']}/{same['compared']}"
-    )
-    if paper and paper.get("calls_over_limit"):
-        console.print(
-            f"paper method: {paper['calls_over_limit']} of {paper['calls']} calls hit the "
-            f"{paper['call_limit_s']:g} s limit; {paper['plans_lower_bound']} of "
-            f"{paper['plans']} plans timed are lower bounds (≥)"
-        )
-    mem = fig["memory"]
-    console.print(
-        f"memory: process RSS {mem['process_rss_after_tbox_mb']:.0f} MB after TBox load, "
-        f"peak {mem['process_rss_peak_after_fast_mb']:.0f} MB after (c), "
-        f"{mem['process_rss_peak_after_reference_mb']:.0f} MB after (b); "
-        f"fast engine Python heap peak {mem['fast_python_heap_peak_mb']:.1f} MB"
-        + (f"; paper method peak {paper['peak_rss_mb']} MB" if paper else "")
-    )
-    for key in ("scene_scaling", "length_scaling"):
-        console.print(to_rich(scaling_table(fig, key, terminal=True)))
-    console.print(to_rich(tbox_table(fig, terminal=True)))
-    # The containment-chain and deadline figures, as the Markdown report has them.
-    for line in chain_markdown(fig):
-        console.print(line, markup=False)
 
 
 def _print_bench(results: list[Any], summary: dict[str, Any]) -> None:
