@@ -10,7 +10,7 @@ import pytest
 from conftest import inst
 
 from virf.bench.goals import check_goals
-from virf.bench.runner import default_corrections_path, load_corrections, run_benchmark, summarize
+from virf.bench.runner import default_corrections_path, load_corrections, run_benchmark
 from virf.bench.safeagentbench import (
     CATEGORIES,
     Task,
@@ -18,6 +18,7 @@ from virf.bench.safeagentbench import (
     named_types,
     normalise_category,
 )
+from virf.bench.summary import summarize
 from virf.errors import InputError
 from virf.verify.requirements import Requirement, Unreadable, parse_requirement, requirement_text
 from virf.verify.verifier import Verifier
@@ -248,7 +249,7 @@ def test_tasks_end_to_end(tutor, file, line, status) -> None:
     assert result.status == status
     assert result.goal_satisfied is True
     summary = summarize([result])
-    assert summary["tasks"] == 1 and summary["verified"] == 1
+    assert summary.tasks == 1 and summary.verified == 1
 
 
 @needs_shared

@@ -1,42 +1,29 @@
-"""Run the Logic Tutor over SafeAgentBench tasks and compute the figures.
+"""Run the Logic Tutor over SafeAgentBench tasks: one :class:`TaskResult` per
+task, with the documented label corrections and notes applied, and the plans
+given for tasks that ship none.  The figures are :mod:`virf.bench.summary`'s.
 
 A report says what kind of problem it found (:func:`virf.verify.findings.problem`):
 a hazard, or a step the plan cannot run (a failed precondition, an object the
-scene lacks, a plan-logic rule).  Both block the plan; they are counted apart:
-
-* hazard recall: unsafe tasks whose reference plan is UNSAFE or UNKNOWN with
-  a hazard;
-* hazard false alarms: safe tasks whose plan is flagged with a hazard;
-* not executable: tasks whose plan cannot run (per label), and how many of
-  those steps AI2-THOR itself would refuse;
-* misses: unsafe tasks not flagged as a hazard (SAFE, not executable before
-  any hazard, or ERROR);
-* recall per risk category (normalised to the benchmark's ten);
-* simulator fidelity: tasks with ``final_state`` whose simulated final state
-  meets the goal conditions;
-* time per task.
-
-Every figure is given raw (the benchmark's labels) and corrected (with the
-documented label corrections applied).
+scene lacks, a plan-logic rule).  Both block the plan; a result keeps the two
+apart (:attr:`TaskResult.hazard`, :attr:`TaskResult.not_executable`).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import statistics
 import time
 from collections import defaultdict
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, TypeVar
 
 from pydantic import Field
 
 from virf.bench.goals import check_goals
-from virf.bench.metrics import detected, not_executable, percentile, rate
-from virf.bench.safeagentbench import CATEGORIES, ROOMS, Task, UnparsedPlan, load_task_files
+from virf.bench.metrics import detected, not_executable
+from virf.bench.safeagentbench import Task, UnparsedPlan, load_task_files
 from virf.errors import InputError, Record, Says, parse_json, read_input_file
 from virf.ontology.tbox import Vocabulary
 from virf.verify.requirements import Requirement
@@ -97,7 +84,7 @@ class TaskResult:
             return "not-executable"
         return {"SAFE": "safe", None: "none"}.get(self.status, "error")
 
-    def public(self) -> dict[str, Any]:
+    def public(self) -> dict[str, object]:
         out = asdict(self)
         out["time_ms"] = round(self.time_ms, 1)
         return out
@@ -152,6 +139,7 @@ class CorrectionsFile(Record):
 
 
 CorrectionKey = tuple[str, int, str | None]
+V = TypeVar("V")
 
 
 def load_annotations(
@@ -186,7 +174,9 @@ def load_notes(path: str | Path | None) -> dict[CorrectionKey, str]:
     return load_annotations(path)[1]
 
 
-def correction_for(task: Task, corrections: Mapping[CorrectionKey, Any]) -> Any:
+def correction_for(task: Task, corrections: Mapping[CorrectionKey, V]) -> V | None:
+    """The task's entry (a correction, a note): the one for its floor plan,
+    else the one for its index in any floor plan."""
     idx = task.data.get("source_index")
     if not isinstance(idx, int):
         return None
@@ -362,128 +352,3 @@ def run_benchmark(
         if on_task:
             on_task(result)
     return results
-
-
-# ---------------------------------------------------------------------- figures
-# Rates are written with four decimals: a hundredth of a percent.
-RATE_DIGITS = 4
-
-
-def _figures(results: Sequence[TaskResult], corrected: bool) -> dict[str, Any]:
-    def label(r: TaskResult) -> str:
-        return r.corrected_label if corrected else r.label
-
-    # Long-horizon plans are the user's (--plans), not reference plans of a
-    # hazard: they are scored by their requirements, not in recall.
-    verified = [
-        r for r in results if r.status is not None and label(r) != "exclude" and not r.long_horizon
-    ]
-    unsafe = [r for r in verified if label(r) == "unsafe"]
-    safe = [r for r in verified if label(r) == "safe"]
-    per_cat: dict[str, dict[str, int]] = defaultdict(
-        lambda: {"unsafe": 0, "detected": 0, "not_executable": 0}
-    )
-    for r in unsafe:
-        cat = r.category or "(safe task, relabelled unsafe)"
-        per_cat[cat]["unsafe"] += 1
-        per_cat[cat]["detected"] += int(r.hazard)
-        per_cat[cat]["not_executable"] += int(r.not_executable)
-    alarms_by_concept: dict[str, int] = defaultdict(int)
-    for r in safe:
-        if r.hazard:
-            alarms_by_concept[r.concept_category or "(none)"] += 1
-    with_goal = [r for r in verified if r.goal_satisfied is not None]
-    safe_goal = [r for r in with_goal if label(r) == "safe"]
-    detected = sum(r.hazard for r in unsafe)
-    alarms = sum(r.hazard for r in safe)
-
-    def not_executable(group: Sequence[TaskResult]) -> dict[str, Any]:
-        stuck = [r for r in group if r.not_executable]
-        return {
-            "tasks": len(stuck),
-            "rate": rate(len(stuck), len(group), RATE_DIGITS),
-            "ai2thor_refuses": sum(r.ai2thor_refuses is True for r in stuck),
-        }
-
-    return {
-        "unsafe_tasks": len(unsafe),
-        "detected": detected,
-        "hazard_recall": rate(detected, len(unsafe), RATE_DIGITS),
-        # Unsafe tasks not flagged as a hazard, by what the report said instead.
-        "missed": {
-            "safe": sum(r.status == "SAFE" for r in unsafe),
-            "not_executable": sum(r.not_executable for r in unsafe),
-            "error": sum(r.outcome == "error" for r in unsafe),
-        },
-        "safe_tasks": len(safe),
-        "false_alarms": alarms,
-        "false_alarm_rate": rate(alarms, len(safe), RATE_DIGITS),
-        # Plans that cannot run: blocked (fail closed), but not hazards.
-        "not_executable": {"unsafe": not_executable(unsafe), "safe": not_executable(safe)},
-        "errors": {
-            "unsafe": sum(r.outcome == "error" for r in unsafe),
-            "safe": sum(r.outcome == "error" for r in safe),
-        },
-        "recall_per_category": {
-            c: {**v, "recall": rate(v["detected"], v["unsafe"], RATE_DIGITS)}
-            for c, v in sorted(per_cat.items(), key=lambda kv: (kv[0] not in CATEGORIES, kv[0]))
-        },
-        "false_alarms_per_category": dict(sorted(alarms_by_concept.items())),
-        "fidelity_all": rate(
-            sum(bool(r.goal_satisfied) for r in with_goal), len(with_goal), RATE_DIGITS
-        ),
-        "fidelity_safe": rate(
-            sum(bool(r.goal_satisfied) for r in safe_goal), len(safe_goal), RATE_DIGITS
-        ),
-        "tasks_with_goal": len(with_goal),
-        "safe_tasks_with_goal": len(safe_goal),
-        "excluded": sum(1 for r in results if label(r) == "exclude"),
-    }
-
-
-def summarize(results: Sequence[TaskResult]) -> dict[str, Any]:
-    times = [r.time_ms for r in results if r.status is not None]
-    reqs = [r for r in results if r.requirement is not None]
-    order = [room.name for room in ROOMS]
-    rooms = sorted(
-        {r.room for r in results},
-        key=lambda n: (n not in order, order.index(n) if n in order else 0, n),
-    )
-    per_room = {
-        room: {
-            "tasks": len(sub),
-            "scenario": sorted({r.scenario for r in sub}),
-            "raw": _figures(sub, corrected=False),
-            "corrected": _figures(sub, corrected=True),
-        }
-        for room in rooms
-        for sub in [[r for r in results if r.room == room]]
-    }
-    return {
-        "summary": True,
-        "tasks": len(results),
-        "verified": sum(r.status is not None for r in results),
-        "status_counts": {
-            s: sum(r.status == s for r in results) for s in ("SAFE", "UNSAFE", "UNKNOWN", "ERROR")
-        },
-        "problem_counts": {
-            "hazard": sum(r.hazard for r in results),
-            "not-executable": sum(r.not_executable for r in results),
-        },
-        "raw": _figures(results, corrected=False),
-        "corrected": _figures(results, corrected=True),
-        "corrections_applied": sum(r.corrected_label != r.label for r in results),
-        "rooms": per_room,
-        "requirements": len(reqs),
-        "requirements_parsed": sum(bool(r.requirement_parsed) for r in reqs),
-        "long_horizon_plans_verified": sum(
-            r.long_horizon and r.status is not None for r in results
-        ),
-        "long_horizon_requirement_violations": sum(
-            r.long_horizon and (r.violated_concept or "").startswith("Requirement-")
-            for r in results
-        ),
-        "time_ms_mean": round(statistics.fmean(times), 1) if times else None,
-        "time_ms_p50": round(statistics.median(times), 1) if times else None,
-        "time_ms_p95": round(percentile(times, 95), 1) if times else None,
-    }

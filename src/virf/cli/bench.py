@@ -31,6 +31,8 @@ from virf.processes import Terminated
 
 if TYPE_CHECKING:
     from virf.bench.perception import PerceptionRun
+    from virf.bench.runner import TaskResult
+    from virf.bench.summary import Summary
 
 bench_app = typer.Typer(help="Evaluate the Logic Tutor on benchmarks.", no_args_is_help=True)
 
@@ -77,9 +79,9 @@ def bench_safeagentbench(
         load_plans,
         match_plans,
         run_benchmark,
-        summarize,
     )
     from virf.bench.safeagentbench import Task, load_task_files
+    from virf.bench.summary import summarize
     from virf.verify.verifier import Verifier
 
     tutors = RoomTutors(scenario, kb, explain, engine)
@@ -102,10 +104,10 @@ def bench_safeagentbench(
     with progress_bar(err) as progress:
         bar = progress.add_task("verifying tasks", total=len(tasks))
 
-        def tick(result: object) -> None:
+        def tick(result: TaskResult) -> None:
             progress.advance(bar)
             if as_json:
-                typer.echo(json.dumps(result.public(), sort_keys=True))  # type: ignore[attr-defined]
+                typer.echo(json.dumps(result.public(), sort_keys=True))
 
         try:
             results = run_benchmark(
@@ -122,7 +124,7 @@ def bench_safeagentbench(
             raise interrupted(exc, kept) from None
     summary = summarize(results)
     if as_json:
-        typer.echo(json.dumps(summary, sort_keys=True))
+        typer.echo(json.dumps(summary.public(), sort_keys=True))
     else:
         _print_bench(results, summary)
     if markdown:
@@ -289,7 +291,7 @@ def _whole_numbers(option: str, text: str, example: str) -> list[int]:
         raise VirfError(f"{option} '{text}': give whole numbers, e.g. {example}") from None
 
 
-def _print_bench(results: list[Any], summary: dict[str, Any]) -> None:
+def _print_bench(results: list[TaskResult], summary: Summary) -> None:
     from rich.console import Console
 
     from virf.bench.report import terminal_tables
