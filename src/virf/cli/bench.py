@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import sys
+from contextlib import ExitStack
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
@@ -24,8 +25,10 @@ from virf.cli.app import (
     check_writable,
     interrupted,
     progress_bar,
+    progress_ticks,
     write_output,
 )
+from virf.cli.bench_latency import bench_latency
 from virf.errors import VirfError
 from virf.processes import Terminated
 
@@ -135,160 +138,7 @@ def bench_safeagentbench(
         err.print(f"wrote {markdown}")
 
 
-@bench_app.command("latency")
-def bench_latency(
-    files: Annotated[
-        list[Path],
-        typer.Argument(help="SafeAgentBench JSONL files whose reference plans are timed."),
-    ],
-    as_json: Annotated[
-        bool, typer.Option("--json", help="Print one JSON object with every figure.")
-    ] = False,
-    repeats: Annotated[
-        int, typer.Option(min=1, help="Fast-engine runs per plan (the median counts).")
-    ] = 3,
-    reference_sample: Annotated[
-        int,
-        typer.Option(min=0, help="Time the reference engine on this many plans (0 = all)."),
-    ] = 0,
-    paper_sample: Annotated[
-        int,
-        typer.Option(
-            min=0,
-            help="Time the paper's method on this many plans (0 = all; seconds to minutes "
-            "per step).",
-        ),
-    ] = 20,
-    paper_max_objects: Annotated[
-        int, typer.Option(min=0, help="Largest synthetic scene the paper's method is timed on.")
-    ] = 200,
-    paper_call_limit: Annotated[
-        float,
-        typer.Option(
-            "--paper-call-limit",
-            min=1.0,
-            help="Seconds one reasoner call of the paper's method may take; a call still "
-            "running is stopped and its plan's time reported as a lower bound.",
-        ),
-    ] = 60.0,  # virf.bench.paper.PAPER_CALL_LIMIT_S, unimported: commands load their modules late
-    no_paper: Annotated[
-        bool, typer.Option("--no-paper", help="Skip the paper's method (needs .venv-paper).")
-    ] = False,
-    sizes: Annotated[
-        str, typer.Option(help="Synthetic scene sizes (objects), comma-separated.")
-    ] = "20,50,200,1000",
-    lengths: Annotated[
-        str, typer.Option(help="Synthetic plan lengths (multiples of 10 steps), comma-separated.")
-    ] = "10,20,40,80",
-    tbox_factors: Annotated[
-        str,
-        typer.Option(help="TBox sizes to time, as multiples of the kitchen TBox, comma-separated."),
-    ] = "1,4",
-    markdown: Annotated[
-        Path | None, typer.Option(help="Also write the figures as Markdown (docs/performance.md).")
-    ] = None,
-    cold_example: Annotated[
-        Path,
-        typer.Option(
-            help="Example folder (scene.json + plan.txt) whose cold start to first verdict "
-            "is timed as fresh 'virf verify' processes."
-        ),
-    ] = Path("examples/walkthrough"),
-    cold_runs: Annotated[
-        int, typer.Option(min=0, help="Fresh processes per engine for the cold start (0 = skip).")
-    ] = 5,
-    cold_engines: Annotated[
-        str,
-        typer.Option(
-            help="Engines whose cold start is timed, comma-separated (the reference "
-            "engine's takes about 10 s a process)."
-        ),
-    ] = "fast,reference",
-) -> None:
-    """Time the paper's method, the reference engine and the fast engine on the same plans."""
-    from rich.console import Console
-
-    from virf.bench.latency import run_latency
-    from virf.bench.latency_report import print_latency, render_markdown
-    from virf.world.plan import MAX_PLAN_STEPS
-    from virf.world.scene import MAX_INSTANCES
-
-    for f in files:
-        if not f.is_file():
-            raise VirfError(f"no such file: {f}")
-    size_list = _whole_numbers("--sizes", sizes, "20,50,200")
-    if not size_list or min(size_list) < 10 or max(size_list) > MAX_INSTANCES:
-        raise VirfError(
-            f"--sizes '{sizes}': every size must be at least 10 objects and at most "
-            f"{MAX_INSTANCES} (the scene limit)"
-        )
-    factors = _whole_numbers("--tbox-factors", tbox_factors, "1,4")
-    if not factors or min(factors) < 1 or max(factors) > 16:
-        raise VirfError(f"--tbox-factors '{tbox_factors}': each factor must be 1 to 16")
-    length_list = _whole_numbers("--lengths", lengths, "10,20,40")
-    if not length_list or any(n < 10 or n % 10 or n > MAX_PLAN_STEPS for n in length_list):
-        raise VirfError(
-            f"--lengths '{lengths}': each length must be a multiple of 10 steps, "
-            f"at most {MAX_PLAN_STEPS} (the plan limit)"
-        )
-    cold_list = [e.strip() for e in cold_engines.split(",") if e.strip()]
-    for name in cold_list or [cold_engines]:
-        if name not in COLD_ENGINES:
-            raise VirfError(
-                f"--cold-engines: unknown engine '{name}'; choose from {', '.join(COLD_ENGINES)}"
-            )
-    cold: tuple[Path, Path] | None = None
-    if cold_runs:
-        cold = (cold_example / "scene.json", cold_example / "plan.txt")
-        missing = [p for p in cold if not p.is_file()]
-        if missing:
-            raise VirfError(
-                f"--cold-example {cold_example}: no {missing[0].name} there; "
-                "give an example folder or --cold-runs 0"
-            )
-    if markdown is not None:
-        check_writable(markdown, "--markdown")
-    err = Console(stderr=True)
-    with progress_bar(err) as progress:
-
-        def bar(label: str, total: int) -> Any:
-            task = progress.add_task(label, total=total)
-            return lambda: progress.advance(task)
-
-        figures = run_latency(
-            [str(f) for f in files],
-            repeats=repeats,
-            reference_sample=reference_sample,
-            paper_sample=paper_sample,
-            paper=not no_paper,
-            sizes=size_list,
-            paper_max_objects=paper_max_objects,
-            paper_call_limit_s=paper_call_limit,
-            tbox_factors=factors,
-            lengths=length_list,
-            cold=cold,
-            cold_runs=cold_runs,
-            cold_engines=cold_list,
-            progress=bar,
-        )
-    if as_json:
-        typer.echo(json.dumps(figures, sort_keys=True))
-    else:
-        print_latency(figures)
-    if markdown:
-        write_output(markdown, render_markdown(figures, " ".join(["virf", *sys.argv[1:]])))
-        typer.echo(f"wrote {markdown}", err=True)
-
-
-COLD_ENGINES = ("fast", "reference")
-
-
-def _whole_numbers(option: str, text: str, example: str) -> list[int]:
-    """A comma-separated option of whole numbers."""
-    try:
-        return [int(x) for x in text.split(",") if x.strip()]
-    except ValueError:
-        raise VirfError(f"{option} '{text}': give whole numbers, e.g. {example}") from None
+bench_app.command("latency")(bench_latency)
 
 
 def _print_bench(results: list[TaskResult], summary: Summary) -> None:
@@ -323,12 +173,10 @@ def bench_service(
     ] = None,
 ) -> None:
     """Throughput and p50/p99 latency of POST /v1/verify against a real virf serve."""
-    from functools import partial
-
     from rich.console import Console
 
     from virf.render.tables import to_markdown, to_rich
-    from virf.service.bench import Server, measure, request_bodies, table
+    from virf.service.bench import run_service_bench, table
 
     try:
         levels = sorted({int(c) for c in concurrency.split(",") if c.strip()})
@@ -338,33 +186,11 @@ def bench_service(
         raise VirfError(f"--concurrency {concurrency!r}: give levels from 1 to 256")
     if markdown is not None:
         check_writable(markdown, "--markdown")
-    bodies = request_bodies(files)
-    err = Console(stderr=True)
-    server = Server(server_workers)
-    try:
-        server.wait_ready()
-        measure(server.url, bodies[:8], 1, 1)  # warm every worker's tutor and caches
-        results = []
-        with progress_bar(err) as progress:
-            for level in levels:
-                bar = progress.add_task(f"concurrency {level}", total=len(bodies) * rounds)
-                results.append(
-                    measure(server.url, bodies, level, rounds, partial(progress.advance, bar))
-                )
-    finally:
-        server.close()
-    shown = table(results, server_workers, len(bodies))
+    with progress_bar(Console(stderr=True)) as progress:
+        run = run_service_bench(files, levels, server_workers, rounds, progress_ticks(progress))
+    shown = table(run)
     if as_json:
-        typer.echo(
-            json.dumps(
-                {
-                    "plans": len(bodies),
-                    "server_workers": server_workers,
-                    "levels": [r.public() for r in results],
-                },
-                indent=2,
-            )
-        )
+        typer.echo(json.dumps(run.public(), indent=2))
     else:
         Console(highlight=False, width=150).print(to_rich(shown))
     if markdown is not None:
@@ -473,8 +299,8 @@ def bench_agents(
     from virf.planner.questions import answers_file, deny
 
     err = Console(stderr=True)
-    closing: list[Any] = []
-    try:
+    # The models and the store are closed however the run ends.
+    with ExitStack() as closing:
         deadline_s = run_deadline(deadline)
         names = [n.strip() for m in method for n in m.split(",") if n.strip()]
         if not names:
@@ -517,11 +343,11 @@ def bench_agents(
         apprentice = make_apprentice(
             planner, base_url=base_url, api_key_env=api_key_env, **sampling
         )
-        closing.append(apprentice)
+        closing.enter_context(apprentice)
         judge = None
         if critic is not None:
             judge = make_apprentice(critic, base_url=base_url, api_key_env=api_key_env, **sampling)
-            closing.append(judge)
+            closing.enter_context(judge)
         config = AgentConfig.build(
             planner,
             critic=critic,
@@ -535,7 +361,7 @@ def bench_agents(
         if db is None:
             out.mkdir(parents=True, exist_ok=True)
         store = ResultStore(db_path, config)
-        closing.append(store)
+        closing.enter_context(store)
         apprentice.run_log = store
         if judge is not None:
             judge.run_log = store
@@ -581,9 +407,6 @@ def bench_agents(
             count = export(store, config.id, export_replay, keep=behind)
             err.print(f"wrote {count} proposals to {export_replay}")
         written = write_outputs(table, out, settings, " ".join(["virf", *sys.argv[1:]]))
-    finally:
-        for thing in reversed(closing):
-            thing.close()
     if stored:
         err.print(f"{stored} row(s) were already in {db_path} and were not run again")
     if as_json:
