@@ -46,13 +46,31 @@ from virf.bench.latency_cases import (
     synthetic_modules,
     synthetic_scene,
 )
+from virf.bench.latency_figures import (
+    ChainRow,
+    ColdStart,
+    DeadlineRow,
+    FastTimings,
+    HazardChainRow,
+    Identical,
+    LatencyFigures,
+    Machine,
+    Memory,
+    PaperComparison,
+    PaperRow,
+    PaperTimings,
+    ReferenceTimings,
+    RoomTimings,
+    ScalingRow,
+    TBoxRow,
+)
 from virf.bench.metrics import comparable, percentile
 from virf.bench.paper import OVER_LIMIT, PAPER_CALL_LIMIT_S
 from virf.errors import InputError
 from virf.ontology.jvm import java_version
 from virf.ontology.tbox import TBox, load_tbox
 from virf.reasoning import Engine, make_engine
-from virf.schema import Report
+from virf.schema import Fact, Report
 from virf.verify.verifier import Verifier
 from virf.world.scene import build_scene
 
@@ -68,19 +86,19 @@ DEADLINE_CHAINS = (("fast", 4000), ("reference", 3000))
 HAZARD_CHAINS = (10, 100)
 
 
-def deadline_row(tbox: TBox, engine: Engine, boxes: int, timeout_s: float) -> dict[str, Any]:
+def deadline_row(tbox: TBox, engine: Engine, boxes: int, timeout_s: float) -> DeadlineRow:
     """How long a verification that cannot finish in time takes to give up."""
     case = chain_case(boxes, tbox)
     verifier = LogicTutor.over(tbox, engine, timeout_s=timeout_s).verifier
     start = time.perf_counter()
     report = case.verify(verifier)
-    return {
-        "engine": engine.name,
-        "objects": boxes,
-        "timeout_s": timeout_s,
-        "status": report.status,
-        "elapsed_ms": round((time.perf_counter() - start) * 1000, 1),
-    }
+    return DeadlineRow(
+        engine=engine.name,
+        objects=boxes,
+        timeout_s=timeout_s,
+        status=report.status,
+        elapsed_ms=round((time.perf_counter() - start) * 1000, 1),
+    )
 
 
 def time_plans(
@@ -107,8 +125,9 @@ def time_plans(
     return times, reports
 
 
-def summary(values: Sequence[float]) -> dict[str, float]:
-    """Median, 95th percentile and mean; each NaN (not measured) without values."""
+def timings(values: Sequence[float]) -> dict[str, float]:
+    """Median, 95th percentile and mean, as the fields of a :class:`Timings`;
+    each NaN (not measured) without values."""
     if not values:
         return {"p50_ms": NOT_MEASURED, "p95_ms": NOT_MEASURED, "mean_ms": NOT_MEASURED}
     return {
@@ -118,11 +137,16 @@ def summary(values: Sequence[float]) -> dict[str, float]:
     }
 
 
-def _paper_plans(verifier: Verifier, cases: Sequence[Case]) -> list[tuple[str, list[list[Any]]]]:
+def _paper_plans(verifier: Verifier, cases: Sequence[Case]) -> list[tuple[str, list[list[Fact]]]]:
     return [(c.name, [sorted(s) for s in verifier.snapshots(c.scene, c.plan)]) for c in cases]
 
 
-def _paper_plan_ms(plan: dict[str, Any]) -> tuple[float, bool] | None:
+# The paper baseline's result is JSON its own process wrote
+# (:func:`virf.bench.paper.run_paper_baseline`): read as such, not typed here.
+TimedPlan = dict[str, Any]
+
+
+def _paper_plan_ms(plan: TimedPlan) -> tuple[float, bool] | None:
     """Sequential time of the paper's loop, steps up to its first finding,
     and whether that time is exact: it is a lower bound when a call was
     stopped at the limit first (that call counts as the limit)."""
@@ -130,7 +154,7 @@ def _paper_plan_ms(plan: dict[str, Any]) -> tuple[float, bool] | None:
     for ms, found, consistent in zip(
         plan["step_ms"], plan["findings"], plan["consistent"], strict=False
     ):
-        if isinstance(found, dict) and found.get("error") == OVER_LIMIT:
+        if _over_limit(found):
             return total + ms, False
         if ms is None or (consistent is None and isinstance(found, dict)):
             return None  # a call failed: the plan has no time
@@ -140,25 +164,25 @@ def _paper_plan_ms(plan: dict[str, Any]) -> tuple[float, bool] | None:
     return total, True
 
 
-def _paper_row(plan: dict[str, Any], time: tuple[float, bool] | None) -> dict[str, Any]:
-    return {
-        "plan": plan["id"],
-        "ms": None if time is None else round(time[0], 1),
-        "lower_bound": time is not None and not time[1],
-        "calls": [
+def _paper_row(plan: TimedPlan, time: tuple[float, bool] | None) -> PaperRow:
+    return PaperRow(
+        plan=plan["id"],
+        ms=None if time is None else round(time[0], 1),
+        lower_bound=time is not None and not time[1],
+        calls=tuple(
             OVER_LIMIT if _over_limit(found) else ms
             for ms, found in zip(plan["step_ms"], plan["findings"], strict=False)
-        ],
-    }
+        ),
+    )
 
 
-def _over_limit(found: Any) -> bool:
+def _over_limit(found: object) -> bool:
     return isinstance(found, dict) and found.get("error") == OVER_LIMIT
 
 
 def paper_figures(
     result: dict[str, Any], fast_ms: dict[str, float], compared: Sequence[str]
-) -> dict[str, Any]:
+) -> PaperComparison:
     """The paper method's figures from :func:`virf.bench.paper.run_paper_baseline`'s
     result: ``compared`` names the dev-split plans (timed by the fast engine in
     ``fast_ms`` too), the others are scaling rows.  A figure computed from a
@@ -172,30 +196,39 @@ def paper_figures(
     step_ms = [ms for ms, _ in steps if isinstance(ms, (int, float))]
     calls_over = sum(1 for _, found in steps if _over_limit(found))
     limit = result.get("call_limit_s")
-    paper: dict[str, Any] = summary(paper_ms) | {
-        "plans": len(paper_ms),
-        "plans_lower_bound": bounded,
-        "lower_bound": bounded > 0,
-        "calls": len(steps),
-        "calls_over_limit": calls_over,
-        "call_limit_s": limit,
-        "per_call_p50_ms": round(percentile(step_ms, 50), 1) if step_ms else NOT_MEASURED,
-        "per_call_lower_bound": calls_over > 0,
-        "owlready2": result.get("owlready2"),
-        "peak_rss_mb": _paper_rss(result),
+    paper = PaperTimings(
+        **timings(paper_ms),
+        plans=len(paper_ms),
+        plans_lower_bound=bounded,
+        lower_bound=bounded > 0,
+        calls=len(steps),
+        calls_over_limit=calls_over,
+        call_limit_s=limit,
+        per_call_p50_ms=round(percentile(step_ms, 50), 1) if step_ms else NOT_MEASURED,
+        per_call_lower_bound=calls_over > 0,
+        owlready2=result.get("owlready2"),
+        peak_rss_mb=_paper_rss(result),
         # Every plan, each call's time or "> limit".
-        "rows": [_paper_row(plan, times[plan["id"]]) for plan in result["plans"]],
-    }
+        rows=tuple(_paper_row(plan, times[plan["id"]]) for plan in result["plans"]),
+    )
     fast_p50 = percentile(list(fast_ms.values()), 50)
-    return {
-        "paper": paper,
-        "paper_p50_ms": paper["p50_ms"],
-        "ratio": round(statistics.median(ratios), 1) if ratios else None,
-        "ratio_of_medians": round(paper["p50_ms"] / fast_p50, 1) if paper_ms else None,
-        # A median of lower bounds is a lower bound of the median.
-        "ratio_lower_bound": bounded > 0,
-        "paper_call_limit_s": limit,
-    }
+    return PaperComparison(
+        paper=paper,
+        ratio=round(statistics.median(ratios), 1) if ratios else None,
+        ratio_of_medians=round(paper.p50_ms / fast_p50, 1) if paper_ms else None,
+        ratio_lower_bound=bounded > 0,
+        paper_call_limit_s=limit,
+    )
+
+
+def _paper_rss(result: dict[str, Any]) -> float | None:
+    peak = result.get("peak_rss_kb")
+    if isinstance(peak, dict):
+        values = [v for v in peak.values() if isinstance(v, (int, float))]
+        return round(max(values) / 1024, 1) if values else None
+    if isinstance(peak, (int, float)):
+        return round(peak / 1024, 1)
+    return None
 
 
 def rss_mb() -> float:
@@ -220,19 +253,22 @@ def run_latency(
     cold_runs: int = 5,
     cold_engines: Sequence[str] = ("fast", "reference"),
     progress: Callable[[str, int], Callable[[], None]] | None = None,
-) -> dict[str, Any]:
-    """All figures of ``virf bench latency`` as one dict.  ``cold``: the scene
-    and plan whose cold start to first verdict is timed, as fresh processes."""
+) -> LatencyFigures:
+    """All figures of ``virf bench latency``.  ``cold``: the scene and plan
+    whose cold start to first verdict is timed, as fresh processes."""
 
     def bar(label: str, total: int) -> Callable[[], None]:
         return progress(label, total) if progress else (lambda: None)
 
+    # The sections measured, as LatencyFigures' fields; one left out was not.
+    out: dict[str, object] = {}
     # First, while this process holds no JVM and no caches that could slow
     # the machine down for the fresh processes.
-    cold_rows: list[dict[str, Any]] = []
     if cold is not None and cold_runs > 0:
         tick = bar("cold start", len(cold_engines) * (cold_runs + 1))
-        cold_rows = cold_start_rows(*cold, engines=cold_engines, runs=cold_runs, tick=tick)
+        rows = cold_start_rows(*cold, engines=cold_engines, runs=cold_runs, tick=tick)
+        if rows:
+            out["cold_start"] = ColdStart(example=str(cold[0].parent), rows=tuple(rows))
 
     tbox = load_tbox()
     fast = make_engine("fast", tbox)
@@ -244,18 +280,12 @@ def run_latency(
     if not cases:
         raise InputError("no task with a reference plan in the given files")
     synthetic = [synthetic_case(n, tbox) for n in sizes]
-    out: dict[str, Any] = {
-        "machine": {
-            "cpus": os.cpu_count(),
-            "python": platform.python_version(),
-            "platform": platform.platform(),
-            "java": java_version(),
-        },
-        "plans": len(cases),
-        "repeats": repeats,
-    }
-    if cold_rows:
-        out["cold_start"] = {"example": str(cold[0].parent) if cold else "", "rows": cold_rows}
+    machine = Machine(
+        cpus=os.cpu_count(),
+        python=platform.python_version(),
+        platform=platform.platform(),
+        java=java_version(),
+    )
     rss_start = rss_mb()
 
     # (c) fast engine: a warm-up pass, then the median of `repeats` runs per plan.
@@ -265,12 +295,12 @@ def run_latency(
     stats_before = [group.fast.engine.stats() for group in rooms]
     tick = bar("fast engine", len(cases))
     fast_ms, fast_reports = [], []
+    by_room = []
     for group in rooms:
         group_ms, group_reports = time_plans(group.fast, group.cases, repeats, tick)
         fast_ms += group_ms
         fast_reports += group_reports
-        out.setdefault("rooms", []).append({"room": group.room, "plans": len(group.cases)})
-        out["rooms"][-1] |= summary(group_ms)
+        by_room.append(RoomTimings(room=group.room, plans=len(group.cases), **timings(group_ms)))
     stats_after = [group.fast.engine.stats() for group in rooms]
     calls = sum(
         a.get("calls", 0) - b.get("calls", 0)
@@ -306,97 +336,76 @@ def run_latency(
         comparable(r) == comparable(fast_reports[index[c.name]])
         for c, r in zip(ref_cases, ref_reports, strict=True)
     )
-    out["fast"] = summary(fast_ms) | {
-        "reasoner_calls": calls,
-        "fallbacks": falls,
-        "python_heap_peak_mb": round(fast_heap, 1),
-    }
-    out["reference"] = summary(ref_ms) | {"plans": len(ref_cases)}
-    out["identical_reports"] = {"compared": len(ref_cases), "identical": identical}
     # b/c on the plans timed both ways, as a/c is.
     fast_of = {c.name: ms for c, ms in zip(cases, fast_ms, strict=True)}
     both = [r / fast_of[c.name] for c, r in zip(ref_cases, ref_ms, strict=True) if fast_of[c.name]]
-    out["reference_ratio"] = round(statistics.median(both), 1) if both else None
-    out["memory"] = {
-        "process_rss_after_tbox_mb": round(rss_start, 1),
-        "process_rss_peak_after_fast_mb": round(rss_fast, 1),
-        "process_rss_peak_after_reference_mb": round(rss_ref, 1),
-        "fast_python_heap_peak_mb": round(fast_heap, 1),
-    }
-    out["fast_p50_ms"] = out["fast"]["p50_ms"]
-    out["fast_p95_ms"] = out["fast"]["p95_ms"]
-    out["reference_p50_ms"] = out["reference"]["p50_ms"]
-    out["reference_p95_ms"] = out["reference"]["p95_ms"]
 
     # Scaling with scene size (the 10-step plan) and plan length (50 objects).
     # The reference engine is also timed with two workers (parallel steps).
     vr2 = LogicTutor.over(tbox, reference.fork(), workers=2).verifier
 
-    def scaling_row(case: Case) -> dict[str, Any]:
+    def scaling_row(case: Case, requested: int | None = None) -> ScalingRow:
         f_ms, f_rep = time_plans(vf, [case], repeats)
         r_ms, r_rep = time_plans(vr, [case], 1)
         p_ms, p_rep = time_plans(vr2, [case], 1)
-        return {
-            "objects": len(case.scene.objects),
-            "steps": len(case.plan),
-            "status": f_rep[0].status,
-            "fast_ms": round(f_ms[0], 2),
-            "reference_ms": round(r_ms[0], 1),
-            "reference_2_workers_ms": round(p_ms[0], 1),
-            "identical": comparable(f_rep[0]) == comparable(r_rep[0]) == comparable(p_rep[0]),
-        }
+        row = ScalingRow(
+            objects=len(case.scene.objects),
+            steps=len(case.plan),
+            status=f_rep[0].status,
+            fast_ms=round(f_ms[0], 2),
+            reference_ms=round(r_ms[0], 1),
+            reference_2_workers_ms=round(p_ms[0], 1),
+            identical=comparable(f_rep[0]) == comparable(r_rep[0]) == comparable(p_rep[0]),
+        )
+        # Only a scene-size row says the size asked for.
+        return row if requested is None else row.model_copy(update={"requested_objects": requested})
 
-    rows = []
+    by_size = []
     tick = bar("scene scaling", len(synthetic))
     for n, case in zip(sizes, synthetic, strict=True):
-        rows.append(scaling_row(case) | {"requested_objects": n})
+        by_size.append(scaling_row(case, n))
         tick()
-    out["scene_scaling"] = rows
     by_length = []
     tick = bar("plan-length scaling", len(lengths))
     for steps in lengths:
         by_length.append(scaling_row(synthetic_case(50, tbox, steps)))
         tick()
-    out["length_scaling"] = by_length
     by_depth = []
     tick = bar("containment chains", len(chains))
     for boxes in chains:
         c_ms, c_rep = time_plans(vf, [chain_case(boxes, tbox)], repeats)
         by_depth.append(
-            {
-                "objects": boxes,
-                "steps": len(CHAIN_PLAN),
-                "status": c_rep[0].status,
-                "fast_ms": round(c_ms[0], 2),
-            }
+            ChainRow(
+                objects=boxes,
+                steps=len(CHAIN_PLAN),
+                status=c_rep[0].status,
+                fast_ms=round(c_ms[0], 2),
+            )
         )
         tick()
-    out["chain_scaling"] = by_depth
     hazards = []
     tick = bar("hazard chains", len(HAZARD_CHAINS))
     for boxes in HAZARD_CHAINS:
         h_ms, h_rep = time_plans(vf, [hazard_chain_case(boxes, tbox)], repeats)
         found = h_rep[0].violations
         hazards.append(
-            {
-                "objects": boxes,
-                "status": h_rep[0].status,
-                "explained_facts": len(found[0].triggering_facts) if found else 0,
-                "fast_ms": round(h_ms[0], 2),
-            }
+            HazardChainRow(
+                objects=boxes,
+                status=h_rep[0].status,
+                explained_facts=len(found[0].triggering_facts) if found else 0,
+                fast_ms=round(h_ms[0], 2),
+            )
         )
         tick()
-    out["hazard_chains"] = hazards
     tick = bar("deadline", len(DEADLINE_CHAINS))
-    out["deadline"] = []
+    deadlines = []
     for which, boxes in DEADLINE_CHAINS:
-        out["deadline"].append(
+        deadlines.append(
             deadline_row(tbox, fast if which == "fast" else reference, boxes, deadline_s)
         )
         tick()
 
     # (a) the paper's method, on a sample of the same plans and the smaller scenes.
-    out["paper_call_limit_s"] = paper_call_limit_s
     if paper:
         from virf.bench.paper import run_paper_baseline
 
@@ -411,15 +420,19 @@ def run_latency(
             call_limit_s=paper_call_limit_s,
         )
         fast_by_name = {c.name: ms for c, ms in zip(cases, fast_ms, strict=True)}
-        out |= paper_figures(result, fast_by_name, [c.name for c in paper_cases])
-        by_plan = {row["plan"]: row for row in out["paper"]["rows"]}
-        for row in rows:
-            timed = by_plan.get(f"synthetic-{row['requested_objects']}")
-            row["paper_ms"] = timed["ms"] if timed else None
-            row["paper_lower_bound"] = bool(timed and timed["lower_bound"])
+        compared = paper_figures(result, fast_by_name, [c.name for c in paper_cases])
+        out |= {name: getattr(compared, name) for name in PaperComparison.model_fields}
+        by_plan = {row.plan: row for row in compared.paper.rows}
+        for i, row in enumerate(by_size):
+            timed = by_plan.get(f"synthetic-{row.size}")
+            by_size[i] = row.model_copy(
+                update={
+                    "paper_ms": timed.ms if timed else None,
+                    "paper_lower_bound": bool(timed and timed.lower_bound),
+                }
+            )
     else:
-        out["paper_p50_ms"] = None
-        out["ratio"] = None
+        out |= {"paper_call_limit_s": paper_call_limit_s, "ratio": None}
 
     # Scaling with TBox size: x1 and xN (N-1 synthetic copies of the kitchen layer).
     tb_rows = []
@@ -437,24 +450,42 @@ def run_latency(
             f_ms, f_rep = time_plans(vfb, [case], repeats)
             r_ms, r_rep = time_plans(vrb, [case], 1)
             tb_rows.append(
-                {
-                    "factor": factor,
-                    "logical_axioms": len(big.owl.logical_axioms()),
-                    "fast_ms": round(f_ms[0], 2),
-                    "reference_ms": round(r_ms[0], 1),
-                    "identical": comparable(f_rep[0]) == comparable(r_rep[0]),
-                }
+                TBoxRow(
+                    factor=factor,
+                    logical_axioms=len(big.owl.logical_axioms()),
+                    fast_ms=round(f_ms[0], 2),
+                    reference_ms=round(r_ms[0], 1),
+                    identical=comparable(f_rep[0]) == comparable(r_rep[0]),
+                )
             )
             tick()
-    out["tbox_scaling"] = tb_rows
-    return out
-
-
-def _paper_rss(result: dict[str, Any]) -> float | None:
-    peak = result.get("peak_rss_kb")
-    if isinstance(peak, dict):
-        values = [v for v in peak.values() if isinstance(v, (int, float))]
-        return round(max(values) / 1024, 1) if values else None
-    if isinstance(peak, (int, float)):
-        return round(peak / 1024, 1)
-    return None
+    return LatencyFigures.model_validate(
+        {
+            "machine": machine,
+            "plans": len(cases),
+            "repeats": repeats,
+            "rooms": tuple(by_room),
+            "fast": FastTimings(
+                **timings(fast_ms),
+                reasoner_calls=calls,
+                fallbacks=falls,
+                python_heap_peak_mb=round(fast_heap, 1),
+            ),
+            "reference": ReferenceTimings(**timings(ref_ms), plans=len(ref_cases)),
+            "identical_reports": Identical(compared=len(ref_cases), identical=identical),
+            "reference_ratio": round(statistics.median(both), 1) if both else None,
+            "memory": Memory(
+                process_rss_after_tbox_mb=round(rss_start, 1),
+                process_rss_peak_after_fast_mb=round(rss_fast, 1),
+                process_rss_peak_after_reference_mb=round(rss_ref, 1),
+                fast_python_heap_peak_mb=round(fast_heap, 1),
+            ),
+            "scene_scaling": tuple(by_size),
+            "length_scaling": tuple(by_length),
+            "chain_scaling": tuple(by_depth),
+            "hazard_chains": tuple(hazards),
+            "deadline": tuple(deadlines),
+            "tbox_scaling": tuple(tb_rows),
+            **out,
+        }
+    )

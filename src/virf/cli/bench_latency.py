@@ -144,7 +144,7 @@ def bench_latency(
             progress=progress_ticks(progress),
         )
     if as_json:
-        typer.echo(json.dumps(figures, sort_keys=True))
+        typer.echo(json.dumps(figures.public(), sort_keys=True))
     else:
         print_latency(figures)
     if markdown:
