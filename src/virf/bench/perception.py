@@ -55,7 +55,10 @@ MARKERS: Final = frozenset({"UnknownMaterial", "UnknownFillState"})
 
 
 @dataclass(frozen=True)
-class Case:
+class PerceptionCase:
+    """A case folder (see the module docstring); not a :class:`virf.bench.case.Case`,
+    which is a plan already in its scene."""
+
     name: str
     folder: Path
     description: str
@@ -186,7 +189,7 @@ class Totals:
         }
 
 
-def load_cases(folder: str | Path) -> list[Case]:
+def load_cases(folder: str | Path) -> list[PerceptionCase]:
     root = Path(folder)
     if not root.is_dir():
         raise InputError(f"cases folder not found: {root}")
@@ -218,7 +221,7 @@ def load_cases(folder: str | Path) -> list[Case]:
             return path if path.is_file() else None
 
         cases.append(
-            Case(
+            PerceptionCase(
                 name=sub.name,
                 folder=sub,
                 description=str(meta.get("description", "")),
@@ -288,7 +291,7 @@ def _count(found: set[Fact], gold: set[Fact]) -> Counts:
 
 
 def score_case(
-    case: Case,
+    case: PerceptionCase,
     mode: str,
     vlm: Apprentice,
     vocab: Vocabulary,
@@ -373,11 +376,11 @@ class PerceptionRun:
 
 
 def run_cases(
-    cases: Iterable[Case],
+    cases: Iterable[PerceptionCase],
     vocab: Vocabulary,
     verifier: Verifier,
     *,
-    vlm: Callable[[Case, str], Apprentice] | None = None,
+    vlm: Callable[[PerceptionCase, str], Apprentice] | None = None,
     modes: tuple[str, ...] = ("cascade", "hybrid"),
     progress: Callable[[str], None] | None = None,
 ) -> PerceptionRun:
