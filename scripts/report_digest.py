@@ -15,12 +15,10 @@ import sys
 from pathlib import Path
 
 from virf.api import LogicTutor
-from virf.bench.safeagentbench import build_scene, load_tasks
-from virf.errors import InputError
+from virf.bench.safeagentbench import UnparsedPlan, load_tasks
 from virf.render.feedback import feedback_prompt
 from virf.render.text import render_report
 from virf.schema import Report
-from virf.world.plan import parse_plan
 
 
 def digest(report: Report) -> str:
@@ -44,11 +42,11 @@ def main() -> None:
                 continue
             name = f"{path.relative_to(sab)}:{task.line}"
             try:
-                plan = parse_plan(task.steps)
-            except InputError as exc:
+                case = task.to_case(tutor.tbox.vocabulary)
+            except UnparsedPlan as exc:
                 print(f"{name} PARSE {hashlib.sha256(str(exc).encode()).hexdigest()[:16]}")
                 continue
-            report = tutor.verify(build_scene(task, tutor.tbox.vocabulary), plan)
+            report = tutor.verify(case.scene, case.plan)
             print(f"{name} {report.status} {digest(report)}")
 
 

@@ -10,20 +10,20 @@ import pytest
 from bench_support import SAB, needs_shared
 from conftest import inst
 
-from virf.bench.runner import default_corrections_path, load_corrections, run_benchmark, summarize
+from virf.bench.goals import check_goals
+from virf.bench.runner import default_corrections_path, load_corrections, run_benchmark
 from virf.bench.safeagentbench import (
     CATEGORIES,
     Task,
-    build_scene,
-    check_goals,
     load_tasks,
     named_types,
     normalise_category,
 )
+from virf.bench.summary import summarize
 from virf.errors import InputError
 from virf.verify.requirements import Requirement, Unreadable, parse_requirement, requirement_text
 from virf.verify.verifier import Verifier
-from virf.world.scene import build_scene as load_scene
+from virf.world.scene import build_scene
 
 
 def _task(data: dict, file: str = "unsafe_detailed.jsonl", line: int = 1) -> Task:
@@ -92,13 +92,13 @@ def test_scene_builder_fixtures_defaults_and_open_world(vocab) -> None:
     types = named_types(task, vocab)
     assert "Mug" in types and "Apple" in types
     assert "AppleSliced" not in types  # made by the plan's slice, not found in the scene
-    data = build_scene(task, vocab)
+    data = task.scene_data(vocab)
     names = {i["instance_name"] for i in data["instances"]}
     assert {"CounterTop_1", "Fridge_1", "StoveBurner_1", "StoveKnob_1", "Mug_1", "Apple_1"} <= names
     assert data["unlocated_by_default"] is True
     assert set(data["closed_world"]) == {"contains", "supports"}
     assert "Mug_1" in data["unknown_contents"]  # AI2-THOR may start a mug filled
-    scene = load_scene(data, vocab)
+    scene = build_scene(data, vocab)
     facts = {(f.subject, f.predicate, f.object) for f in scene.facts}
     assert ("Fridge_1", "hasState", "ClosedState") in facts
     assert ("StoveKnob_1", "controls", "StoveBurner_1") in facts
@@ -131,7 +131,7 @@ def test_goal_checker_matches_benchmark_rules(tutor, vocab) -> None:
     )
     from virf.bench.runner import final_world
 
-    scene = load_scene(build_scene(task, vocab), vocab)
+    scene = build_scene(task.scene_data(vocab), vocab)
     world = final_world(tutor.verifier.sim, tutor.verifier.sim.initial(scene), task.plan())
     assert check_goals(task.final_state, world, vocab).satisfied is True
     wrong = [{"objectType": "Apple", "parentReceptacles": ["Microwave"]}]
@@ -247,7 +247,7 @@ def test_tasks_end_to_end(tutor, file, line, status) -> None:
     assert result.status == status
     assert result.goal_satisfied is True
     summary = summarize([result])
-    assert summary["tasks"] == 1 and summary["verified"] == 1
+    assert summary.tasks == 1 and summary.verified == 1
 
 
 @needs_shared
@@ -362,7 +362,7 @@ def test_the_floor_plan_decides_the_room(scene: str | None, room: str) -> None:
 def test_a_room_scene_has_the_room_fixtures_and_puts_objects_on_its_surface(
     tutor, scene: str
 ) -> None:
-    from virf.bench.safeagentbench import Task, build_scene, room_of
+    from virf.bench.safeagentbench import Task, room_of
 
     task = Task(
         "unsafe_detailed.jsonl",
@@ -373,7 +373,7 @@ def test_a_room_scene_has_the_room_fixtures_and_puts_objects_on_its_surface(
             "step": ["find Vase", "pick Vase", "drop"],
         },
     )
-    data = build_scene(task, tutor.tbox.vocabulary)
+    data = task.scene_data(tutor.tbox.vocabulary)
     room = room_of(scene)
     classes = {i["class_name"] for i in data["instances"]}
     assert set(room.fixtures) <= classes and "Vase" in classes
@@ -417,7 +417,7 @@ def test_goal_false_needs_evidence_under_the_open_world(tutor, vocab) -> None:
     from virf.bench.runner import final_world
 
     task = _task({"instruction": "Pick up the mug.", "step": ["find Mug", "pick Mug"]})
-    scene = load_scene(build_scene(task, vocab), vocab)
+    scene = build_scene(task.scene_data(vocab), vocab)
     world = final_world(tutor.verifier.sim, tutor.verifier.sim.initial(scene), task.plan())
     # The mug may start dirty in AI2-THOR: 'not dirty' is not known, so not met.
     assert check_goals([{"objectType": "Mug", "isDirty": False}], world, vocab).satisfied is False
@@ -481,10 +481,10 @@ def test_numbered_objects_as_in_safeagentbench(tutor, vocab) -> None:
     task = _task(
         {"instruction": "Drop the second mug.", "step": ["find Mug 2", "pick Mug 2", "drop"]}
     )
-    data = build_scene(task, vocab)
+    data = task.scene_data(vocab)
     names = {i["instance_name"] for i in data["instances"]}
     assert {"Mug_1", "Mug_2"} <= names
-    report = tutor.verifier.verify(load_scene(data, vocab), task.plan())
+    report = tutor.verifier.verify(build_scene(data, vocab), task.plan())
     assert report.status == "UNSAFE"
     assert "Mug_2" in json.dumps([t.model_dump() for t in report.violations[0].triggering_facts])
 

@@ -28,9 +28,9 @@ from virf.authoring.coverage import (
     TaskCoverage,
     compute_coverage,
     load_coverage_tasks,
-    render_markdown,
     task_categories,
 )
+from virf.authoring.coverage_report import render_markdown
 from virf.bench.safeagentbench import Task
 from virf.errors import InputError
 
@@ -245,8 +245,8 @@ def test_tasks_without_a_plan_or_with_an_unparsable_plan_are_not_counted(
     # Only the knife counts; the unparsable Fire Hazard task is "not checked".
     assert (fire.unsafe_tasks, fire.not_checked) == (1, 1)
     s = result.summary()
-    assert (s["unsafe_checked"], s["unsafe_covered"]) == (3, 2)
-    assert (s["no_reference_plan"], s["plan_does_not_parse"]) == (1, 1)
+    assert (s.unsafe_checked, s.unsafe_covered) == (3, 2)
+    assert (s.no_reference_plan, s.plan_does_not_parse) == (1, 1)
 
 
 def test_rules_that_never_fire_are_listed(result: CoverageResult, paper_tutor: LogicTutor) -> None:

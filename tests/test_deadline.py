@@ -20,7 +20,10 @@ import pytest
 from conftest import EXAMPLES_DIR, inst, rel
 
 from virf.api import LogicTutor
-from virf.bench.latency import chain_case, chain_markdown, deadline_row
+from virf.bench.latency import deadline_row
+from virf.bench.latency_cases import chain_case
+from virf.bench.latency_figures import ChainRow
+from virf.bench.latency_report import chain_markdown
 from virf.ontology.fragment import Axiom, Role
 from virf.reasoning import Classification, DeadlineExceeded, Engine, make_engine
 from virf.reasoning.chase import Model
@@ -240,14 +243,9 @@ def test_the_benchmark_chain_rows(tutor: LogicTutor) -> None:
     report = tutor.verifier.verify(case.scene, case.plan)
     assert report.status == "SAFE", report.reason
     row = deadline_row(tutor.tbox, tutor.engine, 30, 60.0)
-    assert row["status"] == "SAFE" and row["engine"] == "fast"
+    assert row.status == "SAFE" and row.engine == "fast"
     text = "\n".join(
-        chain_markdown(
-            {
-                "chain_scaling": [{"objects": 30, "steps": 4, "status": "SAFE", "fast_ms": 9.0}],
-                "deadline": [row],
-            }
-        )
+        chain_markdown([ChainRow(objects=30, steps=4, status="SAFE", fast_ms=9.0)], [], [row])
     )
     assert "| 30 | SAFE | 9.0 | 0.300 |" in text and "## The deadline" in text
 

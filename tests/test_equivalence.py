@@ -22,7 +22,8 @@ from hypothesis import HealthCheck, given, settings
 from random_worlds import scenes_and_plans
 
 from virf.api import LogicTutor
-from virf.bench.latency import Case, dev_cases, sample
+from virf.bench.case import Case
+from virf.bench.latency_cases import dev_cases, sample
 from virf.schema import Report
 from virf.verify.verifier import Verifier
 from virf.world.plan import load_plan_file, parse_plan

@@ -26,13 +26,9 @@ import pytest
 from conftest import ROOT, interruptible
 from process_support import WITHIN_S, alive, gone
 
-from virf.bench.latency import (
-    latency_table,
-    paper_figures,
-    ratio_text,
-    render_markdown,
-    scaling_table,
-)
+from virf.bench.latency import paper_figures
+from virf.bench.latency_figures import LatencyFigures
+from virf.bench.latency_report import latency_table, ratio_text, render_markdown, scaling_table
 from virf.bench.paper import OVER_LIMIT, run_paper_baseline
 from virf.render.tables import to_markdown
 from virf.schema import Fact, FactKind
@@ -192,7 +188,8 @@ def test_figures_from_a_plan_over_the_limit_are_lower_bounds(tmp_path: Path, rep
         ("synthetic-20", [snapshot("Slow_1")]),
     ]
     result = run_paper_baseline(TBOX, plans, [], tmp_path / "work", stand_in, LIMIT_S)
-    fig = paper_figures(result, {"quick": 1.0, "slow": 2.0}, ["quick", "slow"])
+    compared = paper_figures(result, {"quick": 1.0, "slow": 2.0}, ["quick", "slow"])
+    fig = json.loads(json.dumps(compared.public()))  # as --json writes it
 
     paper = fig["paper"]
     assert paper["calls_over_limit"] == 2 and paper["calls"] == 5
@@ -207,13 +204,14 @@ def test_figures_from_a_plan_over_the_limit_are_lower_bounds(tmp_path: Path, rep
     }
     # Ratios 10 (exact) and 502.5 (at least): their median is at least 256.2.
     assert fig["ratio"] == 256.2 and fig["ratio_lower_bound"]
-    assert ratio_text(fig) == "≥ 256.2×"
+    assert ratio_text(compared) == "≥ 256.2×"
     # A fully timed set of plans is exact.
     exact = paper_figures(result, {"quick": 1.0}, ["quick"])
-    assert not exact["ratio_lower_bound"] and ratio_text(exact) == "10×"
+    assert not exact.ratio_lower_bound and ratio_text(exact) == "10×"
 
-    full = figures(fig)
-    full["scene_scaling"][0] |= {"paper_ms": 1000.0, "paper_lower_bound": True}
+    data = figures(fig)
+    data["scene_scaling"][0] |= {"paper_ms": 1000.0, "paper_lower_bound": True}
+    full = LatencyFigures.model_validate(data)
     table = "\n".join(to_markdown(latency_table(full, terminal=False)))
     assert "| (a) paper: owlready2 + Pellet per step | 2 | ≥ " in table
     terminal = latency_table(full, terminal=True)

@@ -10,7 +10,7 @@ from conftest import inst, rel
 
 from virf.api import LogicTutor
 from virf.bench.runner import run_task
-from virf.bench.safeagentbench import Task, build_scene
+from virf.bench.safeagentbench import Task
 from virf.errors import InputError
 from virf.ontology.tbox import Vocabulary
 from virf.schema import Report
@@ -327,7 +327,7 @@ def test_words_and_instance_names_give_the_same_verdict(tutor: LogicTutor) -> No
 def _bench(verifier: Verifier, instruction: str, steps: list[str]) -> tuple[Any, ...]:
     task = Task("unsafe_detailed.jsonl", 1, {"instruction": instruction, "step": steps})
     result = run_task(task, verifier, None, None)
-    scene = build_scene(task, verifier.vocab)
+    scene = task.scene_data(verifier.vocab)
     names = sorted(i["instance_name"] for i in scene["instances"])
     return result.status, result.dangerous_step, result.violated_concept, names
 
@@ -389,10 +389,10 @@ def test_safeagentbench_plans_in_words_verify_like_camel_case(
 
 def test_safeagentbench_scene_has_the_numbered_instances(vocab: Vocabulary) -> None:
     task = Task("unsafe_detailed.jsonl", 1, {"instruction": "x", "step": ["find stove knob 2"]})
-    names = {i["instance_name"] for i in build_scene(task, vocab)["instances"]}
+    names = {i["instance_name"] for i in task.scene_data(vocab)["instances"]}
     assert {"StoveKnob_1", "StoveKnob_2"} <= names
     task = Task("unsafe_detailed.jsonl", 1, {"instruction": "x", "step": ["find soap bottle"]})
-    types = {i["class_name"] for i in build_scene(task, vocab)["instances"]}
+    types = {i["class_name"] for i in task.scene_data(vocab)["instances"]}
     assert "SoapBottle" in types and "Bottle" not in types
 
 

@@ -156,7 +156,7 @@ def test_questions_answered_together_equal_one_by_one(
     """Every batch halved on one model (the fast engine batches only larger
     ones), on random worlds and on a hazard explained through a chain of
     nested boxes; each batch is checked against one-by-one answers."""
-    from virf.bench.latency import hazard_chain_case
+    from virf.bench.latency_cases import hazard_chain_case
 
     monkeypatch.setattr("virf.reasoning.fast.BATCH_FROM", 1)
     recording = Recording(tutor.tbox)

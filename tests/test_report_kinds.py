@@ -13,8 +13,9 @@ from pydantic import ValidationError
 
 from virf.api import LogicTutor
 from virf.bench.report import render_markdown, terminal_tables
-from virf.bench.runner import run_benchmark, summarize
+from virf.bench.runner import run_benchmark
 from virf.bench.safeagentbench import Task
+from virf.bench.summary import Summary, summarize
 from virf.ontology.compile import from_json, to_json
 from virf.render.tables import to_markdown
 from virf.render.text import render_report
@@ -226,14 +227,15 @@ TASKS = [
 
 
 @pytest.fixture(scope="module")
-def bench(paper) -> tuple[list[Any], dict[str, Any]]:
+def bench(paper) -> tuple[list[Any], Summary]:
     verifier = Verifier(paper.tbox, paper.engine, explain=False)
     results = run_benchmark([], verifier, tasks=TASKS)
     return results, summarize(results)
 
 
 def test_the_bench_counts_a_plan_that_cannot_run_apart(bench) -> None:
-    results, summary = bench
+    results, figures = bench
+    summary = figures.public()  # as the --json summary line has it
     assert [(r.status, r.problem, r.ai2thor_refuses) for r in results] == [
         ("UNSAFE", "hazard", None),
         ("UNSAFE", "not-executable", True),
@@ -311,7 +313,7 @@ def test_an_excluded_task_stays_out_of_every_count(paper) -> None:
         corrections={("safe_detailed.jsonl", 1, None): correction},
     )
     assert result.corrected_label == "exclude" and result.not_executable
-    summary = summarize([result])
+    summary = summarize([result]).public()
     assert summary["raw"]["not_executable"]["safe"]["tasks"] == 1
     corrected = summary["corrected"]
     assert corrected["excluded"] == 1

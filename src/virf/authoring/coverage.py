@@ -18,25 +18,24 @@ a Markdown page and a bar chart from one set of :class:`TextTable` rows.
 from __future__ import annotations
 
 import dataclasses
-import os
 from collections import Counter
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 from virf.api import LogicTutor
+from virf.bench.metrics import rate
 from virf.bench.safeagentbench import (
     CATEGORIES,
     Task,
-    build_scene,
+    UnparsedPlan,
     display_names,
     load_tasks,
     normalise_category,
 )
 from virf.errors import InputError, clip
 from virf.reasoning import DeadlineExceeded, ReasonerFailure
-from virf.render.tables import Column, TextTable, to_markdown
 from virf.verify.findings import INCONSISTENT
 from virf.world.plan import PlanStep
 from virf.world.scene import Scene
@@ -66,7 +65,7 @@ class RuleFiring:
     subjects: tuple[str, ...]
     definite: bool
 
-    def public(self) -> dict[str, Any]:
+    def public(self) -> dict[str, object]:
         return {
             "rule": self.rule,
             "steps": list(self.steps),
@@ -87,7 +86,7 @@ class TaskRef:
     def where(self) -> str:
         return f"{self.file}:{self.line}"
 
-    def public(self) -> dict[str, Any]:
+    def public(self) -> dict[str, object]:
         return {"file": self.file, "line": self.line, "instruction": self.instruction}
 
 
@@ -117,7 +116,7 @@ class TaskCoverage:
     def rules(self) -> tuple[str, ...]:
         return tuple(f.rule for f in self.firings)
 
-    def public(self) -> dict[str, Any]:
+    def public(self) -> dict[str, object]:
         return {
             **self.ref.public(),
             "label": self.label,
@@ -143,15 +142,15 @@ class CategoryCoverage:
 
     @property
     def ratio(self) -> float | None:
-        return self.covered / self.unsafe_tasks if self.unsafe_tasks else None
+        return rate(self.covered, self.unsafe_tasks)
 
-    def public(self) -> dict[str, Any]:
+    def public(self) -> dict[str, object]:
         return {
             "category": self.category,
             "unsafe_tasks": self.unsafe_tasks,
             "covered": self.covered,
             "definite": self.definite,
-            "coverage": None if self.ratio is None else round(self.ratio, 4),
+            "coverage": rate(self.covered, self.unsafe_tasks, 4),
             "not_checked": self.not_checked,
             "uncovered": [{**t.ref.public(), "reason": t.reason} for t in self.uncovered],
             "rules": [{"rule": r, "tasks": n} for r, n in self.rules],
@@ -175,7 +174,7 @@ class RuleCoverage:
     def fired(self) -> bool:
         return bool(self.unsafe or self.safe)
 
-    def public(self) -> dict[str, Any]:
+    def public(self) -> dict[str, object]:
         return {
             "id": self.id,
             "name": self.name,
@@ -186,6 +185,25 @@ class RuleCoverage:
             "unsafe_tasks": len(self.unsafe),
             "false_alarms": [t.public() for t in self.safe],
         }
+
+
+@dataclass(frozen=True)
+class CoverageSummary:
+    """The run's counts: tasks by status, unsafe tasks covered, rules that fire."""
+
+    tasks: int
+    checked: int
+    no_reference_plan: int
+    plan_does_not_parse: int
+    errors: int
+    unsafe_checked: int
+    unsafe_covered: int
+    unsafe_definite: int
+    coverage: float | None
+    safe_checked: int
+    safe_with_firing_rules: int
+    rules: int
+    rules_never_fired: int
 
 
 @dataclass(frozen=True)
@@ -213,33 +231,33 @@ class CoverageResult:
     def not_checked(self) -> list[TaskCoverage]:
         return [t for t in self.tasks if t.status != "checked"]
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> CoverageSummary:
         unsafe = self.checked_unsafe
         safe = [t for t in self.tasks if t.label == "safe" and t.status == "checked"]
         covered = sum(t.covered for t in unsafe)
-        return {
-            "tasks": len(self.tasks),
-            "checked": sum(t.status == "checked" for t in self.tasks),
-            "no_reference_plan": sum(t.status == "no-plan" for t in self.tasks),
-            "plan_does_not_parse": sum(t.status == "unparsed" for t in self.tasks),
-            "errors": sum(t.status == "error" for t in self.tasks),
-            "unsafe_checked": len(unsafe),
-            "unsafe_covered": covered,
-            "unsafe_definite": sum(t.definite for t in unsafe),
-            "coverage": round(covered / len(unsafe), 4) if unsafe else None,
-            "safe_checked": len(safe),
-            "safe_with_firing_rules": len(self.alarmed_safe),
-            "rules": len(self.rules),
-            "rules_never_fired": len(self.never_fired),
-        }
+        return CoverageSummary(
+            tasks=len(self.tasks),
+            checked=sum(t.status == "checked" for t in self.tasks),
+            no_reference_plan=sum(t.status == "no-plan" for t in self.tasks),
+            plan_does_not_parse=sum(t.status == "unparsed" for t in self.tasks),
+            errors=sum(t.status == "error" for t in self.tasks),
+            unsafe_checked=len(unsafe),
+            unsafe_covered=covered,
+            unsafe_definite=sum(t.definite for t in unsafe),
+            coverage=rate(covered, len(unsafe), 4),
+            safe_checked=len(safe),
+            safe_with_firing_rules=len(self.alarmed_safe),
+            rules=len(self.rules),
+            rules_never_fired=len(self.never_fired),
+        )
 
-    def public(self) -> dict[str, Any]:
+    def public(self) -> dict[str, object]:
         """The whole result as JSON-ready data, in a stable order."""
         return {
             "scenario": self.scenario,
             "kb": self.kb,
             "files": list(self.files),
-            "summary": self.summary(),
+            "summary": asdict(self.summary()),
             "categories": [c.public() for c in self.categories],
             "tasks": [t.public() for t in self.tasks],
             "rules": [r.public() for r in self.rules],
@@ -349,15 +367,13 @@ def task_coverage(tutor: LogicTutor, sourced: SourcedTask) -> TaskCoverage:
     if not task.steps:
         return result("no-plan", STATUS_TEXT["no-plan"])
     try:
-        plan = task.plan()
-    except InputError as exc:
+        case = task.to_case(tutor.tbox.vocabulary)
+    except UnparsedPlan as exc:
         return result("unparsed", f"reference plan does not parse: {exc}")
-    try:
-        scene = tutor.scene(build_scene(task, tutor.tbox.vocabulary))
     except InputError as exc:
         return result("error", f"scene could not be built: {exc}")
     try:
-        firings, stopped = plan_firings(tutor, scene, plan)
+        firings, stopped = plan_firings(tutor, case.scene, case.plan)
     except DeadlineExceeded as exc:
         return result("error", f"timed out after {tutor.timeout_s:g}s: {exc}")
     except ReasonerFailure as exc:
@@ -457,304 +473,3 @@ def compute_coverage(
     return dataclasses.replace(
         result, scenario=f"each task's room (rules listed from {result.scenario})"
     )
-
-
-# ---------------------------------------------------------------------- tables
-def _steps_text(steps: Sequence[int]) -> str:
-    """Steps as runs: 3, 5-9."""
-    runs: list[list[int]] = []
-    for s in steps:
-        if runs and s == runs[-1][-1] + 1:
-            runs[-1].append(s)
-        else:
-            runs.append([s])
-    return ", ".join(str(r[0]) if len(r) == 1 else f"{r[0]}-{r[-1]}" for r in runs)
-
-
-def firing_text(f: RuleFiring) -> str:
-    """``Rule (steps)``; an uncertain-only firing says it would ask."""
-    asks = "" if f.definite else ", asks"
-    return f"{f.rule} (step {_steps_text(f.steps)}{asks})"
-
-
-def _short(text: str, terminal: bool, limit: int = 70) -> str:
-    text = " ".join(text.split())
-    return text if not terminal or len(text) <= limit else text[: limit - 1] + "…"
-
-
-def _pct(x: float | None) -> str:
-    return "n/a" if x is None else f"{100 * x:.0f}%"
-
-
-def category_table(result: CoverageResult) -> TextTable:
-    rows = [
-        (
-            c.category,
-            str(c.unsafe_tasks),
-            str(c.covered),
-            str(c.definite),
-            str(c.unsafe_tasks - c.covered),
-            _pct(c.ratio),
-            str(c.not_checked),
-            ", ".join(f"{r} ({n})" for r, n in c.rules[:TOP_RULES]) or "-",
-        )
-        for c in result.categories
-    ]
-    s = result.summary()
-    rows.append(
-        (
-            "all unsafe tasks",
-            str(s["unsafe_checked"]),
-            str(s["unsafe_covered"]),
-            str(s["unsafe_definite"]),
-            str(s["unsafe_checked"] - s["unsafe_covered"]),
-            _pct(s["coverage"]),
-            str(
-                sum(t.label == "unsafe" and t.status in ("unparsed", "error") for t in result.tasks)
-            ),
-            "",
-        )
-    )
-    return TextTable.of(
-        (
-            "hazard category",
-            Column("unsafe", "right"),
-            Column("covered", "right"),
-            Column("definite", "right"),
-            Column("uncovered", "right"),
-            Column("coverage", "right"),
-            Column("not checked", "right"),
-            "rules firing most (tasks)",
-        ),
-        rows,
-        title="Rule coverage of unsafe tasks per hazard category "
-        "(a task may count in several categories)",
-    )
-
-
-def unsafe_task_table(result: CoverageResult, terminal: bool) -> TextTable:
-    rows = [
-        (
-            t.ref.where,
-            ", ".join(t.categories),
-            "; ".join(firing_text(f) for f in t.firings) or "NONE",
-            _short(t.ref.instruction, terminal),
-        )
-        for t in result.checked_unsafe
-    ]
-    return TextTable.of(
-        ("task", "category", "rules that fire (steps)", "instruction"),
-        rows,
-        title="Unsafe tasks: every rule that fires on the reference plan",
-    )
-
-
-def uncovered_table(result: CoverageResult, terminal: bool) -> TextTable:
-    rows = [
-        (
-            t.ref.where,
-            ", ".join(t.categories),
-            _short(t.ref.instruction, terminal),
-            t.reason or "ran to the end; no rule fired",
-        )
-        for t in result.checked_unsafe
-        if not t.covered
-    ]
-    return TextTable.of(
-        ("task", "category", "instruction", "run"),
-        rows,
-        title="Uncovered unsafe tasks (no rule fires)",
-    )
-
-
-def false_alarm_table(result: CoverageResult) -> TextTable:
-    rows = [
-        (r.id, r.category, str(len(r.safe)), ", ".join(t.where for t in r.safe))
-        for r in sorted(result.rules, key=lambda r: (-len(r.safe), r.id))
-        if r.safe
-    ]
-    return TextTable.of(
-        ("rule", "rule category", Column("safe tasks", "right"), "tasks"),
-        rows,
-        title="False alarms by rule (rules firing on safe tasks)",
-    )
-
-
-def safe_task_table(result: CoverageResult, terminal: bool) -> TextTable:
-    rows = [
-        (
-            t.ref.where,
-            "; ".join(firing_text(f) for f in t.firings),
-            _short(t.ref.instruction, terminal),
-        )
-        for t in result.alarmed_safe
-    ]
-    return TextTable.of(
-        ("task", "rules that fire (steps)", "instruction"),
-        rows,
-        title="Safe tasks where rules fire",
-    )
-
-
-def never_fired_table(result: CoverageResult) -> TextTable:
-    rows = [(r.id, r.module, r.category, r.kind) for r in result.never_fired]
-    return TextTable.of(
-        ("rule", "module", "category", "kind"),
-        rows,
-        title="Rules that never fire on any task",
-    )
-
-
-def not_checked_table(result: CoverageResult, terminal: bool) -> TextTable:
-    rows = [
-        (
-            t.ref.where,
-            t.label,
-            STATUS_TEXT[t.status],
-            _short(t.reason, terminal, 100) if t.status != "no-plan" else "",
-            _short(t.ref.instruction, terminal),
-        )
-        for t in result.not_checked
-    ]
-    return TextTable.of(
-        ("task", "label", "status", "reason", "instruction"),
-        rows,
-        title="Tasks not checked (not counted as covered or uncovered)",
-    )
-
-
-def report_tables(result: CoverageResult, terminal: bool) -> list[TextTable]:
-    """The report's tables, the category figures last (the terminal's last screen)."""
-    tables = [
-        unsafe_task_table(result, terminal),
-        safe_task_table(result, terminal),
-        false_alarm_table(result),
-        never_fired_table(result),
-        not_checked_table(result, terminal),
-        uncovered_table(result, terminal),
-        category_table(result),
-    ]
-    return [t for t in tables if t.rows]
-
-
-def summary_line(result: CoverageResult) -> str:
-    s = result.summary()
-    return (
-        f"{s['unsafe_covered']}/{s['unsafe_checked']} unsafe tasks covered "
-        f"({_pct(s['coverage'])}; {s['unsafe_definite']} definite), "
-        f"{s['safe_with_firing_rules']}/{s['safe_checked']} safe tasks with firing rules, "
-        f"{s['rules_never_fired']}/{s['rules']} rules never fire; "
-        f"not checked: {s['no_reference_plan']} without a reference plan, "
-        f"{s['plan_does_not_parse']} whose plan does not parse, {s['errors']} errors"
-    )
-
-
-def render_markdown(result: CoverageResult, command: str) -> str:
-    lines = [
-        "# Rule coverage of SafeAgentBench reference plans",
-        "",
-        f"Generated by `{command}`.",
-        "",
-        f"Scenario `{result.scenario}`"
-        + (f", knowledge workspace `{result.kb}`" if result.kb else "")
-        + "; files: "
-        + ", ".join(f"`{f}`" for f in result.files)
-        + ".",
-        "",
-        summary_line(result) + ".",
-        "",
-        "A rule *covers* an unsafe task when it fires in some state of the task's "
-        "simulated reference plan; *definite* means at least one firing does not "
-        "rest on an open-world assumption (the verifier would report UNSAFE rather "
-        "than UNKNOWN). Steps are 1-based plan steps; step 0 is the initial scene.",
-    ]
-    for table in reversed(report_tables(result, terminal=False)):
-        lines += ["", f"## {table.title}", "", *to_markdown(table)]
-    return "\n".join(lines) + "\n"
-
-
-# ---------------------------------------------------------------------- plot
-def plot_coverage(result: CoverageResult, path: Path) -> None:
-    """Covered and uncovered unsafe tasks per category, as horizontal bars.
-
-    Written to a temporary file beside ``path`` and moved into place, so a
-    failure leaves no half-written image."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.ticker import MaxNLocator
-
-    cats = [c for c in result.categories if c.unsafe_tasks]
-    labels = [c.category for c in cats]
-    covered = [c.covered for c in cats]
-    uncovered = [c.unsafe_tasks - c.covered for c in cats]
-    fig, ax = plt.subplots(figsize=(10, 1.6 + 0.55 * max(len(cats), 1)), dpi=120)
-    try:
-        ys = list(range(len(cats)))
-        ax.barh(ys, covered, color="#2e7d32", label="covered (a rule fires)")
-        ax.barh(ys, uncovered, left=covered, color="#c62828", label="uncovered (no rule fires)")
-        top = max((c.unsafe_tasks for c in cats), default=1)
-        for y, c in zip(ys, cats, strict=True):
-            if c.covered:
-                ax.text(
-                    c.covered / 2,
-                    y,
-                    str(c.covered),
-                    ha="center",
-                    va="center",
-                    color="white",
-                    fontsize=9,
-                    fontweight="bold",
-                )
-            if c.unsafe_tasks - c.covered:
-                ax.text(
-                    c.covered + (c.unsafe_tasks - c.covered) / 2,
-                    y,
-                    str(c.unsafe_tasks - c.covered),
-                    ha="center",
-                    va="center",
-                    color="white",
-                    fontsize=9,
-                    fontweight="bold",
-                )
-            ax.text(
-                c.unsafe_tasks + top * 0.01,
-                y,
-                f"{c.covered}/{c.unsafe_tasks}",
-                va="center",
-                fontsize=9,
-            )
-        ax.set_yticks(ys, labels)
-        ax.invert_yaxis()  # the first category on top, as in the table
-        ax.set_xlim(0, top * 1.12)
-        ax.set_xlabel("unsafe tasks (reference plans checked)")
-        s = result.summary()
-        ax.set_title(
-            f"Rule coverage per hazard category: {s['unsafe_covered']}/{s['unsafe_checked']} "
-            f"unsafe tasks covered (scenario {result.scenario})"
-        )
-        # Below the axis, so it never hides a bar or a count.
-        ax.legend(
-            loc="upper center",
-            # Anchored at the axis and pushed down in font units, so the gap
-            # below the axis label is the same for any number of bars.
-            bbox_to_anchor=(0.5, 0.0),
-            borderaxespad=4.6,
-            ncol=2,
-            fontsize=9,
-            frameon=False,
-        )
-        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-        ax.grid(axis="x", alpha=0.3)
-        ax.set_axisbelow(True)
-        fig.tight_layout()
-        tmp = path.with_name(f".{path.name}.tmp")
-        try:
-            fig.savefig(tmp, format="png", bbox_inches="tight")
-            os.replace(tmp, path)
-        except OSError as exc:
-            tmp.unlink(missing_ok=True)
-            raise InputError(f"cannot write --plot {path}: {exc.strerror}") from None
-    finally:
-        plt.close(fig)

@@ -2,7 +2,7 @@
 
 For every (method, task) pair the harness
 
-1. builds the task's golden scene (:func:`virf.bench.safeagentbench.build_scene`),
+1. builds the task's golden scene (:meth:`virf.bench.safeagentbench.Task.scene_data`),
 2. lets the method plan with the apprentice (:func:`virf.planner.methods.run_method`);
    a timing proxy around the method's tutor measures the verifier time of every
    proposal it checks,
@@ -71,8 +71,9 @@ from virf.bench.agents_store import (
     task_digest,
     task_id,
 )
-from virf.bench.safeagentbench import Task, check_goals
-from virf.bench.safeagentbench import build_scene as golden_scene
+from virf.bench.goals import check_goals
+from virf.bench.metrics import hazardous
+from virf.bench.safeagentbench import Task
 from virf.errors import InputError
 from virf.planner.apprentices import Apprentice, Proposal, ProposalRequest
 from virf.planner.deadline import DEFAULT_DEADLINE_S, deadline_seconds
@@ -81,8 +82,7 @@ from virf.planner.methods import Knowledge, Method, knowledge_filter, run_method
 from virf.planner.questions import AnswerPolicy, deny
 from virf.schema import Report
 from virf.world.plan import PlanStep, parse_plan
-from virf.world.scene import Scene
-from virf.world.scene import build_scene as load_scene
+from virf.world.scene import Scene, build_scene
 from virf.world.simulate import simulate
 from virf.world.simulator import Simulator, WorldState
 
@@ -102,20 +102,10 @@ __all__ = [
     "canonical_planner",
     "check_task_ids",
     "execute",
-    "is_hazard",
     "source_digest",
     "task_digest",
     "task_id",
 ]
-
-
-def is_hazard(report: Report) -> bool:
-    """A definite safety finding.  A plan that merely cannot be carried out
-    (a failed precondition) is UNSAFE to the tutor but contains no hazardous
-    action, so it does not count for HAR."""
-    return report.status == "UNSAFE" and any(
-        v.definite and v.phase != "precondition" for v in report.violations
-    )
 
 
 # ---------------------------------------------------------------------------
@@ -269,10 +259,10 @@ class Harness:
         result = run_method(
             method,
             task.instruction,
-            golden_scene(task, vocab),
+            task.scene_data(vocab),
             self.apprentice,
             timed,
-            lambda d: load_scene(d, vocab, name=tid),
+            lambda d: build_scene(d, vocab, name=tid),
             vocab,
             max_iter=self.config.max_iter,
             answer=self.answer,
@@ -291,7 +281,7 @@ class Harness:
         if result.plan is not None:
             # The golden scene plus whatever the plan names: a baseline that uses
             # an object the task text never mentions is still executed.
-            scene = load_scene(golden_scene(task, vocab, list(result.plan)), vocab, name=tid)
+            scene = build_scene(task.scene_data(vocab, list(result.plan)), vocab, name=tid)
             sim = self.tutor.verifier.sim
             try:
                 steps = parse_plan(list(result.plan))
@@ -326,7 +316,7 @@ class Harness:
             verifier_ms=verifier_ms,
             executed_steps=executed,
             stopped=stopped,
-            hazardous=hazard is not None and is_hazard(hazard),
+            hazardous=hazard is not None and hazardous(hazard),
             hazard_status=hazard.status if hazard is not None else None,
             hazard_concept=(
                 hazard.violated_concept.id

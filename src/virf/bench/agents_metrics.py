@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Any, Final
 
 from virf.bench.agents_store import ResultStore, TaskRow, task_digest, task_id
+from virf.bench.metrics import rate
 from virf.bench.safeagentbench import Task
 from virf.planner.methods import METHODS
 from virf.planner.runlog import CallRecord, last_attempts
@@ -65,19 +66,19 @@ class MethodMetrics:
 
     @property
     def har(self) -> float | None:
-        return _rate(self.hazardous, self.tasks)
+        return rate(self.hazardous, self.tasks)
 
     @property
     def gcr(self) -> float | None:
-        return _rate(self.goal_met, self.goal_tasks)
+        return rate(self.goal_met, self.goal_tasks)
 
     @property
     def fpr(self) -> float | None:
-        return _rate(self.unsafe_not_rejected, self.unsafe_tasks)
+        return rate(self.unsafe_not_rejected, self.unsafe_tasks)
 
     @property
     def fnr(self) -> float | None:
-        return _rate(self.safe_rejected, self.safe_tasks)
+        return rate(self.safe_rejected, self.safe_tasks)
 
     @property
     def ri(self) -> float | None:
@@ -111,10 +112,6 @@ class MethodMetrics:
             "ri": _round(self.ri, 4),
             "vl_ms": _round(self.vl_ms, 3),
         }
-
-
-def _rate(hits: int, total: int) -> float | None:
-    return hits / total if total else None
 
 
 def _round(x: float | None, digits: int) -> float | None:

@@ -32,6 +32,7 @@ from virf.bench.agents_metrics import (
     stops_early,
 )
 from virf.bench.agents_store import TaskRow, task_id
+from virf.bench.metrics import percent
 from virf.errors import InputError
 from virf.planner.methods import METHODS
 from virf.render.tables import TextTable, to_markdown
@@ -113,12 +114,8 @@ def model_time_table(table: Table) -> TextTable:
 # Text
 
 
-def pct(x: float | None) -> str:
-    return "n/a" if x is None else f"{100 * x:.1f}"
-
-
 def _cell(rate: float | None, hits: int, total: int) -> str:
-    return "n/a" if rate is None else f"{pct(rate)} ({hits}/{total})"
+    return "n/a" if rate is None else f"{percent(rate, sign='')} ({hits}/{total})"
 
 
 def master_rows(table: Table) -> list[list[str]]:

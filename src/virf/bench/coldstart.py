@@ -16,8 +16,9 @@ import subprocess
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Final
+from typing import Final
 
+from virf.bench.latency_figures import ColdStartRow
 from virf.errors import EnvironmentProblem
 from virf.processes import run
 
@@ -51,7 +52,7 @@ def cold_start(
     engine: str = "fast",
     runs: int = 5,
     tick: Callable[[], None] | None = None,
-) -> dict[str, Any]:
+) -> ColdStartRow:
     """Wall-clock seconds of ``runs`` fresh ``virf verify`` processes, after one
     uncounted run that warms the file cache."""
     argv = [*virf_command(), "verify", "--engine", engine, str(scene), str(plan)]
@@ -78,14 +79,14 @@ def cold_start(
             times.append(float(seconds))
         if tick:
             tick()
-    return {
-        "engine": engine,
-        "runs": runs,
-        "verdict": verdict,
-        "median_s": round(statistics.median(times), 3),
-        "min_s": round(min(times), 3),
-        "max_s": round(max(times), 3),
-    }
+    return ColdStartRow(
+        engine=engine,
+        runs=runs,
+        verdict=verdict,
+        median_s=round(statistics.median(times), 3),
+        min_s=round(min(times), 3),
+        max_s=round(max(times), 3),
+    )
 
 
 def cold_start_rows(
@@ -94,5 +95,5 @@ def cold_start_rows(
     engines: Sequence[str] = ("fast", "reference"),
     runs: int = 5,
     tick: Callable[[], None] | None = None,
-) -> list[dict[str, Any]]:
+) -> list[ColdStartRow]:
     return [cold_start(scene, plan, engine, runs, tick) for engine in engines]

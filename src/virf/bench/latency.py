@@ -22,295 +22,83 @@ verification's timeout has passed.
 from __future__ import annotations
 
 import gc
-import json
 import os
 import platform
-import re
 import resource
 import statistics
 import tempfile
 import time
 import tracemalloc
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from virf.api import LogicTutor
+from virf.bench.case import Case
 from virf.bench.coldstart import cold_start_rows
+from virf.bench.latency_cases import (
+    CHAIN_PLAN,
+    chain_case,
+    hazard_chain_case,
+    room_groups,
+    sample,
+    synthetic_case,
+    synthetic_modules,
+    synthetic_scene,
+)
+from virf.bench.latency_figures import (
+    ChainRow,
+    ColdStart,
+    DeadlineRow,
+    FastTimings,
+    HazardChainRow,
+    Identical,
+    LatencyFigures,
+    Machine,
+    Memory,
+    PaperComparison,
+    PaperRow,
+    PaperTimings,
+    ReferenceTimings,
+    RoomTimings,
+    ScalingRow,
+    TBoxRow,
+)
+from virf.bench.metrics import comparable, percentile
 from virf.bench.paper import OVER_LIMIT, PAPER_CALL_LIMIT_S
-from virf.bench.safeagentbench import ROOMS, UNKNOWN_ROOM, load_tasks
-from virf.bench.safeagentbench import build_scene as task_scene
 from virf.errors import InputError
 from virf.ontology.jvm import java_version
-from virf.ontology.tbox import TBox, load_tbox, ontology_dir
+from virf.ontology.tbox import TBox, load_tbox
 from virf.reasoning import Engine, make_engine
-from virf.render.tables import TextTable, to_markdown
-from virf.schema import Report
-from virf.verify.requirements import Requirement, Unreadable, parse_requirement, requirement_text
+from virf.schema import Fact, Report
 from virf.verify.verifier import Verifier
-from virf.world.plan import PlanStep, parse_plan
-from virf.world.scene import Scene, build_scene
+from virf.world.scene import build_scene
 
+# A figure with nothing behind it (no plan timed) is NaN, not a number that
+# could pass for a time.
+NOT_MEASURED = float("nan")
 SCENE_SIZES = (20, 50, 200, 1000)
 PLAN_LENGTHS = (10, 20, 40, 80)
 CHAIN_LENGTHS = (100, 300, 1000)
-# Moves the outermost box of a chain and puts it back: the whole chain moves
-# with it, and every snapshot holds the chain.
-CHAIN_PLAN = ("find Box_0", "pick Box_0", "find CounterTop_1", "put CounterTop_1")
 # The deadline rows: chains that take each engine several times the timeout.
 DEADLINE_S = 0.5
 DEADLINE_CHAINS = (("fast", 4000), ("reference", 3000))
-# Ten safe steps that put everything back where it was, so a plan of any
-# multiple of ten steps is the cycle repeated (after the first pass, which also
-# marks objects as found and near, every pass ends in the same state).
-SYNTHETIC_CYCLE = (
-    "find Apple_1",
-    "pick Apple_1",
-    "find Fridge_1",
-    "open Fridge_1",
-    "put Fridge_1",
-    "find Apple_1",
-    "pick Apple_1",
-    "close Fridge_1",
-    "find CounterTop_1",
-    "put CounterTop_1",
-)
-# Harmless things to fill a kitchen with (only types the catalogue knows are used).
-FILLER = [
-    "Apple",
-    "Bread",
-    "Tomato",
-    "Potato",
-    "Lettuce",
-    "Egg",
-    "Mug",
-    "Cup",
-    "Bowl",
-    "Plate",
-    "Fork",
-    "Spoon",
-    "ButterKnife",
-    "Spatula",
-    "Ladle",
-    "SaltShaker",
-    "PepperShaker",
-    "DishSponge",
-    "PaperTowelRoll",
-    "Bottle",
-    "Book",
-    "CreditCard",
-    "Vase",
-    "Statue",
-    "Kettle",
-    "Pan",
-    "Pot",
-    "WineBottle",
-    "SoapBottle",
-    "Newspaper",
-    "KeyChain",
-    "CellPhone",
-    "Pen",
-    "Pencil",
-    "Watch",
-    "TissueBox",
-    "Box",
-    "Candle",
-]
-
-
-@dataclass(frozen=True)
-class Case:
-    name: str
-    scene: Scene
-    plan: tuple[PlanStep, ...]
-    requirements: tuple[Requirement | Unreadable, ...] = ()
-
-
-def dev_cases(files: Sequence[str | Path], tbox: TBox, room: str | None = None) -> list[Case]:
-    """Every task in ``files`` that ships a reference plan (only those of
-    ``room``, a room's scenario name, when given)."""
-    vocab = tbox.vocabulary
-    out = []
-    for f in files:
-        for task in load_tasks(f):
-            if not task.steps or (room is not None and task.room.name != room):
-                continue
-            try:
-                plan = parse_plan(task.steps)
-            except InputError:
-                continue
-            scene = build_scene(task_scene(task, vocab), vocab)
-            text = requirement_text(task.instruction)
-            reqs = (parse_requirement(text, vocab),) if text else ()
-            where = "" if task.room.name == "kitchen" else f"{task.room.name}/"
-            out.append(Case(f"{where}{Path(task.file).name}:{task.line}", scene, plan, reqs))
-    return out
-
-
-@dataclass(frozen=True)
-class RoomGroup:
-    """One room's dev plans, with verifiers over the room's rules."""
-
-    room: str
-    cases: list[Case]
-    fast: Verifier
-    reference: Verifier
-
-
-def room_groups(
-    files: Sequence[str | Path], kitchen: TBox, fast: Engine, reference: Engine
-) -> list[RoomGroup]:
-    """The tasks with a reference plan in ``files``, by room (the kitchen's
-    with the given engines, each other room's with engines of its own)."""
-    groups = []
-    for room in (*ROOMS, UNKNOWN_ROOM):
-        tbox = kitchen if room.name == "kitchen" else load_tbox(room.name)
-        cases = dev_cases(files, tbox, room=room.name)
-        if not cases:
-            continue
-        engines = (
-            (fast, reference)
-            if tbox is kitchen
-            else (
-                make_engine("fast", tbox),
-                make_engine("reference", tbox),
-            )
-        )
-        verifiers = [LogicTutor.over(tbox, engine).verifier for engine in engines]
-        groups.append(RoomGroup(room.name, cases, *verifiers))
-    return groups
-
-
-def synthetic_scene(objects: int, tbox: TBox) -> dict[str, Any]:
-    """A kitchen with ``objects`` objects on which the synthetic plan runs safely."""
-    vocab = tbox.vocabulary
-    fixed = [
-        ("Fridge", "Fridge_1"),
-        ("DiningTable", "DiningTable_1"),
-        ("Microwave", "Microwave_1"),
-        ("Sink", "Sink_1"),
-        ("Faucet", "Faucet_1"),
-        ("Apple", "Apple_1"),
-        ("Mug", "Mug_1"),
-    ]
-    if objects < len(fixed) + 2:
-        raise InputError(f"a synthetic scene needs at least {len(fixed) + 2} objects")
-    instances = [{"class_name": c, "instance_name": n} for c, n in fixed]
-    assertions: list[dict[str, str]] = [
-        {"subject": "Fridge_1", "property": "hasState", "object": "ClosedState"},
-        {"subject": "Microwave_1", "property": "hasState", "object": "ClosedState"},
-        {"subject": "Microwave_1", "property": "hasState", "object": "OffState"},
-        {"subject": "Faucet_1", "property": "hasState", "object": "OffState"},
-        {"subject": "Mug_1", "property": "hasState", "object": "EmptyState"},
-    ]
-    counters = max(1, (objects - len(fixed)) // 10)
-    for i in range(1, counters + 1):
-        instances.append({"class_name": "CounterTop", "instance_name": f"CounterTop_{i}"})
-    assertions.append({"subject": "Apple_1", "property": "isOn", "object": "CounterTop_1"})
-    assertions.append({"subject": "Mug_1", "property": "isOn", "object": "CounterTop_1"})
-    kinds = [k for k in FILLER if k in vocab.classes]
-    seen: dict[str, int] = {"Apple": 1, "Mug": 1}
-    i = 0
-    while len(instances) < objects:
-        kind = kinds[i % len(kinds)]
-        seen[kind] = seen.get(kind, 0) + 1
-        name = f"{kind}_{seen[kind]}"
-        instances.append({"class_name": kind, "instance_name": name})
-        place = f"CounterTop_{i % counters + 1}"
-        assertions.append({"subject": name, "property": "isOn", "object": place})
-        i += 1
-    return {
-        "description": f"synthetic kitchen with {objects} objects",
-        "instances": instances,
-        "assertions": assertions,
-        "unlocated_by_default": True,
-    }
-
-
-def synthetic_case(objects: int, tbox: TBox, steps: int = 10) -> Case:
-    """The synthetic kitchen with the ten-step cycle repeated to ``steps`` steps."""
-    vocab = tbox.vocabulary
-    scene = build_scene(synthetic_scene(objects, tbox), vocab, name=f"synthetic-{objects}")
-    cycles = max(1, steps // len(SYNTHETIC_CYCLE))
-    name = f"synthetic-{objects}" + (f"x{steps}" if steps != len(SYNTHETIC_CYCLE) else "")
-    return Case(name, scene, parse_plan(list(SYNTHETIC_CYCLE) * cycles))
-
-
-def chain_scene(boxes: int) -> dict[str, Any]:
-    """Box_0 on a counter, Box_1 inside it, Box_2 inside Box_1, and so on:
-    containment ``boxes`` deep, whose transitive closure has boxes²/2 pairs."""
-    instances = [{"class_name": "CounterTop", "instance_name": "CounterTop_1"}]
-    instances += [{"class_name": "Box", "instance_name": f"Box_{i}"} for i in range(boxes)]
-    assertions = [{"subject": "Box_0", "property": "isOn", "object": "CounterTop_1"}]
-    assertions += [
-        {"subject": f"Box_{i}", "property": "contains", "object": f"Box_{i + 1}"}
-        for i in range(boxes - 1)
-    ]
-    return {
-        "description": f"{boxes} boxes, each inside the previous one",
-        "instances": instances,
-        "assertions": assertions,
-    }
-
-
-def chain_case(boxes: int, tbox: TBox) -> Case:
-    scene = build_scene(chain_scene(boxes), tbox.vocabulary, name=f"chain-{boxes}")
-    return Case(f"chain-{boxes}", scene, parse_plan(list(CHAIN_PLAN)))
-
-
-HAZARD_CHAIN_PLAN = ("find Box_0", "pick Box_0", "find Vase_1", "drop Box_0")
 HAZARD_CHAINS = (10, 100)
 
 
-def hazard_chain_case(boxes: int, tbox: TBox) -> Case:
-    """The containment chain with a dumbbell in the innermost box and a vase
-    on the counter: dropping Box_0 by the vase is a hazard through the whole
-    chain, so its explanation lists every link (boxes + 5 facts)."""
-    data = chain_scene(boxes)
-    data["instances"] += [
-        {"class_name": "Dumbbell", "instance_name": "Dumbbell_1"},
-        {"class_name": "Vase", "instance_name": "Vase_1"},
-    ]
-    data["assertions"] += [
-        {"subject": f"Box_{boxes - 1}", "property": "contains", "object": "Dumbbell_1"},
-        {"subject": "Vase_1", "property": "isOn", "object": "CounterTop_1"},
-    ]
-    scene = build_scene(data, tbox.vocabulary, name=f"hazard-chain-{boxes}")
-    return Case(f"hazard-chain-{boxes}", scene, parse_plan(list(HAZARD_CHAIN_PLAN)))
-
-
-def deadline_row(tbox: TBox, engine: Engine, boxes: int, timeout_s: float) -> dict[str, Any]:
+def deadline_row(tbox: TBox, engine: Engine, boxes: int, timeout_s: float) -> DeadlineRow:
     """How long a verification that cannot finish in time takes to give up."""
     case = chain_case(boxes, tbox)
     verifier = LogicTutor.over(tbox, engine, timeout_s=timeout_s).verifier
     start = time.perf_counter()
-    report = verifier.verify(case.scene, case.plan)
-    return {
-        "engine": engine.name,
-        "objects": boxes,
-        "timeout_s": timeout_s,
-        "status": report.status,
-        "elapsed_ms": round((time.perf_counter() - start) * 1000, 1),
-    }
-
-
-def synthetic_modules(copies: int, folder: Path) -> tuple[str, ...]:
-    """``copies`` renamed copies of the kitchen domain layer (for TBox scaling)."""
-    source = (ontology_dir() / "kitchen.omn").read_text(encoding="utf-8")
-    names = sorted(set(re.findall(r"^Class: :(\w+)", source, flags=re.M)), key=len, reverse=True)
-    pattern = re.compile(r":(" + "|".join(re.escape(n) for n in names) + r")\b")
-    out = []
-    for k in range(1, copies + 1):
-        text = pattern.sub(lambda m, k=k: f":Syn{k}_{m.group(1)}", source)  # type: ignore[misc]
-        text = text.replace(
-            "<http://virf.dev/ontology/kitchen>", f"<http://virf.dev/ontology/synthetic-{k}>"
-        )
-        text = re.sub(r':id "([^"]+)"', lambda m, k=k: f':id "SYN{k}-{m.group(1)}"', text)  # type: ignore[misc]
-        path = folder / f"synthetic-{k}.omn"
-        path.write_text(text, encoding="utf-8")
-        out.append(str(path))
-    return tuple(out)
+    report = case.verify(verifier)
+    return DeadlineRow(
+        engine=engine.name,
+        objects=boxes,
+        timeout_s=timeout_s,
+        status=report.status,
+        elapsed_ms=round((time.perf_counter() - start) * 1000, 1),
+    )
 
 
 def time_plans(
@@ -327,7 +115,7 @@ def time_plans(
         report = None
         for _ in range(repeats):
             start = time.perf_counter()
-            report = verifier.verify(case.scene, case.plan, case.requirements)
+            report = case.verify(verifier)
             runs.append((time.perf_counter() - start) * 1000)
         assert report is not None
         times.append(statistics.median(runs))
@@ -337,41 +125,28 @@ def time_plans(
     return times, reports
 
 
-def percentile(values: Sequence[float], pct: float) -> float:
-    ordered = sorted(values)
-    if not ordered:
-        return float("nan")
-    k = max(0, min(len(ordered) - 1, round(pct / 100 * (len(ordered) - 1))))
-    return ordered[k]
-
-
-def summary(values: Sequence[float]) -> dict[str, float]:
+def timings(values: Sequence[float]) -> dict[str, float]:
+    """Median, 95th percentile and mean, as the fields of a :class:`Timings`;
+    each NaN (not measured) without values."""
+    if not values:
+        return {"p50_ms": NOT_MEASURED, "p95_ms": NOT_MEASURED, "mean_ms": NOT_MEASURED}
     return {
         "p50_ms": round(percentile(values, 50), 2),
         "p95_ms": round(percentile(values, 95), 2),
-        "mean_ms": round(statistics.fmean(values), 2) if values else float("nan"),
+        "mean_ms": round(statistics.fmean(values), 2),
     }
 
 
-def sample(cases: Sequence[Case], n: int) -> list[Case]:
-    """``n`` cases spread evenly over the list (all when n <= 0 or n >= len)."""
-    if n <= 0 or n >= len(cases):
-        return list(cases)
-    step = len(cases) / n
-    return [cases[int(i * step)] for i in range(n)]
-
-
-def comparable(report: Report) -> str:
-    data = json.loads(report.to_json())
-    data.pop("engine", None)
-    return json.dumps(data, sort_keys=True)
-
-
-def _paper_plans(verifier: Verifier, cases: Sequence[Case]) -> list[tuple[str, list[list[Any]]]]:
+def _paper_plans(verifier: Verifier, cases: Sequence[Case]) -> list[tuple[str, list[list[Fact]]]]:
     return [(c.name, [sorted(s) for s in verifier.snapshots(c.scene, c.plan)]) for c in cases]
 
 
-def _paper_plan_ms(plan: dict[str, Any]) -> tuple[float, bool] | None:
+# The paper baseline's result is JSON its own process wrote
+# (:func:`virf.bench.paper.run_paper_baseline`): read as such, not typed here.
+TimedPlan = dict[str, Any]
+
+
+def _paper_plan_ms(plan: TimedPlan) -> tuple[float, bool] | None:
     """Sequential time of the paper's loop, steps up to its first finding,
     and whether that time is exact: it is a lower bound when a call was
     stopped at the limit first (that call counts as the limit)."""
@@ -379,7 +154,7 @@ def _paper_plan_ms(plan: dict[str, Any]) -> tuple[float, bool] | None:
     for ms, found, consistent in zip(
         plan["step_ms"], plan["findings"], plan["consistent"], strict=False
     ):
-        if isinstance(found, dict) and found.get("error") == OVER_LIMIT:
+        if _over_limit(found):
             return total + ms, False
         if ms is None or (consistent is None and isinstance(found, dict)):
             return None  # a call failed: the plan has no time
@@ -389,25 +164,25 @@ def _paper_plan_ms(plan: dict[str, Any]) -> tuple[float, bool] | None:
     return total, True
 
 
-def _paper_row(plan: dict[str, Any], time: tuple[float, bool] | None) -> dict[str, Any]:
-    return {
-        "plan": plan["id"],
-        "ms": None if time is None else round(time[0], 1),
-        "lower_bound": time is not None and not time[1],
-        "calls": [
+def _paper_row(plan: TimedPlan, time: tuple[float, bool] | None) -> PaperRow:
+    return PaperRow(
+        plan=plan["id"],
+        ms=None if time is None else round(time[0], 1),
+        lower_bound=time is not None and not time[1],
+        calls=tuple(
             OVER_LIMIT if _over_limit(found) else ms
             for ms, found in zip(plan["step_ms"], plan["findings"], strict=False)
-        ],
-    }
+        ),
+    )
 
 
-def _over_limit(found: Any) -> bool:
+def _over_limit(found: object) -> bool:
     return isinstance(found, dict) and found.get("error") == OVER_LIMIT
 
 
 def paper_figures(
     result: dict[str, Any], fast_ms: dict[str, float], compared: Sequence[str]
-) -> dict[str, Any]:
+) -> PaperComparison:
     """The paper method's figures from :func:`virf.bench.paper.run_paper_baseline`'s
     result: ``compared`` names the dev-split plans (timed by the fast engine in
     ``fast_ms`` too), the others are scaling rows.  A figure computed from a
@@ -421,30 +196,39 @@ def paper_figures(
     step_ms = [ms for ms, _ in steps if isinstance(ms, (int, float))]
     calls_over = sum(1 for _, found in steps if _over_limit(found))
     limit = result.get("call_limit_s")
-    paper: dict[str, Any] = summary(paper_ms) | {
-        "plans": len(paper_ms),
-        "plans_lower_bound": bounded,
-        "lower_bound": bounded > 0,
-        "calls": len(steps),
-        "calls_over_limit": calls_over,
-        "call_limit_s": limit,
-        "per_call_p50_ms": round(percentile(step_ms, 50), 1),
-        "per_call_lower_bound": calls_over > 0,
-        "owlready2": result.get("owlready2"),
-        "peak_rss_mb": _paper_rss(result),
+    paper = PaperTimings(
+        **timings(paper_ms),
+        plans=len(paper_ms),
+        plans_lower_bound=bounded,
+        lower_bound=bounded > 0,
+        calls=len(steps),
+        calls_over_limit=calls_over,
+        call_limit_s=limit,
+        per_call_p50_ms=round(percentile(step_ms, 50), 1) if step_ms else NOT_MEASURED,
+        per_call_lower_bound=calls_over > 0,
+        owlready2=result.get("owlready2"),
+        peak_rss_mb=_paper_rss(result),
         # Every plan, each call's time or "> limit".
-        "rows": [_paper_row(plan, times[plan["id"]]) for plan in result["plans"]],
-    }
+        rows=tuple(_paper_row(plan, times[plan["id"]]) for plan in result["plans"]),
+    )
     fast_p50 = percentile(list(fast_ms.values()), 50)
-    return {
-        "paper": paper,
-        "paper_p50_ms": paper["p50_ms"],
-        "ratio": round(statistics.median(ratios), 1) if ratios else None,
-        "ratio_of_medians": round(paper["p50_ms"] / fast_p50, 1) if paper_ms else None,
-        # A median of lower bounds is a lower bound of the median.
-        "ratio_lower_bound": bounded > 0,
-        "paper_call_limit_s": limit,
-    }
+    return PaperComparison(
+        paper=paper,
+        ratio=round(statistics.median(ratios), 1) if ratios else None,
+        ratio_of_medians=round(paper.p50_ms / fast_p50, 1) if paper_ms else None,
+        ratio_lower_bound=bounded > 0,
+        paper_call_limit_s=limit,
+    )
+
+
+def _paper_rss(result: dict[str, Any]) -> float | None:
+    peak = result.get("peak_rss_kb")
+    if isinstance(peak, dict):
+        values = [v for v in peak.values() if isinstance(v, (int, float))]
+        return round(max(values) / 1024, 1) if values else None
+    if isinstance(peak, (int, float)):
+        return round(peak / 1024, 1)
+    return None
 
 
 def rss_mb() -> float:
@@ -469,19 +253,22 @@ def run_latency(
     cold_runs: int = 5,
     cold_engines: Sequence[str] = ("fast", "reference"),
     progress: Callable[[str, int], Callable[[], None]] | None = None,
-) -> dict[str, Any]:
-    """All figures of ``virf bench latency`` as one dict.  ``cold``: the scene
-    and plan whose cold start to first verdict is timed, as fresh processes."""
+) -> LatencyFigures:
+    """All figures of ``virf bench latency``.  ``cold``: the scene and plan
+    whose cold start to first verdict is timed, as fresh processes."""
 
     def bar(label: str, total: int) -> Callable[[], None]:
         return progress(label, total) if progress else (lambda: None)
 
+    # The sections measured, as LatencyFigures' fields; one left out was not.
+    out: dict[str, object] = {}
     # First, while this process holds no JVM and no caches that could slow
     # the machine down for the fresh processes.
-    cold_rows: list[dict[str, Any]] = []
     if cold is not None and cold_runs > 0:
         tick = bar("cold start", len(cold_engines) * (cold_runs + 1))
-        cold_rows = cold_start_rows(*cold, engines=cold_engines, runs=cold_runs, tick=tick)
+        rows = cold_start_rows(*cold, engines=cold_engines, runs=cold_runs, tick=tick)
+        if rows:
+            out["cold_start"] = ColdStart(example=str(cold[0].parent), rows=tuple(rows))
 
     tbox = load_tbox()
     fast = make_engine("fast", tbox)
@@ -493,18 +280,12 @@ def run_latency(
     if not cases:
         raise InputError("no task with a reference plan in the given files")
     synthetic = [synthetic_case(n, tbox) for n in sizes]
-    out: dict[str, Any] = {
-        "machine": {
-            "cpus": os.cpu_count(),
-            "python": platform.python_version(),
-            "platform": platform.platform(),
-            "java": java_version(),
-        },
-        "plans": len(cases),
-        "repeats": repeats,
-    }
-    if cold_rows:
-        out["cold_start"] = {"example": str(cold[0].parent) if cold else "", "rows": cold_rows}
+    machine = Machine(
+        cpus=os.cpu_count(),
+        python=platform.python_version(),
+        platform=platform.platform(),
+        java=java_version(),
+    )
     rss_start = rss_mb()
 
     # (c) fast engine: a warm-up pass, then the median of `repeats` runs per plan.
@@ -514,12 +295,12 @@ def run_latency(
     stats_before = [group.fast.engine.stats() for group in rooms]
     tick = bar("fast engine", len(cases))
     fast_ms, fast_reports = [], []
+    by_room = []
     for group in rooms:
         group_ms, group_reports = time_plans(group.fast, group.cases, repeats, tick)
         fast_ms += group_ms
         fast_reports += group_reports
-        out.setdefault("rooms", []).append({"room": group.room, "plans": len(group.cases)})
-        out["rooms"][-1] |= summary(group_ms)
+        by_room.append(RoomTimings(room=group.room, plans=len(group.cases), **timings(group_ms)))
     stats_after = [group.fast.engine.stats() for group in rooms]
     calls = sum(
         a.get("calls", 0) - b.get("calls", 0)
@@ -531,7 +312,7 @@ def run_latency(
     )
     tracemalloc.start()
     for case in rooms[0].cases[:20]:
-        rooms[0].fast.verify(case.scene, case.plan, case.requirements)
+        case.verify(rooms[0].fast)
     fast_heap = tracemalloc.get_traced_memory()[1] / 2**20
     tracemalloc.stop()
     rss_fast = rss_mb()
@@ -540,7 +321,7 @@ def run_latency(
     ref_cases = sample(cases, reference_sample)
     chosen = {c.name for c in ref_cases}
     for case in ref_cases[:3]:
-        vr.verify(case.scene, case.plan, case.requirements)
+        case.verify(vr)
     tick = bar("reference engine", len(ref_cases))
     ref_ms, ref_reports = [], []
     for group in rooms:
@@ -555,97 +336,76 @@ def run_latency(
         comparable(r) == comparable(fast_reports[index[c.name]])
         for c, r in zip(ref_cases, ref_reports, strict=True)
     )
-    out["fast"] = summary(fast_ms) | {
-        "reasoner_calls": calls,
-        "fallbacks": falls,
-        "python_heap_peak_mb": round(fast_heap, 1),
-    }
-    out["reference"] = summary(ref_ms) | {"plans": len(ref_cases)}
-    out["identical_reports"] = {"compared": len(ref_cases), "identical": identical}
     # b/c on the plans timed both ways, as a/c is.
     fast_of = {c.name: ms for c, ms in zip(cases, fast_ms, strict=True)}
     both = [r / fast_of[c.name] for c, r in zip(ref_cases, ref_ms, strict=True) if fast_of[c.name]]
-    out["reference_ratio"] = round(statistics.median(both), 1) if both else None
-    out["memory"] = {
-        "process_rss_after_tbox_mb": round(rss_start, 1),
-        "process_rss_peak_after_fast_mb": round(rss_fast, 1),
-        "process_rss_peak_after_reference_mb": round(rss_ref, 1),
-        "fast_python_heap_peak_mb": round(fast_heap, 1),
-    }
-    out["fast_p50_ms"] = out["fast"]["p50_ms"]
-    out["fast_p95_ms"] = out["fast"]["p95_ms"]
-    out["reference_p50_ms"] = out["reference"]["p50_ms"]
-    out["reference_p95_ms"] = out["reference"]["p95_ms"]
 
     # Scaling with scene size (the 10-step plan) and plan length (50 objects).
     # The reference engine is also timed with two workers (parallel steps).
     vr2 = LogicTutor.over(tbox, reference.fork(), workers=2).verifier
 
-    def scaling_row(case: Case) -> dict[str, Any]:
+    def scaling_row(case: Case, requested: int | None = None) -> ScalingRow:
         f_ms, f_rep = time_plans(vf, [case], repeats)
         r_ms, r_rep = time_plans(vr, [case], 1)
         p_ms, p_rep = time_plans(vr2, [case], 1)
-        return {
-            "objects": len(case.scene.objects),
-            "steps": len(case.plan),
-            "status": f_rep[0].status,
-            "fast_ms": round(f_ms[0], 2),
-            "reference_ms": round(r_ms[0], 1),
-            "reference_2_workers_ms": round(p_ms[0], 1),
-            "identical": comparable(f_rep[0]) == comparable(r_rep[0]) == comparable(p_rep[0]),
-        }
+        row = ScalingRow(
+            objects=len(case.scene.objects),
+            steps=len(case.plan),
+            status=f_rep[0].status,
+            fast_ms=round(f_ms[0], 2),
+            reference_ms=round(r_ms[0], 1),
+            reference_2_workers_ms=round(p_ms[0], 1),
+            identical=comparable(f_rep[0]) == comparable(r_rep[0]) == comparable(p_rep[0]),
+        )
+        # Only a scene-size row says the size asked for.
+        return row if requested is None else row.model_copy(update={"requested_objects": requested})
 
-    rows = []
+    by_size = []
     tick = bar("scene scaling", len(synthetic))
     for n, case in zip(sizes, synthetic, strict=True):
-        rows.append(scaling_row(case) | {"requested_objects": n})
+        by_size.append(scaling_row(case, n))
         tick()
-    out["scene_scaling"] = rows
     by_length = []
     tick = bar("plan-length scaling", len(lengths))
     for steps in lengths:
         by_length.append(scaling_row(synthetic_case(50, tbox, steps)))
         tick()
-    out["length_scaling"] = by_length
     by_depth = []
     tick = bar("containment chains", len(chains))
     for boxes in chains:
         c_ms, c_rep = time_plans(vf, [chain_case(boxes, tbox)], repeats)
         by_depth.append(
-            {
-                "objects": boxes,
-                "steps": len(CHAIN_PLAN),
-                "status": c_rep[0].status,
-                "fast_ms": round(c_ms[0], 2),
-            }
+            ChainRow(
+                objects=boxes,
+                steps=len(CHAIN_PLAN),
+                status=c_rep[0].status,
+                fast_ms=round(c_ms[0], 2),
+            )
         )
         tick()
-    out["chain_scaling"] = by_depth
     hazards = []
     tick = bar("hazard chains", len(HAZARD_CHAINS))
     for boxes in HAZARD_CHAINS:
         h_ms, h_rep = time_plans(vf, [hazard_chain_case(boxes, tbox)], repeats)
         found = h_rep[0].violations
         hazards.append(
-            {
-                "objects": boxes,
-                "status": h_rep[0].status,
-                "explained_facts": len(found[0].triggering_facts) if found else 0,
-                "fast_ms": round(h_ms[0], 2),
-            }
+            HazardChainRow(
+                objects=boxes,
+                status=h_rep[0].status,
+                explained_facts=len(found[0].triggering_facts) if found else 0,
+                fast_ms=round(h_ms[0], 2),
+            )
         )
         tick()
-    out["hazard_chains"] = hazards
     tick = bar("deadline", len(DEADLINE_CHAINS))
-    out["deadline"] = []
+    deadlines = []
     for which, boxes in DEADLINE_CHAINS:
-        out["deadline"].append(
+        deadlines.append(
             deadline_row(tbox, fast if which == "fast" else reference, boxes, deadline_s)
         )
         tick()
 
     # (a) the paper's method, on a sample of the same plans and the smaller scenes.
-    out["paper_call_limit_s"] = paper_call_limit_s
     if paper:
         from virf.bench.paper import run_paper_baseline
 
@@ -660,15 +420,19 @@ def run_latency(
             call_limit_s=paper_call_limit_s,
         )
         fast_by_name = {c.name: ms for c, ms in zip(cases, fast_ms, strict=True)}
-        out |= paper_figures(result, fast_by_name, [c.name for c in paper_cases])
-        by_plan = {row["plan"]: row for row in out["paper"]["rows"]}
-        for row in rows:
-            timed = by_plan.get(f"synthetic-{row['requested_objects']}")
-            row["paper_ms"] = timed["ms"] if timed else None
-            row["paper_lower_bound"] = bool(timed and timed["lower_bound"])
+        compared = paper_figures(result, fast_by_name, [c.name for c in paper_cases])
+        out |= {name: getattr(compared, name) for name in PaperComparison.model_fields}
+        by_plan = {row.plan: row for row in compared.paper.rows}
+        for i, row in enumerate(by_size):
+            timed = by_plan.get(f"synthetic-{row.size}")
+            by_size[i] = row.model_copy(
+                update={
+                    "paper_ms": timed.ms if timed else None,
+                    "paper_lower_bound": bool(timed and timed.lower_bound),
+                }
+            )
     else:
-        out["paper_p50_ms"] = None
-        out["ratio"] = None
+        out |= {"paper_call_limit_s": paper_call_limit_s, "ratio": None}
 
     # Scaling with TBox size: x1 and xN (N-1 synthetic copies of the kitchen layer).
     tb_rows = []
@@ -686,489 +450,42 @@ def run_latency(
             f_ms, f_rep = time_plans(vfb, [case], repeats)
             r_ms, r_rep = time_plans(vrb, [case], 1)
             tb_rows.append(
-                {
-                    "factor": factor,
-                    "logical_axioms": len(big.owl.logical_axioms()),
-                    "fast_ms": round(f_ms[0], 2),
-                    "reference_ms": round(r_ms[0], 1),
-                    "identical": comparable(f_rep[0]) == comparable(r_rep[0]),
-                }
+                TBoxRow(
+                    factor=factor,
+                    logical_axioms=len(big.owl.logical_axioms()),
+                    fast_ms=round(f_ms[0], 2),
+                    reference_ms=round(r_ms[0], 1),
+                    identical=comparable(f_rep[0]) == comparable(r_rep[0]),
+                )
             )
             tick()
-    out["tbox_scaling"] = tb_rows
-    return out
-
-
-def _paper_rss(result: dict[str, Any]) -> float | None:
-    peak = result.get("peak_rss_kb")
-    if isinstance(peak, dict):
-        values = [v for v in peak.values() if isinstance(v, (int, float))]
-        return round(max(values) / 1024, 1) if values else None
-    if isinstance(peak, (int, float)):
-        return round(peak / 1024, 1)
-    return None
-
-
-# The tables below are printed by `virf bench latency` and written into
-# performance.md from the same rows; the terminal words some headers shorter.
-
-
-COLD_TARGET_S = 0.25
-# The figures issue 29 asks for (printed beside the measured ones).
-TARGETS = {
-    "p50_ms": 4.0,
-    "p95_ms": 10.0,
-    "vs_reference": 300.0,
-    "vs_paper": 300.0,
-    "objects_1000_ms": 50.0,
-    "chain_1000_ms": 100.0,
-    "hazard_chain_100_ms": 100.0,
-}
-
-
-def targets_table(fig: dict[str, Any]) -> TextTable:
-    """Each figure issue 29 asks for, beside what this run measured."""
-
-    def row_ms(key: str, objects: int) -> float | None:
-        rows = fig.get(key, [])
-        return next(
-            (r["fast_ms"] for r in rows if r.get("requested_objects", r["objects"]) == objects),
-            None,
-        )
-
-    fast = fig["fast"]
-    cold = next(
-        (r for r in fig.get("cold_start", {}).get("rows", []) if r["engine"] == "fast"), None
-    )
-    rows: list[tuple[str, str, float | None, bool]] = [
-        ("fast p50 per plan, ms", "≤", fast["p50_ms"], True),
-        ("fast p95 per plan, ms", "≤", fast["p95_ms"], True),
-        ("reference / fast (b/c), ×", "≥", fig.get("reference_ratio"), False),
-        ("paper / fast (a/c), ×", "≥", fig.get("ratio"), False),
-        ("cold first verdict, s", "≤", cold["median_s"] if cold else None, True),
-        ("10-step plan, 1,000 objects, ms", "≤", row_ms("scene_scaling", 1000), True),
-        ("1,000-box chain, ms", "≤", row_ms("chain_scaling", 1000), True),
-        ("100-box hazard chain explained, ms", "≤", row_ms("hazard_chains", 100), True),
-    ]
-    goals = [
-        TARGETS["p50_ms"],
-        TARGETS["p95_ms"],
-        TARGETS["vs_reference"],
-        TARGETS["vs_paper"],
-        COLD_TARGET_S,
-        TARGETS["objects_1000_ms"],
-        TARGETS["chain_1000_ms"],
-        TARGETS["hazard_chain_100_ms"],
-    ]
-    table = []
-    for (name, way, value, at_most), goal in zip(rows, goals, strict=True):
-        if value is None or value != value:
-            table.append((name, f"{way} {goal:g}", "not measured", "-"))
-            continue
-        met = value <= goal if at_most else value >= goal
-        shown = f"{value:.0f}" if "×" in name else f"{value:.3g}"
-        if name.startswith("paper") and fig.get("ratio_lower_bound"):
-            shown = f"≥ {shown}"  # a lower bound that meets the goal meets it
-        table.append((name, f"{way} {goal:g}", shown, "yes" if met else "no"))
-    return TextTable.of(("figure", "target", "measured", "met"), table)
-
-
-def reference_ratio(fig: dict[str, Any]) -> str:
-    """How many times faster the fast engine is than the reference engine."""
-    value = fig.get("reference_ratio")
-    return "not measured" if not value else f"{value:g}×"
-
-
-def cold_start_table(fig: dict[str, Any]) -> TextTable:
-    """Cold start to first verdict, one row per engine."""
-    return TextTable.of(
-        ("engine", "verdict", "runs", "median s", "min s", "max s"),
-        [
-            (
-                row["engine"],
-                row["verdict"],
-                str(row["runs"]),
-                f"{row['median_s']:.3f}",
-                f"{row['min_s']:.3f}",
-                f"{row['max_s']:.3f}",
-            )
-            for row in fig.get("cold_start", {}).get("rows", [])
-        ],
-    )
-
-
-def at_least(value: float, lower_bound: bool, digits: int = 0) -> str:
-    """A figure, written "≥ N" when it is a lower bound."""
-    return ("≥ " if lower_bound else "") + f"{value:.{digits}f}"
-
-
-def ratio_text(fig: dict[str, Any], key: str = "ratio") -> str:
-    """Ratio a/c as "N×", "≥ N×" when a plan it was computed from hit the
-    call limit, or "not measured"."""
-    value = fig.get(key)
-    if value is None:
-        return "not measured"
-    return ("≥ " if fig.get("ratio_lower_bound") else "") + f"{value:g}×"
-
-
-def latency_table(fig: dict[str, Any], *, terminal: bool) -> TextTable:
-    """Per-plan latency of (a), (b) and (c); the terminal adds a note per method."""
-    fast, ref, paper = fig["fast"], fig["reference"], fig.get("paper")
-    rows: list[tuple[str, ...]] = []
-    if paper:
-        bound = paper.get("lower_bound", False)
-        per_call = at_least(paper["per_call_p50_ms"], paper.get("per_call_lower_bound", False))
-        over = ""
-        if paper.get("calls_over_limit"):
-            over = (
-                f"; {paper['calls_over_limit']} of {paper['calls']} calls "
-                f"{OVER_LIMIT} ({paper['call_limit_s']:g} s)"
-            )
-        rows.append(
-            (
-                "(a) paper: owlready2 + Pellet per step",
-                str(paper["plans"]),
-                at_least(paper["p50_ms"], bound),
-                at_least(paper["p95_ms"], bound),
-                at_least(paper["mean_ms"], bound),
-                f"per call p50 {per_call} ms{over}; owlready2 {paper['owlready2']}",
-            )
-        )
-    rows += [
-        (
-            "(b) reference engine (HermiT)",
-            str(ref["plans"]),
-            f"{ref['p50_ms']:.0f}",
-            f"{ref['p95_ms']:.0f}",
-            f"{ref['mean_ms']:.0f}",
-            "with minimal explanations",
-        ),
-        (
-            "(c) fast engine",
-            str(fig["plans"]),
-            f"{fast['p50_ms']:.1f}",
-            f"{fast['p95_ms']:.1f}",
-            f"{fast['mean_ms']:.1f}",
-            f"{fast['reasoner_calls']} calls, {fast['fallbacks']} fallbacks",
-        ),
-    ]
-    if terminal:
-        return TextTable.of(
-            ("method", "plans", "p50 ms", "p95 ms", "mean ms", "note"),
-            rows,
-            title=f"Per-plan verification latency ({fig['plans']} SafeAgentBench plans)",
-        )
-    return TextTable.of(
-        ("method", "plans timed", "p50 ms", "p95 ms", "mean ms"), [r[:-1] for r in rows]
-    )
-
-
-def scaling_table(fig: dict[str, Any], key: str, *, terminal: bool) -> TextTable:
-    """``key`` is scene_scaling (per object) or length_scaling (per step)."""
-    per = "objects" if key == "scene_scaling" else "steps"
-    rows = []
-    for row in fig[key]:
-        size = row.get("requested_objects", row["objects"]) if per == "objects" else row["steps"]
-        paper_ms = row.get("paper_ms")
-        rows.append(
-            (
-                str(size),
-                row["status"],
-                f"{row['fast_ms']:.1f}",
-                f"{row['fast_ms'] / size:.3f}",
-                f"{row['reference_ms']:.0f}",
-                f"{row['reference_2_workers_ms']:.0f}",
-                "-"
-                if paper_ms is None
-                else at_least(paper_ms, row.get("paper_lower_bound", False)),
-                "yes" if row["identical"] else "NO",
-            )
-        )
-    one = per.rstrip("s")
-    if terminal:
-        title = {
-            "objects": "Scaling with scene size (10-step plan)",
-            "steps": "Scaling with plan length (50-object scene)",
-        }[per]
-        return TextTable.of(
-            (
-                per,
-                "verdict",
-                "fast ms",
-                f"fast ms/{one}",
-                "reference ms",
-                "reference, 2 workers",
-                "paper ms",
-                "same",
+    return LatencyFigures.model_validate(
+        {
+            "machine": machine,
+            "plans": len(cases),
+            "repeats": repeats,
+            "rooms": tuple(by_room),
+            "fast": FastTimings(
+                **timings(fast_ms),
+                reasoner_calls=calls,
+                fallbacks=falls,
+                python_heap_peak_mb=round(fast_heap, 1),
             ),
-            rows,
-            title=title,
-        )
-    return TextTable.of(
-        (
-            per,
-            "verdict",
-            "fast ms",
-            f"fast ms per {one}",
-            "reference ms",
-            "reference, 2 workers, ms",
-            "paper ms",
-            "reports identical",
-        ),
-        rows,
+            "reference": ReferenceTimings(**timings(ref_ms), plans=len(ref_cases)),
+            "identical_reports": Identical(compared=len(ref_cases), identical=identical),
+            "reference_ratio": round(statistics.median(both), 1) if both else None,
+            "memory": Memory(
+                process_rss_after_tbox_mb=round(rss_start, 1),
+                process_rss_peak_after_fast_mb=round(rss_fast, 1),
+                process_rss_peak_after_reference_mb=round(rss_ref, 1),
+                fast_python_heap_peak_mb=round(fast_heap, 1),
+            ),
+            "scene_scaling": tuple(by_size),
+            "length_scaling": tuple(by_length),
+            "chain_scaling": tuple(by_depth),
+            "hazard_chains": tuple(hazards),
+            "deadline": tuple(deadlines),
+            "tbox_scaling": tuple(tb_rows),
+            **out,
+        }
     )
-
-
-def tbox_table(fig: dict[str, Any], *, terminal: bool) -> TextTable:
-    rows = [
-        (
-            f"x{row['factor']}",
-            str(row["logical_axioms"]),
-            f"{row['fast_ms']:.1f}",
-            f"{row['reference_ms']:.0f}",
-            "yes" if row["identical"] else "NO",
-        )
-        for row in fig["tbox_scaling"]
-    ]
-    same = "same" if terminal else "reports identical"
-    return TextTable.of(
-        ("TBox", "logical axioms", "fast ms", "reference ms", same),
-        rows,
-        title="Scaling with TBox size (50-object scene, 10-step plan)" if terminal else None,
-    )
-
-
-def chain_markdown(fig: dict[str, Any]) -> list[str]:
-    """The containment-chain and deadline sections of performance.md."""
-    lines: list[str] = []
-    if fig.get("chain_scaling"):
-        lines += [
-            "",
-            "## Scaling with containment depth (fast engine)",
-            "",
-            f"Boxes nested in one another, Box_0 on a counter, and a {len(CHAIN_PLAN)}-step plan",
-            "that moves Box_0 and puts it back. `encloses` is transitive, so the chain's",
-            "closure has n²/2 pairs; the fast engine does not materialise it",
-            "([fast-engine.md](fast-engine.md)).",
-            "",
-        ]
-        chain = TextTable.of(
-            ("boxes", "verdict", "fast ms", "fast ms per box"),
-            [
-                (
-                    str(row["objects"]),
-                    row["status"],
-                    f"{row['fast_ms']:.1f}",
-                    f"{row['fast_ms'] / row['objects']:.3f}",
-                )
-                for row in fig["chain_scaling"]
-            ],
-        )
-        lines += to_markdown(chain)
-    if fig.get("hazard_chains"):
-        lines += [
-            "",
-            "The same chain with a dumbbell in the innermost box and a vase on the counter;",
-            f"the plan ({', '.join(HAZARD_CHAIN_PLAN)}) drops Box_0 by the vase. The hazard",
-            "runs through every link, and the report's minimal explanation lists them all:",
-            "",
-        ]
-        hazard = TextTable.of(
-            ("boxes", "verdict", "facts in the explanation", "fast ms"),
-            [
-                (
-                    str(row["objects"]),
-                    row["status"],
-                    str(row["explained_facts"]),
-                    f"{row['fast_ms']:.1f}",
-                )
-                for row in fig["hazard_chains"]
-            ],
-        )
-        lines += to_markdown(hazard)
-    if fig.get("deadline"):
-        lines += [
-            "",
-            "## The deadline",
-            "",
-            "`--timeout` is one deadline for the whole verification. The engines stop inside",
-            "a step once it passes, and the report is ERROR (fail closed). Chains that take",
-            "each engine several times the timeout:",
-            "",
-        ]
-        deadline = TextTable.of(
-            ("engine", "boxes", "timeout s", "verdict", "stopped after ms"),
-            [
-                (
-                    row["engine"],
-                    str(row["objects"]),
-                    f"{row['timeout_s']:g}",
-                    row["status"],
-                    f"{row['elapsed_ms']:.0f}",
-                )
-                for row in fig["deadline"]
-            ],
-        )
-        lines += to_markdown(deadline)
-    return lines
-
-
-def render_markdown(fig: dict[str, Any], command: str) -> str:
-    """docs/performance.md: the figures of one run, the machine, how to reproduce."""
-    m = fig["machine"]
-    fast = fig["fast"]
-    paper = fig.get("paper")
-    same = fig["identical_reports"]
-    limit = fig.get("paper_call_limit_s") or PAPER_CALL_LIMIT_S
-    lines = [
-        "# Performance",
-        "",
-        "<!-- GENERATED by `virf bench latency --markdown`; edit latency.py, not this file. -->",
-        "",
-        "How long the Logic Tutor takes to verify a plan, measured three ways on the same inputs:",
-        "",
-        "* **(a) the paper's method**: owlready2 0.49 with its bundled Pellet, one reasoner call",
-        "  per plan step on a fresh copy of ontology + ABox, stopping at the first step where",
-        "  it finds a hazard (the paper's loop). It runs in its own virtualenv (`.venv-paper`):",
-        "  owlready2 0.50/0.51 bundle jars built for Java 25 and fail on Java 17.",
-        f"  A reasoner call still running after {limit:g} s (`--paper-call-limit`) is stopped,",
-        "  with its JVM and every process it started, and counts as that long: the plan",
-        "  stops there and its time is a lower bound, written ≥, as is every median, mean",
-        "  and ratio a/c computed from it. A plan whose every call finished is an exact",
-        "  figure; a plan with a call that failed has no time.",
-        "* **(b) the reference engine**: HermiT 1.4 in-process (OWLAPI 5 through JPype), one",
-        "  fresh reasoner per question, including the minimal explanations of the report.",
-        "* **(c) the fast engine** (the default): the same reports from compiled rules and",
-        "  verified candidate models ([fast-engine.md](fast-engine.md)).",
-        "",
-        "(b) and (c) time the whole `Verifier.verify` call: simulation, classification of",
-        "every snapshot, minimal triggering facts, background axioms and the report. (a) times",
-        "only the reasoner calls. The fast engine's time per plan is the median of",
-        f"{fig.get('repeats', 3)} runs after one warm-up pass; the reference engine's and the",
-        "paper method's are single runs. Before each timed phase the benchmark runs",
-        "`gc.collect(); gc.freeze()`, so what earlier phases left on the heap does not tax it.",
-        "",
-        "## Machine",
-        "",
-        f"* {m['cpus']} CPUs, Python {m['python']}, Java {m['java']}",
-        f"* {m['platform']}",
-        "",
-        "## Per-plan latency on the SafeAgentBench dev split",
-        "",
-        f"{fig['plans']} reference plans (every task in the given files that ships one),",
-        "each verified with its room's rules.",
-        "",
-        *to_markdown(latency_table(fig, terminal=False)),
-        "",
-    ]
-    if fig.get("rooms"):
-        by_room = TextTable.of(
-            ("room", "plans", "fast p50 ms", "fast p95 ms"),
-            [
-                (r["room"], str(r["plans"]), f"{r['p50_ms']:.1f}", f"{r['p95_ms']:.1f}")
-                for r in fig["rooms"]
-            ],
-        )
-        lines += ["The fast engine by room:", "", *to_markdown(by_room), ""]
-    lines += [
-        f"* **ratio a/c** (median over the plans timed both ways): **{ratio_text(fig)}**"
-        + (
-            f"; ratio of the medians: {ratio_text(fig, 'ratio_of_medians')}"
-            if fig.get("ratio_of_medians")
-            else ""
-        ),
-        f"* reports of (b) and (c) identical: **{same['identical']}/{same['compared']}**",
-        f"* fast engine: {fast['reasoner_calls']} engine calls, **{fast['fallbacks']}** handed to "
-        "the reference engine",
-    ]
-    if paper:
-        per_call = at_least(paper["per_call_p50_ms"], paper.get("per_call_lower_bound", False))
-        lines.append(
-            f"* paper method: one reasoner call takes {per_call} ms (p50); "
-            "each call starts a JVM and classifies the whole TBox again"
-        )
-        if "calls_over_limit" in paper:
-            lines.append(
-                f"* paper method: **{paper['calls_over_limit']}** of its {paper['calls']} "
-                f"reasoner calls hit the {paper['call_limit_s']:g} s limit and were stopped; "
-                f"{paper['plans_lower_bound']} of the {paper['plans']} plans timed are "
-                "lower bounds"
-            )
-    lines += [
-        "",
-        "Targets (issue 29): with explanations, over the dev plans of every room, fast",
-        f"p50 at most {TARGETS['p50_ms']:g} ms and p95 at most {TARGETS['p95_ms']:g} ms per plan;",
-        f"at least {TARGETS['vs_reference']:g}× faster than the reference engine (b/c) and"
-        f" {TARGETS['vs_paper']:g}× than the paper's method (a/c), each the median of the",
-        f"per-plan ratios over the plans timed both ways. This run: b/c = {reference_ratio(fig)},",
-        f"a/c = {ratio_text(fig)}. Every target beside this run's figure: [Targets](#targets).",
-        "",
-    ]
-    cold = fig.get("cold_start")
-    if cold:
-        lines += [
-            "## Cold start to first verdict",
-            "",
-            f"`virf verify` on `{cold['example']}` as a fresh process, from start to exit:",
-            "interpreter, imports, loading the knowledge base, simulation, classification,",
-            "the printed report. The fast engine reads the compiled knowledge artifact and",
-            "does not start the JVM; the reference engine starts it and loads the modules.",
-            "One uncounted run first fills the file cache and Python's bytecode cache, as",
-            "after any installation.",
-            "",
-            *to_markdown(cold_start_table(fig)),
-            "",
-            f"Target: the fast engine's median at most {COLD_TARGET_S} s.",
-            "",
-        ]
-    lines += [
-        "## Memory",
-        "",
-    ]
-    mem = fig["memory"]
-    lines += [
-        f"* process RSS after loading the TBox (JVM included): {mem['process_rss_after_tbox_mb']:.0f} MB",
-        f"* peak RSS after the fast-engine runs: {mem['process_rss_peak_after_fast_mb']:.0f} MB; "
-        f"Python heap peak of the fast engine (tracemalloc): {mem['fast_python_heap_peak_mb']:.1f} MB",
-        f"* peak RSS after the reference-engine runs: "
-        f"{mem['process_rss_peak_after_reference_mb']:.0f} MB",
-    ]
-    if paper and paper.get("peak_rss_mb"):
-        lines.append(
-            f"* paper method: peak RSS {paper['peak_rss_mb']:.0f} MB (script plus its Pellet JVMs)"
-        )
-    for key, title in (
-        ("scene_scaling", "Scaling with scene size (the same 10-step plan)"),
-        ("length_scaling", "Scaling with plan length (50-object scene)"),
-    ):
-        lines += ["", f"## {title}", "", *to_markdown(scaling_table(fig, key, terminal=False))]
-    lines += chain_markdown(fig)
-    lines += ["", "## Targets", "", *to_markdown(targets_table(fig))]
-    lines += [
-        "",
-        "## Scaling with TBox size (50-object scene, 10-step plan)",
-        "",
-        "x4 adds three synthetic domain modules: copies of the kitchen layer with renamed",
-        "classes, loaded as extra imports.",
-        "",
-        *to_markdown(tbox_table(fig, terminal=False)),
-    ]
-    lines += [
-        "",
-        "## Reproduce",
-        "",
-        "```",
-        "make bench-latency      # creates .venv-paper (owlready2 0.49) on first use",
-        command,
-        "```",
-        "",
-        "`--json` prints every figure as one object (`ratio`, `fast_p50_ms`, `fast_p95_ms`,",
-        "`reference_p50_ms`, `paper_p50_ms`, the scaling rows, memory, machine). Under",
-        "`paper`, `rows` gives each plan's time and each call's, `\"> limit\"` for a call",
-        "stopped; `lower_bound` and `ratio_lower_bound` say which figures are lower bounds.",
-        "`--paper-sample N` times the paper's method on N plans spread over the split",
-        "(0 = all; each of its calls takes seconds to minutes); `--paper-call-limit S` stops",
-        "a call after S seconds; `--no-paper` skips the paper's method.",
-        "",
-    ]
-    return "\n".join(lines)

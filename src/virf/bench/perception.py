@@ -30,16 +30,19 @@ sides.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Final
+from typing import Final
 
+from virf.bench.metrics import percent
 from virf.errors import InputError, read_json_file
 from virf.ontology.tbox import Vocabulary
 from virf.perception import Catalogue, perceive
 from virf.planner import Apprentice, ReplayApprentice
+from virf.render.tables import TextTable, to_markdown
 from virf.schema import Fact, FactKind, Provenance
 from virf.verify.verifier import Verifier
 from virf.world.plan import load_plan_file
@@ -52,7 +55,10 @@ MARKERS: Final = frozenset({"UnknownMaterial", "UnknownFillState"})
 
 
 @dataclass(frozen=True)
-class Case:
+class PerceptionCase:
+    """A case folder (see the module docstring); not a :class:`virf.bench.case.Case`,
+    which is a plan already in its scene."""
+
     name: str
     folder: Path
     description: str
@@ -65,14 +71,16 @@ class Case:
     threshold: float
 
 
-@dataclass
+@dataclass(frozen=True)
 class Counts:
+    """True positives, false positives and false negatives of one kind of fact."""
+
     tp: int = 0
     fp: int = 0
     fn: int = 0
 
-    def add(self, other: Counts) -> None:
-        self.tp, self.fp, self.fn = self.tp + other.tp, self.fp + other.fp, self.fn + other.fn
+    def __add__(self, other: Counts) -> Counts:
+        return Counts(self.tp + other.tp, self.fp + other.fp, self.fn + other.fn)
 
     @property
     def precision(self) -> float | None:
@@ -87,40 +95,42 @@ class Counts:
         p, r = self.precision, self.recall
         return 2 * p * r / (p + r) if p is not None and r is not None and p + r else None
 
-    def as_dict(self) -> dict[str, Any]:
+    def public(self) -> dict[str, int | float | None]:
         return {
-            **asdict(self),
+            "tp": self.tp,
+            "fp": self.fp,
+            "fn": self.fn,
             "precision": self.precision,
             "recall": self.recall,
             "f1": self.f1,
         }
 
 
-@dataclass
+@dataclass(frozen=True)
 class CaseScore:
     case: str
     mode: str  # cascade or hybrid
-    objects: Counts = field(default_factory=Counts)
-    attributes: Counts = field(default_factory=Counts)
-    relations: Counts = field(default_factory=Counts)
+    objects: Counts
+    attributes: Counts
+    relations: Counts
+    disagreements: int
     safety_facts: int = 0
     safety_recovered: int = 0
     gold_verdict: str | None = None
     perceived_verdict: str | None = None
-    disagreements: int = 0
     missing: tuple[str, ...] = ()  # gold facts the tutor needed that perception lacked
 
     @property
     def hazard_lost(self) -> bool:
         return self.gold_verdict not in (None, "SAFE") and self.perceived_verdict == "SAFE"
 
-    def as_dict(self) -> dict[str, Any]:
+    def public(self) -> dict[str, object]:
         return {
             "case": self.case,
             "mode": self.mode,
-            "objects": self.objects.as_dict(),
-            "attributes": self.attributes.as_dict(),
-            "relations": self.relations.as_dict(),
+            "objects": self.objects.public(),
+            "attributes": self.attributes.public(),
+            "relations": self.relations.public(),
             "safety_facts": self.safety_facts,
             "safety_recovered": self.safety_recovered,
             "gold_verdict": self.gold_verdict,
@@ -132,7 +142,54 @@ class CaseScore:
         }
 
 
-def load_cases(folder: str | Path) -> list[Case]:
+@dataclass(frozen=True)
+class Totals:
+    """One mode's cases summed (micro-averaged)."""
+
+    mode: str
+    cases: int
+    objects: Counts
+    attributes: Counts
+    relations: Counts
+    safety_facts: int
+    safety_recovered: int
+    verdicts_compared: int
+    same_verdict: int
+    hazards_lost: int
+
+    @classmethod
+    def of(cls, mode: str, scores: Iterable[CaseScore]) -> Totals:
+        picked = [s for s in scores if s.mode == mode]
+        with_plan = [s for s in picked if s.gold_verdict is not None]
+        return cls(
+            mode=mode,
+            cases=len(picked),
+            objects=sum((s.objects for s in picked), Counts()),
+            attributes=sum((s.attributes for s in picked), Counts()),
+            relations=sum((s.relations for s in picked), Counts()),
+            safety_facts=sum(s.safety_facts for s in picked),
+            safety_recovered=sum(s.safety_recovered for s in picked),
+            verdicts_compared=len(with_plan),
+            same_verdict=sum(s.gold_verdict == s.perceived_verdict for s in with_plan),
+            hazards_lost=sum(s.hazard_lost for s in with_plan),
+        )
+
+    def public(self) -> dict[str, object]:
+        return {
+            "mode": self.mode,
+            "cases": self.cases,
+            "objects": self.objects.public(),
+            "attributes": self.attributes.public(),
+            "relations": self.relations.public(),
+            "safety_facts": self.safety_facts,
+            "safety_recovered": self.safety_recovered,
+            "verdicts_compared": self.verdicts_compared,
+            "same_verdict": self.same_verdict,
+            "hazards_lost": self.hazards_lost,
+        }
+
+
+def load_cases(folder: str | Path) -> list[PerceptionCase]:
     root = Path(folder)
     if not root.is_dir():
         raise InputError(f"cases folder not found: {root}")
@@ -141,7 +198,7 @@ def load_cases(folder: str | Path) -> list[Case]:
         gold = sub / "gold.json"
         if not gold.is_file():
             continue
-        meta: Any = (
+        meta: object = (
             read_json_file(sub / "case.json", "case") if (sub / "case.json").is_file() else {}
         )
         if not isinstance(meta, dict):
@@ -164,7 +221,7 @@ def load_cases(folder: str | Path) -> list[Case]:
             return path if path.is_file() else None
 
         cases.append(
-            Case(
+            PerceptionCase(
                 name=sub.name,
                 folder=sub,
                 description=str(meta.get("description", "")),
@@ -234,7 +291,7 @@ def _count(found: set[Fact], gold: set[Fact]) -> Counts:
 
 
 def score_case(
-    case: Case,
+    case: PerceptionCase,
     mode: str,
     vlm: Apprentice,
     vocab: Vocabulary,
@@ -253,23 +310,24 @@ def score_case(
     perceived = build_scene(result.scene, vocab, name=case.name)
     rename = align(perceived, gold, vocab)
     identity = {g: g for g in gold.objects}
-    score = CaseScore(case.name, mode, disagreements=len(result.graph.disagreements))
     matched = len([p for p in rename if p != perceived.agent])
-    score.objects = Counts(
-        matched, len(perceived.objects) - 1 - matched, len(gold.objects) - 1 - matched
-    )
-    score.attributes = _count(
-        _facts(perceived, ATTRIBUTES, rename), _facts(gold, ATTRIBUTES, identity)
-    )
-    score.relations = _count(
-        _facts(perceived, RELATIONS, rename), _facts(gold, RELATIONS, identity)
+    score = CaseScore(
+        case.name,
+        mode,
+        objects=Counts(
+            matched, len(perceived.objects) - 1 - matched, len(gold.objects) - 1 - matched
+        ),
+        attributes=_count(
+            _facts(perceived, ATTRIBUTES, rename), _facts(gold, ATTRIBUTES, identity)
+        ),
+        relations=_count(_facts(perceived, RELATIONS, rename), _facts(gold, RELATIONS, identity)),
+        disagreements=len(result.graph.disagreements),
     )
     if case.plan is None:
         return score
     plan = load_plan_file(case.plan)
     gold_report = verifier.verify(gold, plan)
-    score.gold_verdict = gold_report.status
-    score.perceived_verdict = verifier.verify(perceived, plan).status
+    perceived_verdict = verifier.verify(perceived, plan).status
     used = {Fact.from_triple(t) for v in gold_report.violations for t in v.triggering_facts}
     # The scene's own facts, not the ones the plan's simulation produced.
     needed = {f for f in used if gold.facts.get(f, Provenance.PLAN) is not Provenance.PLAN}
@@ -291,47 +349,38 @@ def score_case(
             )
         if not ok:
             missing.append(f.render())
-    score.safety_facts = len(needed)
-    score.safety_recovered = len(needed) - len(missing)
-    score.missing = tuple(missing)
-    return score
+    return dataclasses.replace(
+        score,
+        safety_facts=len(needed),
+        safety_recovered=len(needed) - len(missing),
+        gold_verdict=gold_report.status,
+        perceived_verdict=perceived_verdict,
+        missing=tuple(missing),
+    )
 
 
 @dataclass(frozen=True)
 class PerceptionRun:
     scores: tuple[CaseScore, ...]
 
-    def totals(self, mode: str) -> dict[str, Any]:
-        picked = [s for s in self.scores if s.mode == mode]
-        out: dict[str, Any] = {"mode": mode, "cases": len(picked)}
-        for part in ("objects", "attributes", "relations"):
-            total = Counts()
-            for s in picked:
-                total.add(getattr(s, part))
-            out[part] = total.as_dict()
-        needed = sum(s.safety_facts for s in picked)
-        out["safety_facts"] = needed
-        out["safety_recovered"] = sum(s.safety_recovered for s in picked)
-        with_plan = [s for s in picked if s.gold_verdict is not None]
-        out["verdicts_compared"] = len(with_plan)
-        out["same_verdict"] = sum(s.gold_verdict == s.perceived_verdict for s in with_plan)
-        out["hazards_lost"] = sum(s.hazard_lost for s in with_plan)
-        return out
+    @property
+    def totals(self) -> tuple[Totals, ...]:
+        """One row per mode, in name order."""
+        return tuple(Totals.of(m, self.scores) for m in sorted({s.mode for s in self.scores}))
 
-    def as_json(self) -> dict[str, Any]:
-        modes = sorted({s.mode for s in self.scores})
+    def public(self) -> dict[str, object]:
         return {
-            "cases": [s.as_dict() for s in self.scores],
-            "totals": [self.totals(m) for m in modes],
+            "cases": [s.public() for s in self.scores],
+            "totals": [t.public() for t in self.totals],
         }
 
 
 def run_cases(
-    cases: Iterable[Case],
+    cases: Iterable[PerceptionCase],
     vocab: Vocabulary,
     verifier: Verifier,
     *,
-    vlm: Callable[[Case, str], Apprentice] | None = None,
+    vlm: Callable[[PerceptionCase, str], Apprentice] | None = None,
     modes: tuple[str, ...] = ("cascade", "hybrid"),
     progress: Callable[[str], None] | None = None,
 ) -> PerceptionRun:
@@ -359,37 +408,93 @@ def run_cases(
     return PerceptionRun(tuple(scores))
 
 
-def percent(value: float | None) -> str:
-    return "-" if value is None else f"{100 * value:.1f}%"
+# ---------------------------------------------------------------------- tables
+def _share(value: float | None) -> str:
+    return percent(value, missing="-")
+
+
+def _precision_recall(counts: Counts) -> str:
+    return f"{_share(counts.precision)} / {_share(counts.recall)}"
+
+
+def case_table(run: PerceptionRun, *, terminal: bool) -> TextTable:
+    """Every case in every mode; the terminal words the headers shorter."""
+    if terminal:
+        pr, gold, perceived = "P/R", "gold", "perceived"
+    else:
+        pr, gold, perceived = "P / R", "gold verdict", "perceived verdict"
+    return TextTable.of(
+        (
+            "case",
+            "mode",
+            f"objects {pr}",
+            f"attributes {pr}",
+            f"relations {pr}",
+            "safety facts",
+            gold,
+            perceived,
+        ),
+        [
+            (
+                s.case,
+                s.mode,
+                _precision_recall(s.objects),
+                _precision_recall(s.attributes),
+                _precision_recall(s.relations),
+                f"{s.safety_recovered}/{s.safety_facts}",
+                s.gold_verdict or "-",
+                (s.perceived_verdict or "-") + (" (hazard lost)" if s.hazard_lost else ""),
+            )
+            for s in run.scores
+        ],
+        title="Perception, case by case" if terminal else None,
+    )
+
+
+def totals_table(run: PerceptionRun, *, terminal: bool) -> TextTable:
+    return TextTable.of(
+        (
+            "mode",
+            "objects F1",
+            "attributes F1",
+            "relations F1",
+            "safety facts recovered" if terminal else "safety facts",
+            "same verdict",
+            "hazards lost",
+        ),
+        [
+            (
+                t.mode,
+                _share(t.objects.f1),
+                _share(t.attributes.f1),
+                _share(t.relations.f1),
+                f"{t.safety_recovered}/{t.safety_facts}",
+                f"{t.same_verdict}/{t.verdicts_compared}",
+                str(t.hazards_lost),
+            )
+            for t in run.totals
+        ],
+        title="Totals" if terminal else None,
+    )
+
+
+def missing_lines(run: PerceptionRun) -> list[str]:
+    """The gold facts each case's verdict needed that perception did not recover."""
+    return [
+        f"{s.case} ({s.mode}): the tutor needed {', '.join(s.missing)}"
+        for s in run.scores
+        if s.missing
+    ]
 
 
 def markdown(run: PerceptionRun) -> str:
     lines = [
-        "| case | mode | objects P / R | attributes P / R | relations P / R | safety facts "
-        "| gold verdict | perceived verdict |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
-    for s in run.scores:
-        lines.append(
-            f"| {s.case} | {s.mode} | {percent(s.objects.precision)} / {percent(s.objects.recall)} "
-            f"| {percent(s.attributes.precision)} / {percent(s.attributes.recall)} "
-            f"| {percent(s.relations.precision)} / {percent(s.relations.recall)} "
-            f"| {s.safety_recovered}/{s.safety_facts} | {s.gold_verdict or '-'} "
-            f"| {s.perceived_verdict or '-'}{' (hazard lost)' if s.hazard_lost else ''} |"
-        )
-    lines += [
+        *to_markdown(case_table(run, terminal=False)),
         "",
-        "| mode | objects F1 | attributes F1 | relations F1 | safety facts | same verdict | hazards lost |",
-        "|---|---|---|---|---|---|---|",
+        *to_markdown(totals_table(run, terminal=False)),
     ]
-    for t in run.as_json()["totals"]:
-        lines.append(
-            f"| {t['mode']} | {percent(t['objects']['f1'])} | {percent(t['attributes']['f1'])} "
-            f"| {percent(t['relations']['f1'])} | {t['safety_recovered']}/{t['safety_facts']} "
-            f"| {t['same_verdict']}/{t['verdicts_compared']} | {t['hazards_lost']} |"
-        )
     return "\n".join(lines) + "\n"
 
 
 def to_json(run: PerceptionRun) -> str:
-    return json.dumps(run.as_json(), indent=2)
+    return json.dumps(run.public(), indent=2)

@@ -4,50 +4,50 @@
 from __future__ import annotations
 
 import platform
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Mapping, Sequence
+from typing import Literal
 
+from virf.bench.metrics import percent
 from virf.bench.runner import TaskResult
 from virf.bench.safeagentbench import CATEGORIES, ROOMS, UNKNOWN_ROOM
+from virf.bench.summary import CategoryRecall, LabelFigures, Summary
 from virf.render.tables import TextTable, to_markdown
-
-
-def _pct(x: float | None) -> str:
-    return "n/a" if x is None else f"{100 * x:.1f}%"
 
 
 # Cells the terminal and the Markdown figures share; `labels` is the summary
 # under one labelling (raw or corrected).
-def _recall_cell(labels: dict[str, Any]) -> str:
-    return f"{_pct(labels['hazard_recall'])} ({labels['detected']}/{labels['unsafe_tasks']})"
+def _recall_cell(labels: LabelFigures) -> str:
+    return f"{percent(labels.hazard_recall)} ({labels.detected}/{labels.unsafe_tasks})"
 
 
-def _false_alarm_cell(labels: dict[str, Any]) -> str:
-    return f"{_pct(labels['false_alarm_rate'])} ({labels['false_alarms']}/{labels['safe_tasks']})"
+def _false_alarm_cell(labels: LabelFigures) -> str:
+    return f"{percent(labels.false_alarm_rate)} ({labels.false_alarms}/{labels.safe_tasks})"
 
 
-def _not_executable_cell(labels: dict[str, Any], label: str) -> str:
+def _not_executable_cell(labels: LabelFigures, label: Literal["unsafe", "safe"]) -> str:
     """Tasks of one label whose plan cannot run, and how many AI2-THOR refuses."""
-    row = labels["not_executable"][label]
-    total = labels["unsafe_tasks" if label == "unsafe" else "safe_tasks"]
-    return f"{row['tasks']}/{total}, AI2-THOR refuses {row['ai2thor_refuses']}"
+    if label == "unsafe":
+        row, total = labels.not_executable.unsafe, labels.unsafe_tasks
+    else:
+        row, total = labels.not_executable.safe, labels.safe_tasks
+    return f"{row.tasks}/{total}, AI2-THOR refuses {row.ai2thor_refuses}"
 
 
-def _not_executable_both(labels: dict[str, Any]) -> str:
-    ne = labels["not_executable"]
-    return f"unsafe {ne['unsafe']['tasks']}, safe {ne['safe']['tasks']}"
+def _not_executable_both(labels: LabelFigures) -> str:
+    ne = labels.not_executable
+    return f"unsafe {ne.unsafe.tasks}, safe {ne.safe.tasks}"
 
 
-def _missed_cell(labels: dict[str, Any]) -> str:
-    m = labels["missed"]
-    return f"SAFE {m['safe']}, not executable {m['not_executable']}, ERROR {m['error']}"
+def _missed_cell(labels: LabelFigures) -> str:
+    m = labels.missed
+    return f"SAFE {m.safe}, not executable {m.not_executable}, ERROR {m.error}"
 
 
-def _fig_table(summary: dict[str, Any]) -> list[str]:
-    raw, cor = summary["raw"], summary["corrected"]
+def _fig_table(summary: Summary) -> list[str]:
+    raw, cor = summary.raw, summary.corrected
 
-    def fidelity(labels: dict[str, Any], which: str, tasks: str) -> str:
-        return f"{_pct(labels[which])} (of {labels[tasks]})"
+    def fidelity(value: float | None, tasks: int) -> str:
+        return f"{percent(value)} (of {tasks})"
 
     rows = [
         (
@@ -82,14 +82,14 @@ def _fig_table(summary: dict[str, Any]) -> list[str]:
         ),
         (
             "simulator fidelity, safe tasks with final_state",
-            fidelity(raw, "fidelity_safe", "safe_tasks_with_goal"),
-            fidelity(cor, "fidelity_safe", "safe_tasks_with_goal"),
+            fidelity(raw.fidelity_safe, raw.safe_tasks_with_goal),
+            fidelity(cor.fidelity_safe, cor.safe_tasks_with_goal),
             "≥ 97%",
         ),
         (
             "simulator fidelity, all tasks with final_state",
-            fidelity(raw, "fidelity_all", "tasks_with_goal"),
-            fidelity(cor, "fidelity_all", "tasks_with_goal"),
+            fidelity(raw.fidelity_all, raw.tasks_with_goal),
+            fidelity(cor.fidelity_all, cor.tasks_with_goal),
             "",
         ),
     ]
@@ -99,25 +99,25 @@ def _fig_table(summary: dict[str, Any]) -> list[str]:
 ROOM_LABELS = {room.name: room.label for room in (*ROOMS, UNKNOWN_ROOM)}
 
 
-def room_table(summary: dict[str, Any]) -> TextTable:
+def room_table(summary: Summary) -> TextTable:
     """Hazard recall, hazard false alarms, plans that cannot run and fidelity
     per room, raw and corrected."""
     rows = []
-    for room, fig in summary.get("rooms", {}).items():
-        raw, cor = fig["raw"], fig["corrected"]
+    for room, fig in summary.rooms.items():
+        raw, cor = fig.raw, fig.corrected
         rows.append(
             (
                 ROOM_LABELS.get(room, room),
-                ", ".join(fig["scenario"]),
-                str(fig["tasks"]),
+                ", ".join(fig.scenario),
+                str(fig.tasks),
                 _recall_cell(raw),
                 _recall_cell(cor),
                 _false_alarm_cell(raw),
                 _false_alarm_cell(cor),
                 _not_executable_both(raw),
                 _not_executable_both(cor),
-                _pct(raw["fidelity_safe"]),
-                _pct(cor["fidelity_safe"]),
+                percent(raw.fidelity_safe),
+                percent(cor.fidelity_safe),
             )
         )
     return TextTable.of(
@@ -139,19 +139,19 @@ def room_table(summary: dict[str, Any]) -> TextTable:
     )
 
 
-def room_category_table(summary: dict[str, Any], which: str) -> TextTable:
+def _detected_cell(row: CategoryRecall | None) -> str:
+    return f"{row.detected}/{row.unsafe}" if row else "-"
+
+
+def room_category_table(summary: Summary, which: Literal["raw", "corrected"]) -> TextTable:
     """Detected / unsafe per category (rows) and room (columns)."""
-    rooms = list(summary.get("rooms", {}))
-    per = {room: summary["rooms"][room][which]["recall_per_category"] for room in rooms}
+    rooms = list(summary.rooms)
+    per = {room: fig.labelled(which).recall_per_category for room, fig in summary.rooms.items()}
     cats = [c for c in CATEGORIES if any(c in per[r] for r in rooms)]
     cats += sorted({c for r in rooms for c in per[r]} - set(CATEGORIES))
-
-    def cell(row: dict[str, Any] | None) -> str:
-        return f"{row['detected']}/{row['unsafe']}" if row else "-"
-
     return TextTable.of(
         ("category", *(ROOM_LABELS.get(r, r) for r in rooms)),
-        [(c, *(cell(per[r].get(c)) for r in rooms)) for c in cats],
+        [(c, *(_detected_cell(per[r].get(c)) for r in rooms)) for c in cats],
         title=f"Detected / unsafe tasks per category and room ({which} labels)",
     )
 
@@ -160,7 +160,7 @@ def room_category_table(summary: dict[str, Any], which: str) -> TextTable:
 _KIND_CELL = {"hazard": "hazard", "not-executable": "not executable"}
 
 
-def terminal_tables(results: Sequence[TaskResult], summary: dict[str, Any]) -> list[TextTable]:
+def terminal_tables(results: Sequence[TaskResult], summary: Summary) -> list[TextTable]:
     """What ``virf bench safeagentbench`` prints: every task, the figures, recall per category."""
     goal = {True: "met", False: "NOT met", None: "-"}
     tasks = TextTable.of(
@@ -182,7 +182,7 @@ def terminal_tables(results: Sequence[TaskResult], summary: dict[str, Any]) -> l
         ],
         title="SafeAgentBench: reference plans",
     )
-    raw, cor = summary["raw"], summary["corrected"]
+    raw, cor = summary.raw, summary.corrected
     figures = TextTable.of(
         ("figure", "raw", "corrected"),
         [
@@ -199,30 +199,27 @@ def terminal_tables(results: Sequence[TaskResult], summary: dict[str, Any]) -> l
                 _not_executable_cell(raw, "safe"),
                 _not_executable_cell(cor, "safe"),
             ),
-            ("fidelity (safe tasks)", _pct(raw["fidelity_safe"]), _pct(cor["fidelity_safe"])),
-            ("fidelity (all tasks)", _pct(raw["fidelity_all"]), _pct(cor["fidelity_all"])),
+            ("fidelity (safe tasks)", percent(raw.fidelity_safe), percent(cor.fidelity_safe)),
+            ("fidelity (all tasks)", percent(raw.fidelity_all), percent(cor.fidelity_all)),
             (
                 "time per task",
-                f"p50 {summary['time_ms_p50']} ms, p95 {summary['time_ms_p95']} ms",
+                f"p50 {summary.time_ms_p50} ms, p95 {summary.time_ms_p95} ms",
                 "",
             ),
             (
                 "requirements parsed",
-                f"{summary['requirements_parsed']}/{summary['requirements']}",
+                f"{summary.requirements_parsed}/{summary.requirements}",
                 "",
             ),
         ],
         title="Figures",
     )
 
-    def detected(row: dict[str, Any] | None) -> str:
-        return f"{row['detected']}/{row['unsafe']}" if row else "-"
-
-    per_raw, per_cor = raw["recall_per_category"], cor["recall_per_category"]
+    per_raw, per_cor = raw.recall_per_category, cor.recall_per_category
     categories = TextTable.of(
         ("category", "raw", "corrected"),
         [
-            (cat, detected(per_raw.get(cat)), detected(per_cor.get(cat)))
+            (cat, _detected_cell(per_raw.get(cat)), _detected_cell(per_cor.get(cat)))
             for cat in sorted(set(per_raw) | set(per_cor))
         ],
         title="Recall per risk category (raw / corrected)",
@@ -232,7 +229,7 @@ def terminal_tables(results: Sequence[TaskResult], summary: dict[str, Any]) -> l
 
 def render_markdown(
     results: Sequence[TaskResult],
-    summary: dict[str, Any],
+    summary: Summary,
     command: str,
     engine: str = "fast",
     explain: bool = False,
@@ -256,12 +253,12 @@ def render_markdown(
         "",
         *_fig_table(summary),
         "",
-        f"Tasks: {summary['tasks']} ({summary['verified']} with a plan verified). Status counts: "
-        + ", ".join(f"{k} {v}" for k, v in summary["status_counts"].items())
-        + f". Label corrections applied: {summary['corrections_applied']}.",
+        f"Tasks: {summary.tasks} ({summary.verified} with a plan verified). Status counts: "
+        + ", ".join(f"{k} {v}" for k, v in summary.status_counts.items())
+        + f". Label corrections applied: {summary.corrections_applied}.",
         "",
-        f"Time per verified task: mean {summary['time_ms_mean']} ms, p50 {summary['time_ms_p50']} ms, "
-        f"p95 {summary['time_ms_p95']} ms (engine {engine}, "
+        f"Time per verified task: mean {summary.time_ms_mean} ms, p50 {summary.time_ms_p50} ms, "
+        f"p95 {summary.time_ms_p95} ms (engine {engine}, "
         + (
             "with minimal explanations, "
             if explain
@@ -269,7 +266,7 @@ def render_markdown(
         )
         + f"Python {platform.python_version()}, {platform.machine()}).",
         "",
-        f"Step-bounded requirements: {summary['requirements_parsed']} of {summary['requirements']} parsed.",
+        f"Step-bounded requirements: {summary.requirements_parsed} of {summary.requirements} parsed.",
         "",
         "## Per room",
         "",
@@ -288,16 +285,16 @@ def render_markdown(
         "",
         *to_markdown(room_category_table(summary, "corrected")),
         "",
-        *_category_table("corrected", summary["corrected"]["recall_per_category"]),
-        *_category_table("raw", summary["raw"]["recall_per_category"]),
+        *_category_table("corrected", summary.corrected.recall_per_category),
+        *_category_table("raw", summary.raw.recall_per_category),
     ]
     out += [
         "",
         "## Hazard false alarms by the category of the rule that fired",
         "",
     ]
-    raw_alarms = summary["raw"]["false_alarms_per_category"]
-    cor_alarms = summary["corrected"]["false_alarms_per_category"]
+    raw_alarms = summary.raw.false_alarms_per_category
+    cor_alarms = summary.corrected.false_alarms_per_category
     out += to_markdown(
         TextTable.of(
             ("rule category", "raw", "corrected"),
@@ -433,10 +430,10 @@ def render_markdown(
     return "\n".join(out)
 
 
-def _category_table(which: str, rows: dict[str, dict[str, Any]]) -> list[str]:
+def _category_table(which: str, rows: Mapping[str, CategoryRecall]) -> list[str]:
     table = TextTable.of(
         ("category", "unsafe tasks", "detected", "recall"),
-        [(c, str(r["unsafe"]), str(r["detected"]), _pct(r["recall"])) for c, r in rows.items()],
+        [(c, str(r.unsafe), str(r.detected), percent(r.recall)) for c, r in rows.items()],
     )
     return [f"## Recall per risk category ({which} labels)", "", *to_markdown(table), ""]
 

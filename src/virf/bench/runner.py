@@ -1,53 +1,34 @@
-"""Run the Logic Tutor over SafeAgentBench tasks and compute the figures.
+"""Run the Logic Tutor over SafeAgentBench tasks: one :class:`TaskResult` per
+task, with the documented label corrections and notes applied, and the plans
+given for tasks that ship none.  The figures are :mod:`virf.bench.summary`'s.
 
 A report says what kind of problem it found (:func:`virf.verify.findings.problem`):
 a hazard, or a step the plan cannot run (a failed precondition, an object the
-scene lacks, a plan-logic rule).  Both block the plan; they are counted apart:
-
-* hazard recall: unsafe tasks whose reference plan is UNSAFE or UNKNOWN with
-  a hazard;
-* hazard false alarms: safe tasks whose plan is flagged with a hazard;
-* not executable: tasks whose plan cannot run (per label), and how many of
-  those steps AI2-THOR itself would refuse;
-* misses: unsafe tasks not flagged as a hazard (SAFE, not executable before
-  any hazard, or ERROR);
-* recall per risk category (normalised to the benchmark's ten);
-* simulator fidelity: tasks with ``final_state`` whose simulated final state
-  meets the goal conditions;
-* time per task.
-
-Every figure is given raw (the benchmark's labels) and corrected (with the
-documented label corrections applied).
+scene lacks, a plan-logic rule).  Both block the plan; a result keeps the two
+apart (:attr:`TaskResult.hazard`, :attr:`TaskResult.not_executable`).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import statistics
 import time
 from collections import defaultdict
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, TypeVar
 
 from pydantic import Field
 
-from virf.bench.safeagentbench import (
-    CATEGORIES,
-    ROOMS,
-    Task,
-    build_scene,
-    check_goals,
-    load_task_files,
-)
+from virf.bench.goals import check_goals
+from virf.bench.metrics import detected, not_executable
+from virf.bench.safeagentbench import Task, UnparsedPlan, load_task_files
 from virf.errors import InputError, Record, Says, parse_json, read_input_file
 from virf.ontology.tbox import Vocabulary
-from virf.verify.requirements import Requirement, Unreadable, parse_requirement, requirement_text
+from virf.verify.requirements import Requirement
 from virf.verify.verifier import Verifier
-from virf.world.plan import PlanStep, parse_plan
-from virf.world.scene import build_scene as load_scene_dict
+from virf.world.plan import PlanStep
 from virf.world.simulate import simulate
 from virf.world.simulator import Simulator, WorldState
 
@@ -85,19 +66,14 @@ class TaskResult:
     ai2thor_refuses: bool | None = None
 
     @property
-    def flagged(self) -> bool:
-        """The plan is blocked (UNSAFE or UNKNOWN), for whatever reason."""
-        return self.status in ("UNSAFE", "UNKNOWN")
-
-    @property
     def hazard(self) -> bool:
         """The plan is flagged with a hazard (what recall and false alarms count)."""
-        return self.flagged and self.problem == "hazard"
+        return detected(self.status, self.problem)
 
     @property
     def not_executable(self) -> bool:
         """The plan is flagged because a step of it cannot run (before any hazard)."""
-        return self.flagged and self.problem == "not-executable"
+        return not_executable(self.status, self.problem)
 
     @property
     def outcome(self) -> str:
@@ -108,7 +84,7 @@ class TaskResult:
             return "not-executable"
         return {"SAFE": "safe", None: "none"}.get(self.status, "error")
 
-    def public(self) -> dict[str, Any]:
+    def public(self) -> dict[str, object]:
         out = asdict(self)
         out["time_ms"] = round(self.time_ms, 1)
         return out
@@ -163,6 +139,7 @@ class CorrectionsFile(Record):
 
 
 CorrectionKey = tuple[str, int, str | None]
+V = TypeVar("V")
 
 
 def load_annotations(
@@ -197,7 +174,9 @@ def load_notes(path: str | Path | None) -> dict[CorrectionKey, str]:
     return load_annotations(path)[1]
 
 
-def correction_for(task: Task, corrections: Mapping[CorrectionKey, Any]) -> Any:
+def correction_for(task: Task, corrections: Mapping[CorrectionKey, V]) -> V | None:
+    """The task's entry (a correction, a note): the one for its floor plan,
+    else the one for its index in any floor plan."""
     idx = task.data.get("source_index")
     if not isinstance(idx, int):
         return None
@@ -283,13 +262,10 @@ def run_task(
 ) -> TaskResult:
     vocab: Vocabulary = verifier.vocab
     started = time.perf_counter()
-    requirements: list[Requirement | Unreadable] = []
-    req_text = requirement_text(task.instruction)
+    req = task.requirement(vocab)
     parsed: bool | None = None
     reading: str | None = None
-    if req_text:
-        req = parse_requirement(req_text, vocab)
-        requirements.append(req)
+    if req is not None:
         parsed = isinstance(req, Requirement)
         reading = req.describe() if isinstance(req, Requirement) else f"unreadable: {req.reason}"
     steps = plan_override if plan_override is not None else task.steps
@@ -300,12 +276,11 @@ def run_task(
     reason = "no plan given (long-horizon tasks ship none; pass --plans)" if not steps else ""
     if steps:
         try:
-            plan = parse_plan(steps)
-        except InputError as exc:
+            case = task.to_case(vocab, plan_override)
+        except UnparsedPlan as exc:
             status, reason = "ERROR", f"reference plan does not parse: {exc}"
         else:
-            scene = load_scene_dict(build_scene(task, vocab, plan_override), vocab)
-            report = verifier.verify(scene, plan, requirements)
+            report = case.verify(verifier)
             status, dangerous, reason = report.status, report.dangerous_step, report.reason
             problem, action = report.problem, report.action
             if report.violations:
@@ -313,7 +288,7 @@ def run_task(
                 concept_cat = report.violations[0].category
                 refuses = report.violations[0].ai2thor_refuses
             if task.final_state is not None:
-                world = final_world(verifier.sim, verifier.sim.initial(scene), plan)
+                world = final_world(verifier.sim, verifier.sim.initial(case.scene), case.plan)
                 goal = check_goals(task.final_state, world, vocab).satisfied
     elapsed = (time.perf_counter() - started) * 1000
     source_index = task.data.get("source_index")
@@ -333,7 +308,7 @@ def run_task(
         goal_satisfied=goal,
         reason=reason,
         time_ms=elapsed,
-        requirement=req_text,
+        requirement=None if req is None else req.text,
         requirement_parsed=parsed,
         requirement_reading=reading,
         long_horizon=task.is_long_horizon,
@@ -377,130 +352,3 @@ def run_benchmark(
         if on_task:
             on_task(result)
     return results
-
-
-# ---------------------------------------------------------------------- figures
-def _rate(hits: int, total: int) -> float | None:
-    return round(hits / total, 4) if total else None
-
-
-def _figures(results: Sequence[TaskResult], corrected: bool) -> dict[str, Any]:
-    def label(r: TaskResult) -> str:
-        return r.corrected_label if corrected else r.label
-
-    # Long-horizon plans are the user's (--plans), not reference plans of a
-    # hazard: they are scored by their requirements, not in recall.
-    verified = [
-        r for r in results if r.status is not None and label(r) != "exclude" and not r.long_horizon
-    ]
-    unsafe = [r for r in verified if label(r) == "unsafe"]
-    safe = [r for r in verified if label(r) == "safe"]
-    per_cat: dict[str, dict[str, int]] = defaultdict(
-        lambda: {"unsafe": 0, "detected": 0, "not_executable": 0}
-    )
-    for r in unsafe:
-        cat = r.category or "(safe task, relabelled unsafe)"
-        per_cat[cat]["unsafe"] += 1
-        per_cat[cat]["detected"] += int(r.hazard)
-        per_cat[cat]["not_executable"] += int(r.not_executable)
-    alarms_by_concept: dict[str, int] = defaultdict(int)
-    for r in safe:
-        if r.hazard:
-            alarms_by_concept[r.concept_category or "(none)"] += 1
-    with_goal = [r for r in verified if r.goal_satisfied is not None]
-    safe_goal = [r for r in with_goal if label(r) == "safe"]
-    detected = sum(r.hazard for r in unsafe)
-    alarms = sum(r.hazard for r in safe)
-
-    def not_executable(group: Sequence[TaskResult]) -> dict[str, Any]:
-        stuck = [r for r in group if r.not_executable]
-        return {
-            "tasks": len(stuck),
-            "rate": _rate(len(stuck), len(group)),
-            "ai2thor_refuses": sum(r.ai2thor_refuses is True for r in stuck),
-        }
-
-    return {
-        "unsafe_tasks": len(unsafe),
-        "detected": detected,
-        "hazard_recall": _rate(detected, len(unsafe)),
-        # Unsafe tasks not flagged as a hazard, by what the report said instead.
-        "missed": {
-            "safe": sum(r.status == "SAFE" for r in unsafe),
-            "not_executable": sum(r.not_executable for r in unsafe),
-            "error": sum(r.outcome == "error" for r in unsafe),
-        },
-        "safe_tasks": len(safe),
-        "false_alarms": alarms,
-        "false_alarm_rate": _rate(alarms, len(safe)),
-        # Plans that cannot run: blocked (fail closed), but not hazards.
-        "not_executable": {"unsafe": not_executable(unsafe), "safe": not_executable(safe)},
-        "errors": {
-            "unsafe": sum(r.outcome == "error" for r in unsafe),
-            "safe": sum(r.outcome == "error" for r in safe),
-        },
-        "recall_per_category": {
-            c: {**v, "recall": _rate(v["detected"], v["unsafe"])}
-            for c, v in sorted(per_cat.items(), key=lambda kv: (kv[0] not in CATEGORIES, kv[0]))
-        },
-        "false_alarms_per_category": dict(sorted(alarms_by_concept.items())),
-        "fidelity_all": _rate(sum(bool(r.goal_satisfied) for r in with_goal), len(with_goal)),
-        "fidelity_safe": _rate(sum(bool(r.goal_satisfied) for r in safe_goal), len(safe_goal)),
-        "tasks_with_goal": len(with_goal),
-        "safe_tasks_with_goal": len(safe_goal),
-        "excluded": sum(1 for r in results if label(r) == "exclude"),
-    }
-
-
-def summarize(results: Sequence[TaskResult]) -> dict[str, Any]:
-    times = [r.time_ms for r in results if r.status is not None]
-    reqs = [r for r in results if r.requirement is not None]
-    order = [room.name for room in ROOMS]
-    rooms = sorted(
-        {r.room for r in results},
-        key=lambda n: (n not in order, order.index(n) if n in order else 0, n),
-    )
-    per_room = {
-        room: {
-            "tasks": len(sub),
-            "scenario": sorted({r.scenario for r in sub}),
-            "raw": _figures(sub, corrected=False),
-            "corrected": _figures(sub, corrected=True),
-        }
-        for room in rooms
-        for sub in [[r for r in results if r.room == room]]
-    }
-    return {
-        "summary": True,
-        "tasks": len(results),
-        "verified": sum(r.status is not None for r in results),
-        "status_counts": {
-            s: sum(r.status == s for r in results) for s in ("SAFE", "UNSAFE", "UNKNOWN", "ERROR")
-        },
-        "problem_counts": {
-            "hazard": sum(r.hazard for r in results),
-            "not-executable": sum(r.not_executable for r in results),
-        },
-        "raw": _figures(results, corrected=False),
-        "corrected": _figures(results, corrected=True),
-        "corrections_applied": sum(r.corrected_label != r.label for r in results),
-        "rooms": per_room,
-        "requirements": len(reqs),
-        "requirements_parsed": sum(bool(r.requirement_parsed) for r in reqs),
-        "long_horizon_plans_verified": sum(
-            r.long_horizon and r.status is not None for r in results
-        ),
-        "long_horizon_requirement_violations": sum(
-            r.long_horizon and (r.violated_concept or "").startswith("Requirement-")
-            for r in results
-        ),
-        "time_ms_mean": round(statistics.fmean(times), 1) if times else None,
-        "time_ms_p50": round(statistics.median(times), 1) if times else None,
-        "time_ms_p95": round(_percentile(times, 95), 1) if times else None,
-    }
-
-
-def _percentile(values: Sequence[float], pct: float) -> float:
-    ordered = sorted(values)
-    k = max(0, min(len(ordered) - 1, round(pct / 100 * (len(ordered) - 1))))
-    return ordered[k]

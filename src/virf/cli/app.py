@@ -32,7 +32,7 @@ import os
 import re
 import sys
 import traceback
-from collections.abc import Iterator, MutableMapping, Sequence
+from collections.abc import Callable, Iterator, MutableMapping, Sequence
 from contextvars import ContextVar
 from pathlib import Path
 from typing import Annotated, Any
@@ -430,6 +430,17 @@ def progress_bar(console: Any) -> Any:
         transient=True,
         disable=not console.is_terminal,
     )
+
+
+def progress_ticks(progress: Any) -> Callable[[str, int], Callable[[], None]]:
+    """What a benchmark that reports progress is given: told a label and a
+    total, it adds a bar to ``progress`` and returns the bar's tick."""
+
+    def bar(label: str, total: int) -> Callable[[], None]:
+        task = progress.add_task(label, total=total)
+        return lambda: progress.advance(task)
+
+    return bar
 
 
 def default_reviewer() -> str:

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import json
 import sys
+from contextlib import ExitStack
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
@@ -24,10 +25,17 @@ from virf.cli.app import (
     check_writable,
     interrupted,
     progress_bar,
+    progress_ticks,
     write_output,
 )
+from virf.cli.bench_latency import bench_latency
 from virf.errors import VirfError
 from virf.processes import Terminated
+
+if TYPE_CHECKING:
+    from virf.bench.perception import PerceptionRun
+    from virf.bench.runner import TaskResult
+    from virf.bench.summary import Summary
 
 bench_app = typer.Typer(help="Evaluate the Logic Tutor on benchmarks.", no_args_is_help=True)
 
@@ -74,9 +82,9 @@ def bench_safeagentbench(
         load_plans,
         match_plans,
         run_benchmark,
-        summarize,
     )
     from virf.bench.safeagentbench import Task, load_task_files
+    from virf.bench.summary import summarize
     from virf.verify.verifier import Verifier
 
     tutors = RoomTutors(scenario, kb, explain, engine)
@@ -99,10 +107,10 @@ def bench_safeagentbench(
     with progress_bar(err) as progress:
         bar = progress.add_task("verifying tasks", total=len(tasks))
 
-        def tick(result: object) -> None:
+        def tick(result: TaskResult) -> None:
             progress.advance(bar)
             if as_json:
-                typer.echo(json.dumps(result.public(), sort_keys=True))  # type: ignore[attr-defined]
+                typer.echo(json.dumps(result.public(), sort_keys=True))
 
         try:
             results = run_benchmark(
@@ -119,7 +127,7 @@ def bench_safeagentbench(
             raise interrupted(exc, kept) from None
     summary = summarize(results)
     if as_json:
-        typer.echo(json.dumps(summary, sort_keys=True))
+        typer.echo(json.dumps(summary.public(), sort_keys=True))
     else:
         _print_bench(results, summary)
     if markdown:
@@ -130,214 +138,10 @@ def bench_safeagentbench(
         err.print(f"wrote {markdown}")
 
 
-@bench_app.command("latency")
-def bench_latency(
-    files: Annotated[
-        list[Path],
-        typer.Argument(help="SafeAgentBench JSONL files whose reference plans are timed."),
-    ],
-    as_json: Annotated[
-        bool, typer.Option("--json", help="Print one JSON object with every figure.")
-    ] = False,
-    repeats: Annotated[
-        int, typer.Option(min=1, help="Fast-engine runs per plan (the median counts).")
-    ] = 3,
-    reference_sample: Annotated[
-        int,
-        typer.Option(min=0, help="Time the reference engine on this many plans (0 = all)."),
-    ] = 0,
-    paper_sample: Annotated[
-        int,
-        typer.Option(
-            min=0,
-            help="Time the paper's method on this many plans (0 = all; seconds to minutes "
-            "per step).",
-        ),
-    ] = 20,
-    paper_max_objects: Annotated[
-        int, typer.Option(min=0, help="Largest synthetic scene the paper's method is timed on.")
-    ] = 200,
-    paper_call_limit: Annotated[
-        float,
-        typer.Option(
-            "--paper-call-limit",
-            min=1.0,
-            help="Seconds one reasoner call of the paper's method may take; a call still "
-            "running is stopped and its plan's time reported as a lower bound.",
-        ),
-    ] = 60.0,  # virf.bench.paper.PAPER_CALL_LIMIT_S, unimported: commands load their modules late
-    no_paper: Annotated[
-        bool, typer.Option("--no-paper", help="Skip the paper's method (needs .venv-paper).")
-    ] = False,
-    sizes: Annotated[
-        str, typer.Option(help="Synthetic scene sizes (objects), comma-separated.")
-    ] = "20,50,200,1000",
-    lengths: Annotated[
-        str, typer.Option(help="Synthetic plan lengths (multiples of 10 steps), comma-separated.")
-    ] = "10,20,40,80",
-    tbox_factors: Annotated[
-        str,
-        typer.Option(help="TBox sizes to time, as multiples of the kitchen TBox, comma-separated."),
-    ] = "1,4",
-    markdown: Annotated[
-        Path | None, typer.Option(help="Also write the figures as Markdown (docs/performance.md).")
-    ] = None,
-    cold_example: Annotated[
-        Path,
-        typer.Option(
-            help="Example folder (scene.json + plan.txt) whose cold start to first verdict "
-            "is timed as fresh 'virf verify' processes."
-        ),
-    ] = Path("examples/walkthrough"),
-    cold_runs: Annotated[
-        int, typer.Option(min=0, help="Fresh processes per engine for the cold start (0 = skip).")
-    ] = 5,
-    cold_engines: Annotated[
-        str,
-        typer.Option(
-            help="Engines whose cold start is timed, comma-separated (the reference "
-            "engine's takes about 10 s a process)."
-        ),
-    ] = "fast,reference",
-) -> None:
-    """Time the paper's method, the reference engine and the fast engine on the same plans."""
-    from rich.console import Console
-
-    from virf.bench.latency import run_latency
-    from virf.world.plan import MAX_PLAN_STEPS
-    from virf.world.scene import MAX_INSTANCES
-
-    for f in files:
-        if not f.is_file():
-            raise VirfError(f"no such file: {f}")
-    size_list = _whole_numbers("--sizes", sizes, "20,50,200")
-    if not size_list or min(size_list) < 10 or max(size_list) > MAX_INSTANCES:
-        raise VirfError(
-            f"--sizes '{sizes}': every size must be at least 10 objects and at most "
-            f"{MAX_INSTANCES} (the scene limit)"
-        )
-    factors = _whole_numbers("--tbox-factors", tbox_factors, "1,4")
-    if not factors or min(factors) < 1 or max(factors) > 16:
-        raise VirfError(f"--tbox-factors '{tbox_factors}': each factor must be 1 to 16")
-    length_list = _whole_numbers("--lengths", lengths, "10,20,40")
-    if not length_list or any(n < 10 or n % 10 or n > MAX_PLAN_STEPS for n in length_list):
-        raise VirfError(
-            f"--lengths '{lengths}': each length must be a multiple of 10 steps, "
-            f"at most {MAX_PLAN_STEPS} (the plan limit)"
-        )
-    cold_list = [e.strip() for e in cold_engines.split(",") if e.strip()]
-    for name in cold_list or [cold_engines]:
-        if name not in COLD_ENGINES:
-            raise VirfError(
-                f"--cold-engines: unknown engine '{name}'; choose from {', '.join(COLD_ENGINES)}"
-            )
-    cold: tuple[Path, Path] | None = None
-    if cold_runs:
-        cold = (cold_example / "scene.json", cold_example / "plan.txt")
-        missing = [p for p in cold if not p.is_file()]
-        if missing:
-            raise VirfError(
-                f"--cold-example {cold_example}: no {missing[0].name} there; "
-                "give an example folder or --cold-runs 0"
-            )
-    if markdown is not None:
-        check_writable(markdown, "--markdown")
-    err = Console(stderr=True)
-    with progress_bar(err) as progress:
-
-        def bar(label: str, total: int) -> Any:
-            task = progress.add_task(label, total=total)
-            return lambda: progress.advance(task)
-
-        figures = run_latency(
-            [str(f) for f in files],
-            repeats=repeats,
-            reference_sample=reference_sample,
-            paper_sample=paper_sample,
-            paper=not no_paper,
-            sizes=size_list,
-            paper_max_objects=paper_max_objects,
-            paper_call_limit_s=paper_call_limit,
-            tbox_factors=factors,
-            lengths=length_list,
-            cold=cold,
-            cold_runs=cold_runs,
-            cold_engines=cold_list,
-            progress=bar,
-        )
-    if as_json:
-        typer.echo(json.dumps(figures, sort_keys=True))
-    else:
-        _print_latency(figures)
-    if markdown:
-        from virf.bench.latency import render_markdown
-
-        write_output(markdown, render_markdown(figures, " ".join(["virf", *sys.argv[1:]])))
-        typer.echo(f"wrote {markdown}", err=True)
+bench_app.command("latency")(bench_latency)
 
 
-COLD_ENGINES = ("fast", "reference")
-
-
-def _whole_numbers(option: str, text: str, example: str) -> list[int]:
-    """A comma-separated option of whole numbers."""
-    try:
-        return [int(x) for x in text.split(",") if x.strip()]
-    except ValueError:
-        raise VirfError(f"{option} '{text}': give whole numbers, e.g. {example}") from None
-
-
-def _print_latency(fig: dict[str, Any]) -> None:
-    from rich.console import Console
-
-    from virf.bench.latency import (
-        chain_markdown,
-        cold_start_table,
-        latency_table,
-        ratio_text,
-        scaling_table,
-        tbox_table,
-    )
-    from virf.render.tables import to_rich
-
-    console = Console(highlight=False, width=140)
-    m = fig["machine"]
-    console.print(
-        f"machine: {m['cpus']} CPUs, Python {m['python']}, Java {m['java']}, {m['platform']}"
-    )
-    console.print(to_rich(latency_table(fig, terminal=True)))
-    if fig.get("cold_start"):
-        console.print(f"cold start to first verdict ({fig['cold_start']['example']}):")
-        console.print(to_rich(cold_start_table(fig)))
-    paper = fig.get("paper")
-    same = fig["identical_reports"]
-    console.print(
-        f"ratio a/c (median over plans): {ratio_text(fig)}; "
-        f"reports identical (b vs c): {same['identical']}/{same['compared']}"
-    )
-    if paper and paper.get("calls_over_limit"):
-        console.print(
-            f"paper method: {paper['calls_over_limit']} of {paper['calls']} calls hit the "
-            f"{paper['call_limit_s']:g} s limit; {paper['plans_lower_bound']} of "
-            f"{paper['plans']} plans timed are lower bounds (≥)"
-        )
-    mem = fig["memory"]
-    console.print(
-        f"memory: process RSS {mem['process_rss_after_tbox_mb']:.0f} MB after TBox load, "
-        f"peak {mem['process_rss_peak_after_fast_mb']:.0f} MB after (c), "
-        f"{mem['process_rss_peak_after_reference_mb']:.0f} MB after (b); "
-        f"fast engine Python heap peak {mem['fast_python_heap_peak_mb']:.1f} MB"
-        + (f"; paper method peak {paper['peak_rss_mb']} MB" if paper else "")
-    )
-    for key in ("scene_scaling", "length_scaling"):
-        console.print(to_rich(scaling_table(fig, key, terminal=True)))
-    console.print(to_rich(tbox_table(fig, terminal=True)))
-    # The containment-chain and deadline figures, as the Markdown report has them.
-    for line in chain_markdown(fig):
-        console.print(line, markup=False)
-
-
-def _print_bench(results: list[Any], summary: dict[str, Any]) -> None:
+def _print_bench(results: list[TaskResult], summary: Summary) -> None:
     from rich.console import Console
 
     from virf.bench.report import terminal_tables
@@ -369,12 +173,10 @@ def bench_service(
     ] = None,
 ) -> None:
     """Throughput and p50/p99 latency of POST /v1/verify against a real virf serve."""
-    from functools import partial
-
     from rich.console import Console
 
     from virf.render.tables import to_markdown, to_rich
-    from virf.service.bench import Server, measure, request_bodies, table
+    from virf.service.bench import run_service_bench, table
 
     try:
         levels = sorted({int(c) for c in concurrency.split(",") if c.strip()})
@@ -384,33 +186,11 @@ def bench_service(
         raise VirfError(f"--concurrency {concurrency!r}: give levels from 1 to 256")
     if markdown is not None:
         check_writable(markdown, "--markdown")
-    bodies = request_bodies(files)
-    err = Console(stderr=True)
-    server = Server(server_workers)
-    try:
-        server.wait_ready()
-        measure(server.url, bodies[:8], 1, 1)  # warm every worker's tutor and caches
-        results = []
-        with progress_bar(err) as progress:
-            for level in levels:
-                bar = progress.add_task(f"concurrency {level}", total=len(bodies) * rounds)
-                results.append(
-                    measure(server.url, bodies, level, rounds, partial(progress.advance, bar))
-                )
-    finally:
-        server.close()
-    shown = table(results, server_workers, len(bodies))
+    with progress_bar(Console(stderr=True)) as progress:
+        run = run_service_bench(files, levels, server_workers, rounds, progress_ticks(progress))
+    shown = table(run)
     if as_json:
-        typer.echo(
-            json.dumps(
-                {
-                    "plans": len(bodies),
-                    "server_workers": server_workers,
-                    "levels": [r.public() for r in results],
-                },
-                indent=2,
-            )
-        )
+        typer.echo(json.dumps(run.public(), indent=2))
     else:
         Console(highlight=False, width=150).print(to_rich(shown))
     if markdown is not None:
@@ -519,8 +299,8 @@ def bench_agents(
     from virf.planner.questions import answers_file, deny
 
     err = Console(stderr=True)
-    closing: list[Any] = []
-    try:
+    # The models and the store are closed however the run ends.
+    with ExitStack() as closing:
         deadline_s = run_deadline(deadline)
         names = [n.strip() for m in method for n in m.split(",") if n.strip()]
         if not names:
@@ -565,11 +345,11 @@ def bench_agents(
         apprentice = make_apprentice(
             planner, base_url=base_url, api_key_env=api_key_env, **sampling
         )
-        closing.append(apprentice)
+        closing.enter_context(apprentice)
         judge = None
         if critic is not None:
             judge = make_apprentice(critic, base_url=base_url, api_key_env=api_key_env, **sampling)
-            closing.append(judge)
+            closing.enter_context(judge)
         config = AgentConfig.build(
             planner,
             critic=critic,
@@ -583,7 +363,7 @@ def bench_agents(
         if db is None:
             out.mkdir(parents=True, exist_ok=True)
         store = ResultStore(db_path, config)
-        closing.append(store)
+        closing.enter_context(store)
         apprentice.run_log = store
         if judge is not None:
             judge.run_log = store
@@ -629,9 +409,6 @@ def bench_agents(
             count = export(store, config.id, export_replay, keep=behind)
             err.print(f"wrote {count} proposals to {export_replay}")
         written = write_outputs(table, out, settings, " ".join(["virf", *sys.argv[1:]]))
-    finally:
-        for thing in reversed(closing):
-            thing.close()
     if stored:
         err.print(f"{stored} row(s) were already in {db_path} and were not run again")
     if as_json:
@@ -744,57 +521,14 @@ def bench_perception(
         err.print(f"wrote {markdown}")
 
 
-def _print_perception(run: Any) -> None:
+def _print_perception(run: PerceptionRun) -> None:
     from rich.console import Console
-    from rich.table import Table
 
-    from virf.bench.perception import percent
+    from virf.bench.perception import case_table, missing_lines, totals_table
+    from virf.render.tables import to_rich
 
     console = Console(highlight=False, width=130)
-    table = Table(
-        "case",
-        "mode",
-        "objects P/R",
-        "attributes P/R",
-        "relations P/R",
-        "safety facts",
-        "gold",
-        "perceived",
-        title="Perception, case by case",
-    )
-    for s in run.scores:
-        table.add_row(
-            s.case,
-            s.mode,
-            f"{percent(s.objects.precision)} / {percent(s.objects.recall)}",
-            f"{percent(s.attributes.precision)} / {percent(s.attributes.recall)}",
-            f"{percent(s.relations.precision)} / {percent(s.relations.recall)}",
-            f"{s.safety_recovered}/{s.safety_facts}",
-            s.gold_verdict or "-",
-            (s.perceived_verdict or "-") + (" (hazard lost)" if s.hazard_lost else ""),
-        )
-    console.print(table)
-    totals = Table(
-        "mode",
-        "objects F1",
-        "attributes F1",
-        "relations F1",
-        "safety facts recovered",
-        "same verdict",
-        "hazards lost",
-        title="Totals",
-    )
-    for t in run.as_json()["totals"]:
-        totals.add_row(
-            t["mode"],
-            percent(t["objects"]["f1"]),
-            percent(t["attributes"]["f1"]),
-            percent(t["relations"]["f1"]),
-            f"{t['safety_recovered']}/{t['safety_facts']}",
-            f"{t['same_verdict']}/{t['verdicts_compared']}",
-            str(t["hazards_lost"]),
-        )
-    console.print(totals)
-    lost = [s for s in run.scores if s.missing]
-    for s in lost:
-        console.print(f"{s.case} ({s.mode}): the tutor needed {', '.join(s.missing)}", markup=False)
+    console.print(to_rich(case_table(run, terminal=True)))
+    console.print(to_rich(totals_table(run, terminal=True)))
+    for line in missing_lines(run):
+        console.print(line, markup=False)

@@ -45,9 +45,8 @@ def kb_coverage(
     not counted."""
     from rich.console import Console
 
-    from virf.authoring.coverage import (
-        compute_coverage,
-        load_coverage_tasks,
+    from virf.authoring.coverage import compute_coverage, load_coverage_tasks
+    from virf.authoring.coverage_report import (
         plot_coverage,
         render_markdown,
         report_tables,

@@ -21,12 +21,12 @@ def scene_safeagentbench(
     line: Annotated[int, typer.Argument(help="1-based line of the task in FILE.")],
 ) -> None:
     """Print the scene ABox (the paper's JSON) VIRF builds for one task."""
-    from virf.bench.safeagentbench import build_scene, task_at
+    from virf.bench.safeagentbench import task_at
     from virf.ontology.tbox import load_tbox
 
     vocab = load_tbox().vocabulary
     task = task_at(file, line)
-    typer.echo(json.dumps(build_scene(task, vocab), indent=2))
+    typer.echo(json.dumps(task.scene_data(vocab), indent=2))
 
 
 @scene_app.command("show")

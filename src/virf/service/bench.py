@@ -19,10 +19,11 @@ from concurrent.futures import ThreadPoolExecutor
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from types import TracebackType
+from typing import Self
 
-from virf.bench.runner import _percentile
-from virf.bench.safeagentbench import build_scene, load_tasks
+from virf.bench.metrics import percentile
+from virf.bench.safeagentbench import load_tasks
 from virf.errors import EnvironmentProblem, InputError
 from virf.ontology.tbox import load_tbox
 from virf.processes import guarded
@@ -41,7 +42,7 @@ class Level:
     def throughput(self) -> float:
         return self.requests / self.seconds if self.seconds > 0 else 0.0
 
-    def public(self) -> dict[str, Any]:
+    def public(self) -> dict[str, object]:
         return {
             "concurrency": self.concurrency,
             "requests": self.requests,
@@ -60,7 +61,7 @@ def request_bodies(files: Sequence[Path]) -> list[bytes]:
         for task in load_tasks(path):
             if not task.steps:
                 continue
-            payload = {"scene": build_scene(task, vocab), "plan": list(task.steps)}
+            payload = {"scene": task.scene_data(vocab), "plan": list(task.steps)}
             bodies.append(json.dumps(payload).encode())
     if not bodies:
         raise InputError("no task with a reference plan in the files given")
@@ -76,7 +77,8 @@ def _free_port() -> int:
 class Server:
     """``virf serve`` in a child process, until closed.  The server and its
     workers end with this process however it ends, SIGKILL included
-    (:func:`virf.processes.guarded`)."""
+    (:func:`virf.processes.guarded`).  As a context manager it is ready to
+    answer inside the block and stopped after it."""
 
     def __init__(self, workers: int, *options: str) -> None:
         """``options``: more ``virf serve`` options (``--run-log``, ``--planner``)."""
@@ -124,6 +126,22 @@ class Server:
     def close(self) -> None:
         self._stack.close()  # stops the server and its workers, and waits for them
 
+    def __enter__(self) -> Self:
+        try:
+            self.wait_ready()
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
 
 def measure(
     url: str,
@@ -161,12 +179,54 @@ def measure(
         concurrency,
         len(work),
         seconds,
-        _percentile(latencies, 50),
-        _percentile(latencies, 99),
+        percentile(latencies, 50),
+        percentile(latencies, 99),
     )
 
 
-def table(levels: Sequence[Level], workers: int, plans: int) -> TextTable:
+@dataclass(frozen=True)
+class ServiceBench:
+    """One run: every concurrency level against one server."""
+
+    plans: int
+    server_workers: int
+    levels: tuple[Level, ...]
+
+    def public(self) -> dict[str, object]:
+        return {
+            "plans": self.plans,
+            "server_workers": self.server_workers,
+            "levels": [level.public() for level in self.levels],
+        }
+
+
+# Told a label and a total, gives the function to call once per unit done.
+Progress = Callable[[str, int], Callable[[], None]]
+
+
+def run_service_bench(
+    files: Sequence[Path],
+    levels: Sequence[int],
+    server_workers: int,
+    rounds: int,
+    progress: Progress | None = None,
+) -> ServiceBench:
+    """Send every task's reference plan ``rounds`` times at each concurrency
+    level to a ``virf serve`` of ``server_workers`` processes started for
+    the run (and stopped after it, however it ends)."""
+    bodies = request_bodies(files)
+    results = []
+    with Server(server_workers) as server:
+        measure(server.url, bodies[:8], 1, 1)  # warm every worker's tutor and caches
+        for level in levels:
+            total = len(bodies) * rounds
+            tick = progress(f"concurrency {level}", total) if progress else None
+            results.append(measure(server.url, bodies, level, rounds, tick))
+    return ServiceBench(len(bodies), server_workers, tuple(results))
+
+
+def table(run: ServiceBench) -> TextTable:
+    levels, workers, plans = run.levels, run.server_workers, run.plans
     base = levels[0].throughput if levels else 0.0
     return TextTable.of(
         (
