@@ -15,6 +15,7 @@ from types import MappingProxyType
 import pytest
 
 import virf.ontology.tbox as tbox_module
+from virf.ontology import artifact as kba
 from virf.ontology import compile as kbc
 from virf.ontology.owlapi import OwlModules
 from virf.ontology.tbox import load_tbox, ontology_dir, scenario_names
@@ -28,16 +29,16 @@ def test_every_artifact_was_compiled_from_the_modules_as_they_are() -> None:
 
 
 @cache
-def _rebuilt(scenario: str) -> kbc.CompiledKB:
+def _rebuilt(scenario: str) -> kba.CompiledKB:
     return kbc.compile_kb(OwlModules(scenario, ontology_dir()), kbc.source_digest())
 
 
 @pytest.mark.parametrize("scenario", scenario_names())
 def test_rebuilding_an_artifact_with_the_jvm_gives_the_same_bytes(scenario: str) -> None:
-    rebuilt = kbc.to_json(_rebuilt(scenario))
+    rebuilt = kba.to_json(_rebuilt(scenario))
     # Through the index: a scenario that shares another's file gets its own
     # name and module back.
-    shipped = kbc.to_json(kbc.read_artifact(scenario))
+    shipped = kba.to_json(kbc.read_artifact(scenario))
     assert rebuilt == shipped, f"run 'make kb': the {scenario} artifact is out of date"
 
 
@@ -60,7 +61,7 @@ def test_rooms_that_compile_to_the_same_knowledge_share_one_artifact() -> None:
     named = {entry["artifact"] for entry in index.values()}
     on_disk = {p.name for p in kbc.artifact_dir().glob("*.json")} - {kbc.INDEX}
     assert named == on_disk, "every artifact file is some scenario's, and only those"
-    forms = [kbc.shared_form(kbc.from_json((kbc.artifact_dir() / n).read_text())) for n in named]
+    forms = [kbc.shared_form(kba.from_json((kbc.artifact_dir() / n).read_text())) for n in named]
     assert len(set(forms)) == len(forms), "two files hold the same knowledge"
 
 
@@ -93,7 +94,7 @@ def test_scenarios_share_a_file_only_when_their_knowledge_is_the_same() -> None:
 
 def test_the_loaded_artifact_is_the_knowledge_the_compiler_built() -> None:
     built = kbc.compile_kb(OwlModules("kitchen", ontology_dir()), kbc.source_digest())
-    loaded = kbc.from_json(kbc.artifact_path("kitchen").read_text(encoding="utf-8"))
+    loaded = kba.from_json(kbc.artifact_path("kitchen").read_text(encoding="utf-8"))
     assert loaded.vocabulary == built.vocabulary
     assert loaded.module_stats == built.module_stats
     assert loaded.fragment.axioms == built.fragment.axioms
@@ -118,9 +119,9 @@ def test_a_module_edited_after_compiling_is_compiled_again(
 
 def test_an_artifact_of_another_format_is_refused() -> None:
     doc = json.loads(kbc.artifact_path("kitchen").read_text(encoding="utf-8"))
-    doc["format"] = kbc.FORMAT + 1
+    doc["format"] = kba.FORMAT + 1
     with pytest.raises(ValueError, match="format"):
-        kbc.from_json(json.dumps(doc))
+        kba.from_json(json.dumps(doc))
 
 
 def _without_java(argv: list[str], tmp_path: Path) -> subprocess.CompletedProcess[str]:
@@ -264,7 +265,7 @@ def test_kb_check_compares_the_artifact_with_the_modules(
 
     doc = json.loads(kbc.artifact_path("paper").read_text(encoding="utf-8"))
     doc["vocabulary"]["uscs"] = {}
-    forged = tbox_module.TBox(kbc.from_json(json.dumps(doc)))
+    forged = tbox_module.TBox(kba.from_json(json.dumps(doc)))
     monkeypatch.setattr(check_module, "load_tbox", lambda scenario=None, kb=None: forged)
     checked = cli("kb", "check", "--scenario", "paper", "--json")
     assert checked.exit_code == 1, checked.output

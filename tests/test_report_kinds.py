@@ -16,7 +16,7 @@ from virf.bench.report import render_markdown, terminal_tables
 from virf.bench.runner import run_benchmark
 from virf.bench.safeagentbench import Task
 from virf.bench.summary import Summary, summarize
-from virf.ontology.compile import from_json, to_json
+from virf.ontology.artifact import from_json, to_json
 from virf.render.tables import to_markdown
 from virf.render.text import render_report
 from virf.schema import Fact, FactKind, Provenance, Report

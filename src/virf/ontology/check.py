@@ -85,7 +85,8 @@ def _artifact_differs(tbox: TBox) -> list[str]:
     one a stale build left behind."""
     if tbox.source == "modules":
         return []
-    from virf.ontology.compile import compile_kb, to_json
+    from virf.ontology.artifact import to_json
+    from virf.ontology.compile import compile_kb
 
     loaded = json.loads(to_json(tbox.compiled))
     built = json.loads(to_json(compile_kb(tbox.owl, tbox.compiled.digest)))

@@ -30,14 +30,22 @@ import json
 import sys
 from collections import defaultdict
 from collections.abc import Mapping
-from dataclasses import dataclass, fields, replace
+from dataclasses import replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any
 
 from virf.errors import InputError
 from virf.files import write_atomically
-from virf.ontology.fragment import Axiom, Fragment, fragment_from, load_fragment
+from virf.ontology.artifact import (
+    FORMAT,
+    CompiledKB,
+    from_json,
+    module_stats_from,
+    plain,
+    to_json,
+)
+from virf.ontology.fragment import load_fragment
 from virf.ontology.iri import MODULE_BASE, NS, THING, iri_short
 from virf.ontology.tbox import (
     DEFAULT_SCENARIO,
@@ -52,22 +60,6 @@ from virf.ontology.tbox import (
 
 if TYPE_CHECKING:
     from virf.ontology.owlapi import OwlModules
-
-# Bumped whenever the artifact's layout or the compiler's output changes, so
-# an artifact written by an older compiler counts as out of date.
-FORMAT = 1
-
-
-@dataclass(frozen=True)
-class CompiledKB:
-    """Everything the Python side knows of one scenario's ontology."""
-
-    scenario: str
-    digest: str
-    vocabulary: Vocabulary
-    module_stats: tuple[ModuleStats, ...]
-    fragment: Fragment
-
 
 # Which file holds each scenario's knowledge (see the module's docstring).
 INDEX = "scenarios.json"
@@ -399,113 +391,6 @@ def _material_definition(expr: Any) -> str | None:
 # values sorted.  (No reader depends on the order the JVM happened to use.)
 
 
-def to_json(kb: CompiledKB) -> str:
-    v = kb.vocabulary
-    vocab: dict[str, Any] = {}
-    for f in fields(Vocabulary):
-        if f.name == "_lower":  # derived from the classes when loaded
-            continue
-        vocab[f.name] = _plain(getattr(v, f.name))
-
-    doc = {
-        "format": FORMAT,
-        "scenario": kb.scenario,
-        "digest": kb.digest,
-        "vocabulary": vocab,
-        "module_stats": [_plain(vars(m)) for m in kb.module_stats],
-        "fragment": {
-            "problems": list(kb.fragment.problems),
-            "axioms": [[a.kind, _plain(a.args), a.id, a.text] for a in kb.fragment.axioms],
-        },
-    }
-    return json.dumps(doc, indent=1, ensure_ascii=False, sort_keys=True) + "\n"
-
-
-def _plain(value: Any) -> Any:
-    if isinstance(value, UnsafeStateConcept | BackgroundAxiom):
-        return {f.name: _plain(getattr(value, f.name)) for f in fields(value)}
-    if isinstance(value, Mapping):
-        return {k: _plain(v) for k, v in value.items()}
-    if isinstance(value, frozenset | set):
-        return sorted(value)
-    if isinstance(value, tuple | list):
-        return [_plain(v) for v in value]
-    return value
-
-
-def from_json(text: str) -> CompiledKB:
-    doc = json.loads(text)
-    if doc.get("format") != FORMAT:
-        raise ValueError(f"knowledge artifact format {doc.get('format')}, expected {FORMAT}")
-    raw = doc["vocabulary"]
-    classes = frozenset(raw["classes"])
-    annotations = raw["annotations"]
-
-    def concept(name: str, fields_: dict[str, Any]) -> UnsafeStateConcept:
-        # An artifact written before the field existed still has the annotation.
-        refuses = annotations.get(name, {}).get("ai2thorRefuses") or [""]
-        return UnsafeStateConcept(**{"ai2thor_refuses": refuses[0], **fields_})
-
-    vocabulary = Vocabulary(
-        classes=classes,
-        object_properties=frozenset(raw["object_properties"]),
-        data_properties=frozenset(raw["data_properties"]),
-        individuals=frozenset(raw["individuals"]),
-        ancestors=_sets(raw["ancestors"]),
-        annotations=MappingProxyType(
-            {
-                k: MappingProxyType({p: tuple(vs) for p, vs in props.items()})
-                for k, props in raw["annotations"].items()
-            }
-        ),
-        uscs=MappingProxyType({k: concept(k, u) for k, u in raw["uscs"].items()}),
-        preconditions=MappingProxyType({k: concept(k, u) for k, u in raw["preconditions"].items()}),
-        background=MappingProxyType(
-            {
-                k: BackgroundAxiom(**{**b, "signature": frozenset(b["signature"])})
-                for k, b in raw["background"].items()
-            }
-        ),
-        property_synonyms=MappingProxyType(dict(raw["property_synonyms"])),
-        class_synonyms=MappingProxyType(dict(raw["class_synonyms"])),
-        class_materials=_sets(raw["class_materials"]),
-        _lower=MappingProxyType(lower_index(classes)),
-        inverses=MappingProxyType(dict(raw["inverses"])),
-        material_classes=MappingProxyType(dict(raw["material_classes"])),
-        exclusive_states=_sets(raw["exclusive_states"]),
-        catalogue_types=frozenset(raw["catalogue_types"]),
-    )
-    stats = tuple(_module_stats(m) for m in doc["module_stats"])
-    axioms = [
-        Axiom(kind, _tuples(args), ident, text)
-        for kind, args, ident, text in doc["fragment"]["axioms"]
-    ]
-    fragment = fragment_from(axioms, list(doc["fragment"]["problems"]))
-    return CompiledKB(doc["scenario"], doc["digest"], vocabulary, stats, fragment)
-
-
-def _module_stats(m: Mapping[str, Any]) -> ModuleStats:
-    return ModuleStats(
-        **{
-            **m,
-            "imports": tuple(m["imports"]),
-            "usc_by_category": MappingProxyType(m["usc_by_category"]),
-            "usc_by_kind": MappingProxyType(m["usc_by_kind"]),
-        }
-    )
-
-
-def _sets(mapping: Mapping[str, list[str]]) -> Mapping[str, frozenset[str]]:
-    return MappingProxyType({k: frozenset(v) for k, v in mapping.items()})
-
-
-def _tuples(value: Any) -> Any:
-    """JSON arrays back into the tuples fast-engine terms are made of."""
-    if isinstance(value, list):
-        return tuple(_tuples(v) for v in value)
-    return value
-
-
 # ---------------------------------------------------------------------------
 
 
@@ -546,7 +431,7 @@ def artifact_files(kbs: list[CompiledKB]) -> dict[str, str]:
             entries[kb.scenario] = {"artifact": name}
             continue
         [own] = [m for m in kb.module_stats if m.name == _own_module(kb.scenario)]
-        entries[kb.scenario] = {"artifact": name, "module": _plain(vars(own))}
+        entries[kb.scenario] = {"artifact": name, "module": plain(vars(own))}
     index = {"format": FORMAT, "scenarios": dict(sorted(entries.items()))}
     files[INDEX] = json.dumps(index, indent=1, ensure_ascii=False, sort_keys=True) + "\n"
     return files
@@ -560,7 +445,7 @@ def read_artifact(scenario: str) -> CompiledKB:
     kb = from_json((artifact_dir() / entry["artifact"]).read_text(encoding="utf-8"))
     if kb.scenario == scenario:
         return kb
-    return as_scenario(kb, scenario, _module_stats(entry["module"]))
+    return as_scenario(kb, scenario, module_stats_from(entry["module"]))
 
 
 def write_artifacts() -> list[Path]:

@@ -29,7 +29,7 @@ from virf.files import write_atomically
 from virf.names import term_key
 
 if TYPE_CHECKING:  # the Java bridge and the compiler load only when used
-    from virf.ontology.compile import CompiledKB
+    from virf.ontology.artifact import CompiledKB
     from virf.ontology.fragment import Fragment
     from virf.ontology.owlapi import OwlModules
 DEFAULT_SCENARIO = "kitchen"
@@ -341,7 +341,8 @@ def _files_digest(paths: tuple[str, ...]) -> str:
 def _load(
     scenario: str, extras: tuple[str, ...], extras_digest: str, cache_dir: str | None
 ) -> TBox:
-    from virf.ontology.compile import compile_kb, from_json, read_artifact, source_digest, to_json
+    from virf.ontology.artifact import from_json, to_json
+    from virf.ontology.compile import compile_kb, read_artifact, source_digest
     from virf.ontology.seal import local_key, seal, unseal
 
     digest = source_digest()
