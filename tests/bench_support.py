@@ -30,7 +30,9 @@ def bench_agents(*args: str | Path, cwd: Path = ROOT) -> subprocess.CompletedPro
         cwd=cwd,
         capture_output=True,
         text=True,
-        timeout=300,
+        # A guard against a hang, not a time limit: the kitchen replay takes
+        # about a minute on an idle machine, several when the cores are shared.
+        timeout=900,
         check=False,
         env=environ,
     )
