@@ -38,7 +38,6 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Final
 
-from virf.authoring import manchester
 from virf.authoring.models import (
     CheckItem,
     CheckReport,
@@ -51,6 +50,7 @@ from virf.authoring.models import (
 from virf.errors import InputError, clip, hidden_char, printable
 from virf.migrations import now
 from virf.names import term_key
+from virf.ontology import manchester
 from virf.ontology.lexicon import propose
 from virf.ontology.tbox import Vocabulary
 from virf.schema import FactKind, Provenance, Question

@@ -20,7 +20,6 @@ from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
-from virf.authoring import manchester
 from virf.authoring.drafts import Draft, read_draft, rule_json
 from virf.authoring.models import (
     AcceptedRule,
@@ -41,6 +40,7 @@ from virf.authoring.store import CandidateRow, DecisionRow, Store, status_of
 from virf.errors import InputError, clip, read_json_file
 from virf.files import write_atomically
 from virf.migrations import now
+from virf.ontology import manchester
 from virf.ontology.tbox import TBox, Vocabulary, load_tbox, ontology_dir, scenario_names
 from virf.ontology.workspace import FORMAT, LAYERS, MARKER, KbLayout, open_layout
 from virf.schema import Fact, FactKind
