@@ -352,10 +352,6 @@ def source_text(learned: Learned) -> str:
     )
 
 
-def _literal(text: str) -> str:
-    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
-
-
 def _axiom_id(name: str, part: str, n: int, vocab: Vocabulary) -> str:
     m = re.fullmatch(r"\(?\s*(hasProperty|hasMaterial) value (\w+)\s*\)?", part)
     if m:
@@ -381,35 +377,42 @@ def block(
     name = learned.class_name
     lines = [f"# candidate {cid}: {name}"]
     for term, role in sorted(manchester.names(axiom).items()):
-        keyword = {"class": "Class", "property": "ObjectProperty", "individual": "Individual"}[role]
-        lines.append(f"{keyword}: :{term}")
+        lines.append(manchester.frame(manchester.FRAME_OF_ROLE[role], term))
     lines.append("")
     source = source_text(learned)
     anns = [
-        f"rdfs:comment {_literal(f'{name}: learned from answers about an open-world object.')}",
-        *(f":evidence {_literal(e)}" for e in evidence_lines(learned)),
-        f":source {_literal(source)}",
-        f":drafter {_literal(drafter)}",
-        f":candidate {_literal(str(cid))}",
-        *(f":{k} {_literal(v)}" for k, v in (decision or {}).items()),
+        ("rdfs:comment", f"{name}: learned from answers about an open-world object."),
+        *(("evidence", e) for e in evidence_lines(learned)),
+        ("source", source),
+        ("drafter", drafter),
+        ("candidate", str(cid)),
+        *(decision or {}).items(),
     ]
-    lines += [f"Class: :{name}", "    Annotations:"]
-    lines += [f"        {a}," for a in anns[:-1]] + [f"        {anns[-1]}"]
     parts = manchester.conjuncts(display, prefix=":")
     shown = manchester.conjuncts(display)
-    lines.append("    SubClassOf:")
     confirmed = {a.effect for a in learned.answers}
+    supers = []
     for n, (part, text) in enumerate(zip(parts, shown, strict=True), start=1):
         ident = _axiom_id(name, text, n, vocab)
         said = f"{name} SubClassOf {text.removeprefix('(').removesuffix(')')}" in confirmed
         how = "confirmed by an answer" if said else "accepted with the learned class"
         comment = f"Every {name} {_in_words(text)} ({how})."
-        lines.append(
-            f"        Annotations: :id {_literal(ident)}, rdfs:comment {_literal(comment)}, "
-            f':source {_literal(source)}, :kind "background"'
+        about = (
+            ("id", ident),
+            ("rdfs:comment", comment),
+            ("source", source),
+            ("kind", "background"),
         )
-        lines.append(f"        {part}{',' if n < len(parts) else ''}")
-    lines.append("")
+        supers.append(manchester.Axiom(part, about))
+    lines += [
+        manchester.frame(
+            "Class",
+            name,
+            manchester.annotations_section(anns),
+            manchester.section("SubClassOf", supers),
+        ),
+        "",
+    ]
     return "\n".join(lines)
 
 

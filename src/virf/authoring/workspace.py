@@ -41,6 +41,7 @@ from virf.errors import InputError, clip, read_json_file
 from virf.files import write_atomically
 from virf.migrations import now
 from virf.ontology import manchester
+from virf.ontology.iri import MODULE_BASE
 from virf.ontology.tbox import TBox, Vocabulary, load_tbox, ontology_dir, scenario_names
 from virf.ontology.workspace import FORMAT, LAYERS, MARKER, KbLayout, open_layout
 from virf.schema import Fact, FactKind
@@ -78,52 +79,35 @@ EDIT_LABELS: Final = {
     "minor": "accepted after a minor edit",
     "major": "accepted after a major edit",
 }
-_PREFIXES: Final = """Prefix: : <http://virf.dev/ontology#>
-Prefix: owl: <http://www.w3.org/2002/07/owl#>
-Prefix: rdf: <http://www.w3.org/1999/02/22-rdf-syntax-ns#>
-Prefix: rdfs: <http://www.w3.org/2000/01/rdf-schema#>
-Prefix: xsd: <http://www.w3.org/2001/XMLSchema#>
-"""
 
 
 def _declarations() -> str:
-    props = [*_USC_ANNOTATIONS, *PROVENANCE]
-    return "\n".join(f"AnnotationProperty: :{p}" for p in props) + (
-        "\nAnnotationProperty: rdfs:comment\nAnnotationProperty: rdfs:label\n"
-    )
-
-
-def _literal(text: str) -> str:
-    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    props = (*_USC_ANNOTATIONS, *PROVENANCE, "rdfs:comment", "rdfs:label")
+    return "".join(manchester.frame("AnnotationProperty", p) + "\n" for p in props)
 
 
 def _builtin_imports(scenario: str) -> list[str]:
     """The modules the built-in scenario module imports (its domain layer)."""
     text = (ontology_dir() / f"scenario-{scenario}.omn").read_text(encoding="utf-8")
-    return [
-        line.split("<", 1)[1].rstrip(">").strip() for line in text.splitlines() if "Import:" in line
-    ]
+    return manchester.imports_of(text)
 
 
 def _module_header(layout: KbLayout, layer: str) -> str:
-    base = "http://virf.dev/ontology/"
     if layer == "core":
-        imports = [f"{base}core"]
+        imports = [f"{MODULE_BASE}core"]
     elif layer == "domain":
         imports = [layout.module_iri("core"), *_builtin_imports(layout.scenario)]
     else:
-        imports = [layout.module_iri("domain"), f"{base}scenario-{layout.scenario}"]
-    lines = [_PREFIXES, f"Ontology: <{layout.module_iri(layer)}>"]
-    lines += [f"    Import: <{iri}>" for iri in imports]
-    lines += [
-        "    Annotations:",
-        f'        rdfs:label "Workspace {layer} layer",',
-        '        rdfs:comment "Axioms accepted through VIRF knowledge acquisition (virf kb decide or '
-        'the review page). Written by VIRF, one block per decision; edit through the workflow."',
-        "",
-        _declarations(),
-    ]
-    return "\n".join(lines)
+        imports = [layout.module_iri("domain"), f"{MODULE_BASE}scenario-{layout.scenario}"]
+    about = (
+        ("rdfs:label", f"Workspace {layer} layer"),
+        (
+            "rdfs:comment",
+            "Axioms accepted through VIRF knowledge acquisition (virf kb decide or the review "
+            "page). Written by VIRF, one block per decision; edit through the workflow.",
+        ),
+    )
+    return manchester.document(layout.module_iri(layer), imports, about, _declarations())
 
 
 def starter_corpus_dir() -> Path:
@@ -580,7 +564,7 @@ class Workspace:
     ) -> str:
         """The Manchester frames accepting the candidate adds to a layer module."""
         name = rule["name"]
-        source = _literal(self._source(evidence_ids, modelling_decision))
+        source = self._source(evidence_ids, modelling_decision)
         lines = [f"# candidate {cid}: {name}"]
         # Every term the block uses is declared in it: OWLAPI's Manchester
         # parser does not look into already-loaded imports when it parses a
@@ -589,63 +573,59 @@ class Workspace:
         for term, role in sorted(manchester.names(axiom).items()):
             if term in new:
                 continue
-            keyword = {"class": "Class", "property": "ObjectProperty", "individual": "Individual"}[
-                role
-            ]
+            keyword = manchester.FRAME_OF_ROLE[role]
             if term in vocab.data_properties:
                 keyword = "DataProperty"
-            lines.append(f"{keyword}: :{term}")
+            lines.append(manchester.frame(keyword, term))
         for parent in sorted({p for _, p in new_classes} - new | {"UnsafeStateConcept"}):
-            lines.append(f"Class: :{parent}")
+            lines.append(manchester.frame("Class", parent))
         lines.append("")
         for cls, parent in new_classes:
+            introduced = ("rdfs:comment", f"Introduced by candidate {cid} ({name}).")
             lines += [
-                f"Class: :{cls}",
-                f"    Annotations: rdfs:comment {_literal(f'Introduced by candidate {cid} ({name}).')}",
-                f"    SubClassOf: :{parent}",
+                manchester.frame(
+                    "Class",
+                    cls,
+                    manchester.annotations_section([introduced], one_line=True),
+                    manchester.section("SubClassOf", [manchester.term(parent)], one_line=True),
+                ),
                 "",
             ]
         anns = [
-            f":id {_literal(name)}",
-            f":kind {_literal(rule['kind'])}",
-            f":category {_literal(rule['category'])}",
-            f":dangerLevel {_literal(rule['danger_level'])}",
-            f"rdfs:comment {_literal(rule['description'])}",
-            f":safetyWarning {_literal(rule['safety_warning'])}",
-            f":triggerReason {_literal(rule['trigger_reason'])}",
-            f":suggestion {_literal(rule['suggestion'])}",
-            f":source {source}",
-            f":checkAt {_literal(rule['check_at'])}",
-            *([f":mechanism {_literal(rule['mechanism'])}"] if rule.get("mechanism") else []),
-            *([f":question {_literal(rule['question'])}"] if rule.get("question") else []),
-            *(f":twin {_literal(t)}" for t in rule.get("twins", ())),
-            *(f":evidence {_literal(pid)}" for pid in evidence_ids),
-            f":drafter {_literal(drafter)}",
-            f":candidate {_literal(str(cid))}",
+            ("id", name),
+            ("kind", rule["kind"]),
+            ("category", rule["category"]),
+            ("dangerLevel", rule["danger_level"]),
+            ("rdfs:comment", rule["description"]),
+            ("safetyWarning", rule["safety_warning"]),
+            ("triggerReason", rule["trigger_reason"]),
+            ("suggestion", rule["suggestion"]),
+            ("source", source),
+            ("checkAt", rule["check_at"]),
+            *([("mechanism", rule["mechanism"])] if rule.get("mechanism") else []),
+            *([("question", rule["question"])] if rule.get("question") else []),
+            *(("twin", t) for t in rule.get("twins", ())),
+            *(("evidence", pid) for pid in evidence_ids),
+            ("drafter", drafter),
+            ("candidate", str(cid)),
+            *(decision or {}).items(),
         ]
-        if decision:
-            anns += [f":{k} {_literal(v)}" for k, v in decision.items()]
-        lines += [f"Class: :{name}", "    Annotations:"]
-        lines += [f"        {a}," for a in anns[:-1]] + [f"        {anns[-1]}"]
+        definition = manchester.Axiom(axiom, (("id", name + "-def"), ("source", source)))
         lines += [
-            "    EquivalentTo:",
-            f"        Annotations: :id {_literal(name + '-def')}, :source {source}",
-            f"        {axiom}",
-            "    SubClassOf: :UnsafeStateConcept",
+            manchester.frame(
+                "Class",
+                name,
+                manchester.annotations_section(anns),
+                manchester.section("EquivalentTo", [definition]),
+                manchester.section("SubClassOf", [":UnsafeStateConcept"], one_line=True),
+            ),
             "",
         ]
         return "\n".join(lines)
 
     def _candidate_module(self, block: str) -> str:
-        return "\n".join(
-            [
-                _PREFIXES,
-                f"Ontology: <{CANDIDATE_IRI}>",
-                f"    Import: <{self.layout.module_iri('scenario')}>",
-                "",
-                _declarations(),
-                block,
-            ]
+        return manchester.document(
+            CANDIDATE_IRI, [self.layout.module_iri("scenario")], (), _declarations(), block
         )
 
     # ------------------------------------------------------------------ preview
@@ -890,21 +870,18 @@ class Workspace:
             if d.decision == "accept" and d.block
         )
         text = label or f"Knowledge accepted in workspace {self.root.name} (virf kb export)"
-        lines = [
-            _PREFIXES,
-            f"Ontology: <{iri}>",
-            f"    Import: <http://virf.dev/ontology/scenario-{self.scenario}>",
-            "    Annotations:",
-            f"        rdfs:label {_literal(text)},",
-            "        rdfs:comment "
-            + _literal(
+        about = (
+            ("rdfs:label", text),
+            (
+                "rdfs:comment",
                 "Written by 'virf kb export' from the workspace's accepted candidates; "
-                "each block is one decision. Edit through the workflow, not by hand."
+                "each block is one decision. Edit through the workflow, not by hand.",
             ),
-            "",
-            _declarations(),
-        ]
-        return "\n".join(lines) + "".join(f"\n{block.rstrip()}\n" for _, block in blocks)
+        )
+        module = manchester.document(
+            iri, [f"{MODULE_BASE}scenario-{self.scenario}"], about, _declarations()
+        )
+        return module + "".join(f"\n{block.rstrip()}\n" for _, block in blocks)
 
     def rules(self) -> list[AcceptedRule]:
         out = []

@@ -1,17 +1,26 @@
-"""The little of Manchester syntax a drafted axiom needs before OWLAPI sees it:
-which names it uses, in which role, and the same expression with names
-replaced.  OWLAPI's parser stays the judge of whether the result parses; this
-only finds the names, so they can be matched to the vocabulary first.
+"""Manchester syntax, read and written in one place.
+
+Reading: the little of a class expression a drafted axiom needs before OWLAPI
+sees it (which names it uses, in which role, and the same expression with
+names replaced), and the imports a module document declares.  OWLAPI's parser
+stays the judge of whether a text parses; this only finds the names, so they
+can be matched to the vocabulary first.
+
+Writing: module documents (prefixes, the ontology header), frames with their
+sections and annotations, and literals.  The generated kitchen module and a
+knowledge workspace's layer modules are written with it, so quoting and
+layout are decided once.
 """
 
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Final, Literal
 
 from virf.errors import InputError, clip
+from virf.ontology.iri import NS, OWL
 
 KEYWORDS: Final = frozenset(
     {
@@ -172,3 +181,130 @@ def _depths(toks: list[Token]) -> list[tuple[Token, int]]:
             depth -= 1
         out.append((tok, depth))
     return out
+
+
+# ---------------------------------------------------------------------- documents, read
+# An import names its module by IRI in angle brackets, on a line of its own.
+_IMPORT: Final = re.compile(r"^[ \t]*Import:[ \t]*<([^>\s]+)>[ \t]*$", re.MULTILINE)
+
+
+def imports_of(document: str) -> list[str]:
+    """The IRIs a module document imports, in the order it names them."""
+    return _IMPORT.findall(document)
+
+
+# ---------------------------------------------------------------------- documents, written
+PREFIXES: Final = (
+    ("", NS),
+    ("owl", OWL),
+    ("rdf", "http://www.w3.org/1999/02/22-rdf-syntax-ns#"),
+    ("rdfs", "http://www.w3.org/2000/01/rdf-schema#"),
+    ("xsd", "http://www.w3.org/2001/XMLSchema#"),
+)
+# The frame keyword that declares a name in the role an expression gives it.
+FRAME_OF_ROLE: Final[Mapping[Role, str]] = {
+    "class": "Class",
+    "property": "ObjectProperty",
+    "individual": "Individual",
+}
+_INDENT: Final = "    "
+# An annotation as (property, text): the property a name of ours ("id") or a
+# prefixed one ("rdfs:comment"), the text written as a string literal.
+Annotation = tuple[str, str]
+
+
+def literal(text: str) -> str:
+    """``text`` as a string literal."""
+    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def term(name: str) -> str:
+    """A name of ours with the empty prefix (``Pot`` -> ``:Pot``); a name
+    that already has a prefix (``rdfs:comment``, ``owl:Thing``) as it is."""
+    return name if ":" in name else f":{name}"
+
+
+def value(prop: str, individual: str) -> str:
+    """``:prop value :individual``."""
+    return f"{term(prop)} value {term(individual)}"
+
+
+def some(prop: str, filler: str) -> str:
+    """``:prop some (filler)``, ``filler`` a written class expression."""
+    return f"{term(prop)} some ({filler})"
+
+
+def prefixes() -> str:
+    """The prefix declarations a module starts with, one a line."""
+    return "".join(f"Prefix: {p}: <{iri}>\n" for p, iri in PREFIXES)
+
+
+def annotation_list(annotations: Iterable[Annotation]) -> str:
+    """Annotations on one line: ``:id "X", rdfs:comment "Y"``."""
+    return ", ".join(f"{term(p)} {literal(text)}" for p, text in annotations)
+
+
+def annotations_section(pairs: Sequence[Annotation], *, one_line: bool = False) -> str:
+    """A frame's ``Annotations:`` section: on the keyword's line, or one
+    annotation a line below it."""
+    if one_line:
+        return f"{_INDENT}Annotations: {annotation_list(pairs)}"
+    lines = ",\n".join(f"{_INDENT * 2}{term(p)} {literal(text)}" for p, text in pairs)
+    return f"{_INDENT}Annotations:\n{lines}"
+
+
+@dataclass(frozen=True)
+class Axiom:
+    """A written class expression in a frame's section, with the annotations
+    of the axiom it makes (its id, comment and source)."""
+
+    expression: str
+    annotations: tuple[Annotation, ...] = ()
+
+    def written(self, indent: str) -> str:
+        if not self.annotations:
+            return f"{indent}{self.expression}"
+        return (
+            f"{indent}Annotations: {annotation_list(self.annotations)}\n{indent}{self.expression}"
+        )
+
+
+def section(keyword: str, axioms: Sequence[Axiom | str], *, one_line: bool = False) -> str:
+    """A frame's section (``SubClassOf:``, ``EquivalentTo:``, ``Types:``): its
+    expressions on the keyword's line (none annotated), or one a line below it."""
+    items = [Axiom(a) if isinstance(a, str) else a for a in axioms]
+    if one_line:
+        if any(a.annotations for a in items):
+            raise ValueError(f"an annotated axiom of {keyword} needs a line of its own")
+        return f"{_INDENT}{keyword}: " + ", ".join(a.expression for a in items)
+    return f"{_INDENT}{keyword}:\n" + ",\n".join(a.written(_INDENT * 2) for a in items)
+
+
+def frame(keyword: str, name: str, *sections: str) -> str:
+    """A frame (``Class: :Pot``) and its sections, each as written by
+    :func:`annotations_section` or :func:`section`."""
+    return "\n".join([f"{keyword}: {term(name)}", *sections])
+
+
+def axiom_frame(keyword: str, axiom: Axiom) -> str:
+    """A frame that is one axiom (``DisjointClasses:``), its annotations and
+    expression indented below the keyword."""
+    return f"{keyword}:\n{axiom.written(_INDENT)}"
+
+
+def ontology(iri: str, imports: Sequence[str] = (), annotations: Sequence[Annotation] = ()) -> str:
+    """The ontology header: its IRI, its imports and its annotations."""
+    lines = [f"Ontology: <{iri}>", *(f"{_INDENT}Import: <{i}>" for i in imports)]
+    if annotations:
+        lines.append(annotations_section(annotations))
+    return "\n".join(lines)
+
+
+def document(
+    iri: str,
+    imports: Sequence[str],
+    annotations: Sequence[Annotation],
+    *body: str,
+) -> str:
+    """A whole module: prefixes, its header, a blank line, then ``body``."""
+    return "\n".join([prefixes(), ontology(iri, imports, annotations), "", *body])
