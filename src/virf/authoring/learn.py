@@ -38,6 +38,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Final
 
+from virf.authoring import checks, layers
+from virf.authoring.check_items import reasoner_items
 from virf.authoring.models import (
     CheckItem,
     CheckReport,
@@ -47,12 +49,14 @@ from virf.authoring.models import (
     Preview,
     Related,
 )
+from virf.authoring.normalize import normalise
 from virf.errors import InputError, clip, hidden_char, printable
 from virf.migrations import now
 from virf.names import term_key
 from virf.ontology import manchester
 from virf.ontology.lexicon import propose
 from virf.ontology.tbox import Vocabulary
+from virf.ontology.workspace import LAYERS
 from virf.schema import FactKind, Provenance, Question
 from virf.world.open_world import HYPOTHESIS_WORDS
 from virf.world.scene import build_scene
@@ -63,7 +67,7 @@ if TYPE_CHECKING:
 
 CATEGORY: Final = "Learned class"
 # A learned class's name: the word as written, in UpperCamelCase.
-_CLASS_NAME: Final = re.compile(r"^[A-Z][A-Za-z0-9]{1,80}$")
+CLASS_NAME: Final = re.compile(r"^[A-Z][A-Za-z0-9]{1,80}$")
 # What an answer can say about a class (other facts are about one object).
 CLASS_PREDICATES: Final = frozenset({"hasProperty", "hasMaterial"})
 TYPE_PREDICATE: Final = "rdf:type"
@@ -76,7 +80,7 @@ def class_name(word: str) -> str:
     ``hair_dryer`` and ``HairDryer`` are all ``HairDryer``."""
     pieces = [p for p in re.split(r"[\s_\-.]+", word.strip()) if p]
     name = "".join(p[:1].upper() + p[1:] for p in pieces)
-    if not _CLASS_NAME.match(name):
+    if not CLASS_NAME.match(name):
         raise InputError(
             f"cannot learn the class '{clip(word)}': a class name is a word in UpperCamelCase "
             "(letters and digits, at least two), e.g. HairDryer"
@@ -375,7 +379,7 @@ def block(
     module: the class, each superclass as a background axiom citing the
     answers, and the answers themselves as evidence."""
     name = learned.class_name
-    lines = [f"# candidate {cid}: {name}"]
+    lines = [layers.block_header(cid, name)]
     for term, role in sorted(manchester.names(axiom).items()):
         lines.append(manchester.frame(manchester.FRAME_OF_ROLE[role], term))
     lines.append("")
@@ -437,24 +441,21 @@ def check(
     is new, every term is known, the class has a parent, the answers are its
     evidence; then HermiT (parse, consistency, satisfiability, and whether
     every object of the class would already be an unsafe state)."""
-    from virf.authoring.normalize import normalise
-    from virf.authoring.workspace import reasoner_items
     from virf.ontology.axiom_check import check_candidate
-    from virf.ontology.workspace import LAYERS
 
     learned = learned_of(row)
     name = learned.class_name
     vocab = ws.tbox().vocabulary
     items: list[CheckItem] = []
 
-    def report(
+    def done(
         normalised: str, terms: Sequence[Any], layer: Layer, text: str, related: Related
     ) -> CheckReport:
-        return ws._report(axiom, normalised, items, terms, related, layer, text)
+        return checks.report(ws.threshold, axiom, normalised, items, terms, related, layer, text)
 
-    if not _CLASS_NAME.match(name):
+    if not CLASS_NAME.match(name):
         items.append(CheckItem.error("name", f"'{clip(name)}' is not a class name"))
-        return report("", (), "core", "", Related())
+        return done("", (), "core", "", Related())
     known = vocab.canonical_class(name) or vocab.term_by_key(term_key(name))
     if known is not None:
         items.append(
@@ -468,13 +469,13 @@ def check(
         normalised = normalise(
             axiom,
             vocab,
-            ws._vocabulary_index(vocab),
+            ws.vocabulary_index(vocab),
             threshold=ws.threshold,
             own_name=name,
         )
     except InputError as exc:
         items.append(CheckItem.error("parses", str(exc)))
-        return report("", (), "core", "", Related())
+        return done("", (), "core", "", Related())
     items.extend(normalised.problems)
     for cls, _parent in normalised.new_classes:
         items.append(
@@ -511,12 +512,12 @@ def check(
         vocab, row.id, learned, normalised.axiom, normalised.display, row.drafter, decision
     )
     if any(i.severity == "error" for i in items):
-        return report(normalised.display, normalised.terms, "core", text, Related())
+        return done(normalised.display, normalised.terms, "core", text, Related())
     used = [t.chosen for t in normalised.terms]
     result = check_candidate(
         ws.scenario,
         tuple(str(p) for p in ws.layout.modules()),
-        ws._candidate_module(text),
+        layers.candidate_module(ws.layout, text),
         name,
         used,
         vocab.uscs,
@@ -527,7 +528,7 @@ def check(
         )
     )
     if not result.parses:
-        return report(normalised.display, normalised.terms, "core", text, Related())
+        return done(normalised.display, normalised.terms, "core", text, Related())
     related = Related(equivalent=result.equivalent, subsumed_by=result.subsumed_by)
     if related.equivalent or related.subsumed_by:
         items.append(
@@ -539,7 +540,7 @@ def check(
             )
         )
     layer = max((result.layers.get(t, "core") for t in used), key=LAYERS.index, default="core")
-    return report(normalised.display, normalised.terms, layer, text, related)  # type: ignore[arg-type]
+    return done(normalised.display, normalised.terms, layer, text, related)  # type: ignore[arg-type]
 
 
 def _answers_item(learned: Learned) -> CheckItem:
