@@ -4,7 +4,7 @@ then HermiT on the block accepting it would add (parse, consistency,
 satisfiability, novelty, and whether it would fire on every scene).
 
 A class learned from answers has checks of its own
-(:func:`virf.authoring.learn.check`); :func:`check_row` picks them.
+(:func:`virf.authoring.learned.check`); :func:`check_row` picks them.
 """
 
 from __future__ import annotations
@@ -61,9 +61,9 @@ def check_row(
     learned class's.  ``decision`` (reviewer, decision, date) goes into the
     block when the check is the one an acceptance makes."""
     if row.origin == "answer":
-        from virf.authoring import learn
+        from virf.authoring import learned
 
-        return learn.check(ws, row, axiom, decision)
+        return learned.check(ws, row, axiom, decision)
     return _check_rule(ws, row, axiom, decision)
 
 

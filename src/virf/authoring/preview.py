@@ -56,7 +56,7 @@ def preview(
     write_atomically(module, layers.candidate_module(ws.layout, report.module_text))
     scenes: list[tuple[str, dict[str, Any], tuple[str, ...]]] = []
     if row.origin == "answer":
-        from virf.authoring.learn import learned_of
+        from virf.authoring.learned import learned_of
 
         learned = learned_of(row)
         scenes.append(

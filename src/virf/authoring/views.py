@@ -68,7 +68,7 @@ def candidate(ws: Workspace, cid: int) -> CandidateView:
     status = status_of(decision.decision if decision else None)
     learned = None
     if row.origin == "answer":
-        from virf.authoring.learn import learned_of
+        from virf.authoring.learned import learned_of
 
         learned = learned_of(row)
     return CandidateView(
