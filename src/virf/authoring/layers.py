@@ -169,7 +169,9 @@ def rule_block(
             name,
             manchester.annotations_section(anns),
             manchester.section("EquivalentTo", [definition]),
-            manchester.section("SubClassOf", [":UnsafeStateConcept"], one_line=True),
+            manchester.section(
+                "SubClassOf", [manchester.term("UnsafeStateConcept")], one_line=True
+            ),
         ),
         "",
     ]
