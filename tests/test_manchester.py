@@ -53,7 +53,7 @@ def test_an_annotated_axiom_is_never_squeezed_onto_the_keyword_line() -> None:
         manchester.section("SubClassOf", [manchester.Axiom(":A", (("id", "x"),))], one_line=True)
 
 
-def test_a_document_reads_back_its_imports_in_order() -> None:
+def test_a_document_reads_back_its_header() -> None:
     text = manchester.document(
         "http://example.org/m",
         ["http://example.org/a", "http://example.org/b"],
@@ -61,13 +61,21 @@ def test_a_document_reads_back_its_imports_in_order() -> None:
         "Class: :A\n",
     )
     assert text.startswith(manchester.prefixes() + "\nOntology: <http://example.org/m>\n")
-    assert manchester.imports_of(text) == ["http://example.org/a", "http://example.org/b"]
-    # A comment that mentions an import is not one.
-    assert manchester.imports_of("# Import: <http://example.org/c>\n") == []
+    assert manchester.header_of(text, "m.omn") == manchester.Header(
+        "http://example.org/m", ("http://example.org/a", "http://example.org/b")
+    )
+    # A comment among the imports is not one; a line that is neither is named.
+    text = "Ontology: <http://x/m>\n# Import: <http://x/c>\n    Import: <http://x/a>\n"
+    assert manchester.header_of(text, "m.omn").imports == ("http://x/a",)
+    with pytest.raises(ValueError, match=r"m\.omn: cannot read the header line '<http://x/b>'"):
+        manchester.header_of(text + "<http://x/b>\n", "m.omn")
+    with pytest.raises(ValueError, match=r"m\.omn has no 'Ontology: <IRI>' header"):
+        manchester.header_of("Class: :A\n", "m.omn")
 
 
 def test_every_built_in_scenario_s_imports_are_read() -> None:
     for path in ontology_dir().glob("scenario-*.omn"):
         text = path.read_text(encoding="utf-8")
         declared = [ln for ln in text.splitlines() if ln.strip().startswith("Import:")]
-        assert len(manchester.imports_of(text)) == len(declared) > 0, path.name
+        imports = manchester.header_of(text, path.name).imports
+        assert len(imports) == len(declared) > 0, path.name

@@ -58,8 +58,8 @@ def declarations() -> str:
 
 def _builtin_imports(scenario: str) -> list[str]:
     """The modules the built-in scenario module imports (its domain layer)."""
-    text = (ontology_dir() / f"scenario-{scenario}.omn").read_text(encoding="utf-8")
-    return manchester.imports_of(text)
+    path = ontology_dir() / f"scenario-{scenario}.omn"
+    return list(manchester.header_of(path.read_text(encoding="utf-8"), path.name).imports)
 
 
 def module_header(layout: KbLayout, layer: str) -> str:

@@ -2,7 +2,7 @@
 
 Reading: the little of a class expression a drafted axiom needs before OWLAPI
 sees it (which names it uses, in which role, and the same expression with
-names replaced), and the imports a module document declares.  OWLAPI's parser
+names replaced), and the header of a module document (its IRI and imports).  OWLAPI's parser
 stays the judge of whether a text parses; this only finds the names, so they
 can be matched to the vocabulary first.
 
@@ -184,13 +184,39 @@ def _depths(toks: list[Token]) -> list[tuple[Token, int]]:
 
 
 # ---------------------------------------------------------------------- documents, read
-# An import names its module by IRI in angle brackets, on a line of its own.
-_IMPORT: Final = re.compile(r"^[ \t]*Import:[ \t]*<([^>\s]+)>[ \t]*$", re.MULTILINE)
+# A module names itself and its imports first, before any frame:
+# 'Ontology: <IRI> [<version IRI>]', then one 'Import: <IRI>' a line.
+_ONTOLOGY: Final = re.compile(r"^Ontology:\s*<([^>]*)>", re.MULTILINE)
+_IMPORT: Final = re.compile(r"\s*Import:\s*<([^>]*)>\s*$")
+_FRAME: Final = re.compile(r"\s*[A-Za-z]+:")
 
 
-def imports_of(document: str) -> list[str]:
-    """The IRIs a module document imports, in the order it names them."""
-    return _IMPORT.findall(document)
+@dataclass(frozen=True)
+class Header:
+    """What a module document's header says: its IRI and the IRIs it imports."""
+
+    iri: str
+    imports: tuple[str, ...]
+
+
+def header_of(document: str, name: str) -> Header:
+    """The header of a module document (``name``, its file, is what an error
+    names); ValueError when it has no ``Ontology: <IRI>`` or a header line
+    that is neither an import, a comment nor the start of what follows."""
+    found = _ONTOLOGY.search(document)
+    if found is None:
+        raise ValueError(f"{name} has no 'Ontology: <IRI>' header")
+    imports = []
+    for line in document[found.end() :].splitlines()[1:]:
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        hit = _IMPORT.match(line)
+        if hit is None:
+            if _FRAME.match(line):
+                break  # the imports are over: annotations or the first frame
+            raise ValueError(f"{name}: cannot read the header line {line.strip()!r}")
+        imports.append(hit.group(1))
+    return Header(found.group(1), tuple(imports))
 
 
 # ---------------------------------------------------------------------- documents, written
