@@ -19,8 +19,10 @@ from click.testing import Result
 
 from virf.api import LogicTutor
 from virf.authoring.audit import audit
+from virf.authoring.decisions import edit_size
 from virf.authoring.draft import METHOD, system_prompt, task_id
-from virf.authoring.workspace import Workspace, _edit_size, starter_corpus_dir
+from virf.authoring.layers import candidate_module
+from virf.authoring.workspace import Workspace, starter_corpus_dir
 from virf.errors import InputError
 from virf.planner import (
     ClientSettings,
@@ -245,9 +247,9 @@ def test_decisions_are_checked_final_and_rejected_rules_stay_out(
 
 
 def test_edit_sizes() -> None:
-    assert _edit_size("A and (p some B)", "A  and (p some B) ") == "none"
-    assert _edit_size("Cup and (p some B)", "Mug and (p some B)") == "minor"
-    assert _edit_size("A and (p some B)", "A and (p some (B and C))") == "major"
+    assert edit_size("A and (p some B)", "A  and (p some B) ") == "none"
+    assert edit_size("Cup and (p some B)", "Mug and (p some B)") == "minor"
+    assert edit_size("A and (p some B)", "A and (p some (B and C))") == "major"
 
 
 # ---------------------------------------------------------------------- the LLM drafter
@@ -495,11 +497,12 @@ def test_the_effect_preview_lists_the_verdicts_a_candidate_changes(
 def test_a_module_that_makes_the_tbox_inconsistent_is_reported(ws: Workspace) -> None:
     from virf.ontology.axiom_check import check_candidate
 
-    module = ws._candidate_module(
+    module = candidate_module(
+        ws.layout,
         "Class: :Microwave\nClass: :UnsafeStateConcept\nIndividual: :Metal\n"
         "    Types: :Microwave\n"
         "Class: :MetalMicrowaveDraft\n    EquivalentTo: {:Metal}\n"
-        "    SubClassOf: :UnsafeStateConcept\n"
+        "    SubClassOf: :UnsafeStateConcept\n",
     )
     result = check_candidate(
         ws.scenario,

@@ -14,7 +14,6 @@ from conftest import inst, rel
 from learn_support import ELECTRIC, HAIR_DRYER, HAIR_DRYER_PLAN, TODDLER
 
 from virf.api import LogicTutor
-from virf.authoring import manchester
 from virf.authoring.learn import (
     answered_from_transcript,
     check_who,
@@ -23,6 +22,7 @@ from virf.authoring.learn import (
     scene_digest,
 )
 from virf.errors import InputError
+from virf.ontology import manchester
 from virf.planner.loop import Turn
 from virf.planner.questions import settle
 from virf.schema import Question, Report

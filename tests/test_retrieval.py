@@ -20,7 +20,8 @@ import typer
 from typer.testing import CliRunner
 
 from virf.authoring import documents
-from virf.authoring.corpus import DOCUMENTS_CACHE, INDEX_CACHE, Corpus
+from virf.authoring.corpus import Corpus
+from virf.authoring.corpus_cache import DOCUMENTS_CACHE, INDEX_CACHE
 from virf.authoring.documents import Document, read_document
 from virf.errors import EnvironmentProblem, InputError
 

@@ -1,30 +1,15 @@
 """A workspace's corpus: a folder of safety documents and a cached hybrid index over their passages.
 
-The files in the folder are the truth; everything else is derived and kept
-in the cache folder, keyed by a digest of the files, so deleting the cache
-only costs a rebuild:
+The files in the folder are the truth; what is derived from them (the
+documents as parsed, one embedding per passage) is kept in the cache folder,
+keyed by a digest of the files (:mod:`virf.authoring.corpus_cache`), so
+deleting the cache only costs a rebuild.  When the corpus changes, vectors of
+passages whose text did not change are reused, so adding a document embeds
+only it.
 
-* ``corpus-documents.json``: the documents as parsed (for listing and
-  search without re-reading PDFs);
-* ``retrieval-index.npz``: one all-MiniLM-L6-v2 vector per passage, with the
-  passage ids and text digests it was built from.  Key: index format, corpus
-  digest and model id.  When the corpus changes, vectors of passages whose
-  text did not change are reused, so adding a document embeds only it.
-
-Both are written to a temporary file and renamed into place, so a build that
-is interrupted leaves the old cache or none, never half of one; a cache that
-cannot be read is rebuilt.
-
-Retrieval is hybrid.  BM25 (``rank_bm25.BM25Okapi``) finds passages sharing
-the query's words, the embeddings find paraphrases that share none.  Each
-score list is min-max normalised over the corpus to [0, 1] and the two are
-averaged with weight 0.5 each (a list whose scores are all equal, such as
-BM25's when no query word occurs anywhere, counts 0 for everyone).  This
-keeps the size of the gap between passages, which reciprocal-rank fusion
-would throw away, and gives a score a reader can compare across hits.  Ties
-go to the smaller passage id.  A passage is indexed with its section title
-(or, for an introduction, body or PDF page, its document's title) in front,
-because the corpus's paragraphs often leave the topic to their heading.
+Retrieval is hybrid: BM25 over the passages' words and the embeddings' cosine
+similarity, fused into one score in [0, 1] (:mod:`virf.authoring.scoring`).
+Ties go to the smaller passage id.
 """
 
 from __future__ import annotations
@@ -32,10 +17,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import hashlib
-import io
-import json
 import os
-import re
 import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -45,10 +27,15 @@ from typing import TYPE_CHECKING, Any, NoReturn
 import numpy as np
 import numpy.typing as npt
 
+from virf.authoring.corpus_cache import (
+    FILE_MODE,
+    INDEX_FORMAT,
+    read_documents,
+    read_index,
+    write_documents,
+    write_index,
+)
 from virf.authoring.documents import (
-    BODY,
-    INTRODUCTION,
-    PAGE,
     READERS,
     SUPPORTED,
     Document,
@@ -56,25 +43,15 @@ from virf.authoring.documents import (
     read_document,
     read_document_bytes,
     shown,
-    web_address,
 )
+from virf.authoring.scoring import bm25_index, fused, indexed_text, tokens
 from virf.errors import InputError, clip
 
 if TYPE_CHECKING:
     from virf.embed import Embedder
 
-# Bump when the files below change shape or the indexed text changes.
-INDEX_FORMAT = 1
-BM25_WEIGHT = 0.5
-DENSE_WEIGHT = 0.5
 # A question, not a document: BM25 scores each query word against every passage.
 MAX_QUERY_CHARS = 2000
-DOCUMENTS_CACHE = "corpus-documents.json"
-INDEX_CACHE = "retrieval-index.npz"
-
-# mkstemp makes files only their owner may read; corpus copies and caches
-# are ordinary files of the workspace.
-_FILE_MODE = 0o644
 Progress = Callable[[int, int], None]  # (texts embedded so far, texts to embed)
 
 
@@ -194,10 +171,10 @@ class Corpus:
         digest, files = self._scan()
         if self._documents is not None and self._documents[0] == digest:
             return self._documents
-        docs = self._read_documents_cache(digest)
+        docs = read_documents(self.cache_dir, self.folder, digest)
         if docs is None:
             docs = [read_document(self.folder / f.name) for f in files]
-            self._write_documents_cache(digest, docs)
+            write_documents(self.cache_dir, digest, docs)
         seen: dict[str, str] = {}
         for doc in docs:
             other = seen.setdefault(doc.id, Path(doc.path).name)
@@ -209,23 +186,6 @@ class Corpus:
         docs.sort(key=lambda d: d.id)
         self._documents = (digest, docs)
         return self._documents
-
-    def _read_documents_cache(self, digest: str) -> list[Document] | None:
-        try:
-            data = json.loads((self.cache_dir / DOCUMENTS_CACHE).read_text(encoding="utf-8"))
-            if data["format"] != INDEX_FORMAT or data["corpus"] != digest:
-                return None
-            return [_document_from(d, self.folder) for d in data["documents"]]
-        except (OSError, ValueError, KeyError, TypeError):
-            return None  # absent or damaged: parse the files again
-
-    def _write_documents_cache(self, digest: str, docs: list[Document]) -> None:
-        data = {
-            "format": INDEX_FORMAT,
-            "corpus": digest,
-            "documents": [_document_to(d) for d in docs],
-        }
-        self._write_atomic(DOCUMENTS_CACHE, json.dumps(data).encode())
 
     # -- adding documents -------------------------------------------------
 
@@ -324,7 +284,7 @@ class Corpus:
                 )
                 staged.append((Path(temp_name), self.folder / name, old))
                 with os.fdopen(fd, "wb") as fh:
-                    os.fchmod(fh.fileno(), _FILE_MODE)
+                    os.fchmod(fh.fileno(), FILE_MODE)
                     fh.write(raw)
         except OSError as exc:
             self._unstage(staged, exc)
@@ -375,14 +335,16 @@ class Corpus:
         texts = [indexed_text(by_id[p.document], p) for p in passages]
         digests = [hashlib.sha256(t.encode()).hexdigest() for t in texts]
         ids = [p.id for p in passages]
-        cached = self._read_index_cache(model_id)
+        cached = read_index(self.cache_dir, model_id)
         if cached is not None and cached[0] == key and cached[1] == ids and cached[2] == digests:
             embeddings = cached[3]
         else:
             reuse = {} if cached is None else dict(zip(cached[2], cached[3], strict=True))
             embeddings = self._embed(texts, digests, reuse, progress)
-            self._write_index_cache(key, model_id, ids, digests, embeddings)
-        self._index = _Index(key, passages, by_id, embeddings, _bm25([_tokens(t) for t in texts]))
+            write_index(self.cache_dir, key, model_id, ids, digests, embeddings)
+        self._index = _Index(
+            key, passages, by_id, embeddings, bm25_index([tokens(t) for t in texts])
+        )
         return self._index
 
     def _embed(
@@ -413,78 +375,11 @@ class Corpus:
             out[todo] = self.embedder.encode([texts[i] for i in todo], progress=step)
         return out
 
-    def _read_index_cache(
-        self, model_id: str
-    ) -> tuple[str, list[str], list[str], npt.NDArray[np.float32]] | None:
-        """(key, passage ids, text digests, vectors) of the cached index if it
-        was built by this model and format; None if absent or unreadable."""
-        from virf.embed import DIMENSION
-
-        try:
-            with np.load(self.cache_dir / INDEX_CACHE, allow_pickle=False) as data:
-                meta = json.loads(bytes(data["meta"]).decode("utf-8"))
-                vectors = np.asarray(data["embeddings"], dtype=np.float32)
-            ids = [str(x) for x in meta["passages"]]
-            digests = [str(x) for x in meta["digests"]]
-            if (
-                meta["format"] != INDEX_FORMAT
-                or meta["model"] != model_id
-                or vectors.shape != (len(ids), DIMENSION)
-                or len(digests) != len(ids)
-                or not np.all(np.isfinite(vectors))
-            ):
-                return None
-            return str(meta["key"]), ids, digests, vectors
-        except Exception:
-            # Whatever a damaged or foreign file raises inside numpy's zip
-            # and npy readers (BadZipFile, ValueError, EOFError, KeyError...):
-            # the cache is derived, so it is rebuilt.
-            return None
-
-    def _write_index_cache(
-        self,
-        key: str,
-        model_id: str,
-        ids: list[str],
-        digests: list[str],
-        embeddings: npt.NDArray[np.float32],
-    ) -> None:
-        meta = {
-            "format": INDEX_FORMAT,
-            "key": key,
-            "model": model_id,
-            "passages": ids,
-            "digests": digests,
-        }
-        buffer = io.BytesIO()
-        np.savez(
-            buffer,
-            meta=np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8),
-            embeddings=embeddings,
-        )
-        self._write_atomic(INDEX_CACHE, buffer.getvalue())
-
-    def _write_atomic(self, name: str, data: bytes) -> None:
-        """Temp file + rename.  A cache that cannot be written is not an error:
-        it is only rebuilt next time."""
-        tmp: str | None = None
-        try:
-            self.cache_dir.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=self.cache_dir)
-            with os.fdopen(fd, "wb") as fh:
-                os.fchmod(fh.fileno(), _FILE_MODE)
-                fh.write(data)
-            os.replace(tmp, self.cache_dir / name)
-        except OSError:
-            if tmp is not None:
-                with contextlib.suppress(OSError):
-                    os.unlink(tmp)
-
     # -- search -----------------------------------------------------------
 
     def search(self, query: str, k: int = 5, progress: Progress | None = None) -> list[Hit]:
-        """The ``k`` best passages for ``query``, best first (see the module
-        docstring for the scoring)."""
+        """The ``k`` best passages for ``query``, best first (scored as
+        :mod:`virf.authoring.scoring` says)."""
         if not isinstance(query, str) or not query.strip():
             raise InputError("the search query is empty; give some words to search for")
         if len(query) > MAX_QUERY_CHARS:
@@ -496,122 +391,21 @@ class Corpus:
         index = self._current_index(progress)
         vector = self.embedder.encode([query])[0]
         dense = index.embeddings @ vector
-        terms = _tokens(query)
+        terms = tokens(query)
         if index.bm25 is not None and terms:
             bm25 = np.asarray(index.bm25.get_scores(terms), dtype=np.float64)
         else:
             bm25 = np.zeros(len(index.passages))
-        fused = BM25_WEIGHT * _min_max(bm25) + DENSE_WEIGHT * _min_max(dense.astype(np.float64))
-        order = sorted(range(len(index.passages)), key=lambda i: (-fused[i], index.passages[i].id))
+        score = fused(bm25, dense.astype(np.float64))
+        order = sorted(range(len(index.passages)), key=lambda i: (-score[i], index.passages[i].id))
         return [
             Hit(
                 passage=index.passages[i],
                 document=index.documents[index.passages[i].document],
-                score=float(fused[i]),
+                score=float(score[i]),
                 bm25=float(bm25[i]),
                 dense=float(dense[i]),
                 rank=rank,
             )
             for rank, i in enumerate(order[:k], start=1)
         ]
-
-
-def _min_max(scores: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-    low, high = float(scores.min()), float(scores.max())
-    if high - low <= 1e-12:
-        return np.zeros_like(scores)
-    return (scores - low) / (high - low)
-
-
-def _bm25(tokenized: list[list[str]]) -> Any:
-    from rank_bm25 import BM25Okapi
-
-    if not any(tokenized):
-        return None  # BM25Okapi divides by the vocabulary size
-    return BM25Okapi(tokenized)
-
-
-_GENERIC_SECTION = re.compile(rf"{INTRODUCTION}|{BODY}|{PAGE} \d+")
-
-
-def indexed_text(document: Document, passage: Passage) -> str:
-    """The text a passage is indexed under: its section title (or, where the
-    section has none of its own, the document's title), then its words."""
-    context = document.title if _GENERIC_SECTION.fullmatch(passage.section) else passage.section
-    return f"{context}. {passage.text}"
-
-
-# English function words: they carry no topic, and with min-max fusion a
-# passage matching only "while" would otherwise get BM25's full half of the
-# score.  Negations and "off"/"without" stay: in safety advice they matter.
-_STOP = frozenset({
-    "a", "about", "above", "after", "again", "against", "all", "also", "am", "an", "and",
-    "any", "are", "as", "at", "be", "because", "been", "before", "being", "below", "between",
-    "both", "but", "by", "can", "could", "did", "do", "does", "doing", "down", "during",
-    "each", "few", "for", "from", "further", "had", "has", "have", "having", "he", "her",
-    "here", "hers", "herself", "him", "himself", "his", "how", "i", "if", "in", "into", "is",
-    "it", "its", "itself", "just", "may", "me", "might", "more", "most", "must", "my",
-    "myself", "nor", "now", "of", "on", "once", "only", "or", "other", "our", "ours",
-    "ourselves", "out", "over", "own", "same", "shall", "she", "should", "so", "some", "such",
-    "than", "that", "the", "their", "theirs", "them", "themselves", "then", "there", "these",
-    "they", "this", "those", "through", "to", "too", "under", "until", "up", "very", "was",
-    "we", "were", "what", "when", "where", "which", "while", "who", "whom", "why", "will",
-    "with", "would", "you", "your", "yours", "yourself", "yourselves",
-})  # fmt: skip
-
-
-def _tokens(text: str) -> list[str]:
-    """Lowercase words for BM25, stop words dropped, plurals folded.
-
-    Folding plurals by hand instead of a stemmer library (snowball, Porter):
-    "fires"/"fire" and "pans"/"pan" are the mismatches household questions
-    hit; deeper stemming would be a dependency for little, since the dense
-    half already matches related forms."""
-    return [_singular(w) for w in re.findall(r"[^\W_]+", text.lower()) if w not in _STOP]
-
-
-def _singular(word: str) -> str:
-    if len(word) <= 3:
-        return word
-    if word.endswith("ies") and len(word) > 4:
-        return word[:-3] + "y"
-    if word.endswith(("sses", "shes", "ches", "xes")):
-        return word[:-2]
-    if word.endswith("s") and not word.endswith(("ss", "us", "is")):
-        return word[:-1]
-    return word
-
-
-def _document_to(doc: Document) -> dict[str, Any]:
-    data = dataclasses.asdict(doc)
-    data["path"] = Path(doc.path).name
-    return data
-
-
-def _document_from(data: dict[str, Any], folder: Path) -> Document:
-    name = str(data["path"])
-    if "/" in name or "\\" in name or name.startswith("."):
-        raise ValueError("not a corpus file name")
-    url = str(data["url"])
-    if url and not web_address(url):
-        raise ValueError("not a web address")  # not what reading the file gives: read it again
-    return Document(
-        id=str(data["id"]),
-        title=str(data["title"]),
-        publisher=str(data["publisher"]),
-        url=url,
-        kind=str(data["kind"]),
-        path=str(folder / name),
-        rooms=tuple(str(r) for r in data["rooms"]),
-        topics=tuple(str(t) for t in data["topics"]),
-        passages=tuple(
-            Passage(
-                id=str(p["id"]),
-                document=str(p["document"]),
-                section=str(p["section"]),
-                number=int(p["number"]),
-                text=str(p["text"]),
-            )
-            for p in data["passages"]
-        ),
-    )

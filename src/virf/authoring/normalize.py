@@ -16,9 +16,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Final
 
-from virf.authoring import manchester
 from virf.authoring.models import CheckItem, TermChoice
 from virf.names import name_words, term_key
+from virf.ontology import manchester
 from virf.ontology.tbox import Vocabulary
 
 if TYPE_CHECKING:

@@ -19,13 +19,60 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from virf.api import LogicTutor
+from virf.authoring import layers
+from virf.authoring.checks import check_row, current_axiom
 from virf.authoring.models import Preview, PreviewChange
-from virf.errors import VirfError
+from virf.errors import InputError, VirfError, clip
+from virf.files import write_atomically
 from virf.migrations import now
 from virf.ontology.tbox import load_tbox
 
 if TYPE_CHECKING:
     from virf.authoring.workspace import Workspace
+
+
+def preview(
+    ws: Workspace,
+    cid: int,
+    axiom: str | None = None,
+    tasks: Path | None = None,
+    examples: Path | None = None,
+) -> Preview:
+    """The effect preview of candidate ``cid`` with ``axiom`` (else the axiom
+    checked last), which must pass its checks; stored as its latest preview."""
+    row = ws.store.candidate(cid)
+    ws.store.undecided(cid)
+    if examples is not None and not examples.is_dir():
+        raise InputError(f"examples folder {clip(str(examples))} does not exist")
+    if tasks is not None and not tasks.is_file():
+        raise InputError(f"benchmark file {clip(str(tasks))} does not exist")
+    text = axiom if axiom is not None else current_axiom(ws.store, cid, row.axiom)
+    report = check_row(ws, row, text)
+    if not report.passed:
+        failed = next(i for i in report.items if i.severity == "error")
+        raise InputError(f"candidate {cid} does not pass its checks: {failed.message}")
+    ws.cache_dir.mkdir(exist_ok=True)
+    module = ws.cache_dir / f"preview-{cid}.omn"
+    write_atomically(module, layers.candidate_module(ws.layout, report.module_text))
+    scenes: list[tuple[str, dict[str, Any], tuple[str, ...]]] = []
+    if row.origin == "answer":
+        from virf.authoring.learned import learned_of
+
+        learned = learned_of(row)
+        scenes.append(
+            (f"scene {learned.scene_name} (learned from)", row.draft["scene"], learned.plan)
+        )
+    result = effect_preview(
+        ws,
+        module,
+        text,
+        tasks=tasks,
+        examples=examples,
+        scenes=scenes,
+        kb_test=row.origin == "answer",
+    )
+    ws.store.add_preview(cid, text, result.model_dump(mode="json"))
+    return result
 
 
 def _verdict(status: str, concept: str | None) -> str:

@@ -28,7 +28,6 @@ from fastapi.responses import FileResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
 from pydantic import Field
 
-from virf.authoring.manchester import MAX_AXIOM_CHARS
 from virf.authoring.models import (
     AcceptedRule,
     CandidateSummary,
@@ -40,6 +39,7 @@ from virf.authoring.models import (
     Status,
 )
 from virf.errors import EnvironmentProblem, InputError, Record, Says, clip
+from virf.ontology.manchester import MAX_AXIOM_CHARS
 from virf.web import (
     LOCAL_HOSTS,
     BodyLimit,

@@ -299,6 +299,14 @@ class Store:
         rows = self.decisions(cid)
         return rows[0] if rows else None
 
+    def undecided(self, cid: int) -> None:
+        """Refuse a candidate that has been decided: a decision is final, so
+        it is neither checked, previewed nor decided again."""
+        decided = self.decision(cid)
+        if decided is not None:
+            what = "accepted" if decided.decision == "accept" else "rejected"
+            raise InputError(f"candidate {cid} has already been decided ({what})")
+
     def decisions(self, cid: int | None = None) -> list[DecisionRow]:
         sql = (
             "SELECT candidate_id, created_at, decision, edit, axiom, layer, reason, reviewer, "

@@ -390,7 +390,7 @@ def kb_decide(
     as_json: JsonOpt = False,
 ) -> None:
     """Accept (after re-checking) or reject a candidate; accepted axioms go into the workspace's modules."""
-    from virf.authoring.workspace import EDIT_LABELS
+    from virf.authoring.decisions import EDIT_LABELS
 
     ws = _open(workspace)
     result = ws.decide(

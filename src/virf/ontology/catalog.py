@@ -17,24 +17,18 @@ folder, and this file is generated.
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
 from virf.errors import closest
 from virf.files import write_atomically
+from virf.ontology.manchester import header_of
 from virf.ontology.tbox import ontology_dir
 
 CATALOG = "catalog-v001.xml"
 NAMESPACE = "urn:oasis:names:tc:entity:xmlns:xml:catalog"
 GROUP_ID = "virf-modules"
-
-# Manchester syntax puts the ontology's IRI and its imports first, before any
-# frame: 'Ontology: <IRI> [<version IRI>]', then one 'Import: <IRI>' per line.
-_ONTOLOGY = re.compile(r"^Ontology:\s*<([^>]*)>", re.MULTILINE)
-_IMPORT = re.compile(r"\s*Import:\s*<([^>]*)>\s*$")
-_FRAME = re.compile(r"\s*[A-Za-z]+:")
 
 
 @dataclass(frozen=True)
@@ -47,21 +41,8 @@ class ModuleHeader:
 
 
 def read_header(path: Path) -> ModuleHeader:
-    text = path.read_text(encoding="utf-8")
-    found = _ONTOLOGY.search(text)
-    if found is None:
-        raise ValueError(f"{path.name} has no 'Ontology: <IRI>' header")
-    imports = []
-    for line in text[found.end() :].splitlines()[1:]:
-        if not line.strip() or line.lstrip().startswith("#"):
-            continue
-        hit = _IMPORT.match(line)
-        if hit is None:
-            if _FRAME.match(line):
-                break  # the imports are over: annotations or the first frame
-            raise ValueError(f"{path.name}: cannot read the header line {line.strip()!r}")
-        imports.append(hit.group(1))
-    return ModuleHeader(path.name, found.group(1), tuple(imports))
+    found = header_of(path.read_text(encoding="utf-8"), path.name)
+    return ModuleHeader(path.name, found.iri, found.imports)
 
 
 def module_headers(module_dir: Path | None = None) -> list[ModuleHeader]:
