@@ -216,9 +216,7 @@ def engine_factory(name: str) -> Callable[[TBox, float], Engine]:
     if key not in BUILTIN:
         near = closest(name, engine_names())
         guess = f"did you mean {' or '.join(near)}? " if near else ""
-        raise InputError(
-            f"unknown engine '{name}'; {guess}choose from {', '.join(engine_names())}"
-        )
+        raise InputError(f"unknown engine '{name}'; {guess}choose from {', '.join(engine_names())}")
     module, _, attr = BUILTIN[key].partition(":")
     factory: Callable[[TBox, float], Engine] = getattr(import_module(module), attr)
     return factory
