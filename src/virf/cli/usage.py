@@ -42,8 +42,11 @@ def _usage_pieces(command: TyperCommand | TyperGroup, ctx: Any) -> list[str]:
     return pieces
 
 
-class HelpCommand(TyperCommand):
-    """A command whose help shows no type on flags and plain argument names."""
+class _NoFlagTypes:
+    """Mixed into a typer command or group: its flags, ``--help`` included,
+    show no type."""
+
+    params: list[Any]
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
@@ -51,26 +54,20 @@ class HelpCommand(TyperCommand):
             _without_flag_type(param)
 
     def get_help_option(self, ctx: Any) -> Any:
-        option = super().get_help_option(ctx)
+        option = super().get_help_option(ctx)  # type: ignore[misc]
         _without_flag_type(option)
         return option
+
+
+class HelpCommand(_NoFlagTypes, TyperCommand):
+    """A command whose help shows no type on flags and plain argument names."""
 
     def collect_usage_pieces(self, ctx: Any) -> list[str]:
         return _usage_pieces(self, ctx)
 
 
-class HelpGroup(TyperGroup):
+class HelpGroup(_NoFlagTypes, TyperGroup):
     """A group whose help, like :class:`HelpCommand`'s, shows no type on flags."""
-
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
-        for param in self.params:
-            _without_flag_type(param)
-
-    def get_help_option(self, ctx: Any) -> Any:
-        option = super().get_help_option(ctx)
-        _without_flag_type(option)
-        return option
 
     def collect_usage_pieces(self, ctx: Any) -> list[str]:
         return [*_usage_pieces(self, ctx), self.subcommand_metavar]
