@@ -4,15 +4,12 @@ The report as text for people is :func:`virf.render.text.render_report`."""
 
 from __future__ import annotations
 
-from importlib import resources
-
+from virf.files import read_prompt
 from virf.schema import Report, Violation
 
 # The paper's Appendix E template, kept as a file so it can be read and
 # adapted without touching code.
-FEEDBACK_TEMPLATE = (
-    resources.files("virf.render").joinpath("diagnostic.txt").read_text(encoding="utf-8")
-)
+FEEDBACK_TEMPLATE = read_prompt("virf.render", "diagnostic.txt")
 
 _NON_OBJECTS = {"rdf:type"}
 
