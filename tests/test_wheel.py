@@ -21,10 +21,17 @@ ROOT = Path(__file__).resolve().parent.parent
 WALKTHROUGH = ROOT / "examples" / "walkthrough"
 
 
-def _without_checkout_env() -> dict[str, str]:
-    """This environment less PYTHONPATH, which could put the checkout's
-    sources ahead of the installed wheel."""
-    return {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+def _installed(command: list[str | Path], cwd: Path) -> subprocess.CompletedProcess[str]:
+    """``command`` run in ``cwd`` with this environment less PYTHONPATH, which
+    could put the checkout's sources ahead of the installed wheel."""
+    return subprocess.run(
+        [str(part) for part in command],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"},
+        timeout=300,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -95,24 +102,13 @@ def wheel_python(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_the_wheel_verifies_from_anywhere(wheel_python: Path, tmp_path: Path) -> None:
-    where = subprocess.run(
-        [str(wheel_python), "-c", "import virf; print(virf.__file__)"],
-        capture_output=True,
-        text=True,
-        cwd=tmp_path,
-        env=_without_checkout_env(),
-        check=True,
-    ).stdout
+    found = _installed([wheel_python, "-c", "import virf; print(virf.__file__)"], tmp_path)
+    assert found.returncode == 0, found.stderr
+    where = found.stdout
     assert "site-packages" in where and str(ROOT / "src") not in where
     virf = wheel_python.with_name("virf")
-    env = _without_checkout_env()
-    run = subprocess.run(
-        [str(virf), "verify", str(WALKTHROUGH / "scene.json"), str(WALKTHROUGH / "plan.txt")],
-        capture_output=True,
-        text=True,
-        cwd=tmp_path,
-        env=env,
-        timeout=300,
+    run = _installed(
+        [virf, "verify", WALKTHROUGH / "scene.json", WALKTHROUGH / "plan.txt"], tmp_path
     )
     assert run.returncode == 1, run.stdout + run.stderr
     assert "Verdict: UNSAFE at step 7" in run.stdout
@@ -125,27 +121,13 @@ def test_the_wheel_carries_every_artifact(wheel_python: Path, tmp_path: Path) ->
         "print(stale_artifacts(), len(scenario_names()),"
         " {load_tbox(s).source for s in scenario_names()})\n"
     )
-    run = subprocess.run(
-        [str(wheel_python), "-c", probe],
-        capture_output=True,
-        text=True,
-        cwd=tmp_path,
-        env=_without_checkout_env(),
-        timeout=300,
-    )
+    run = _installed([wheel_python, "-c", probe], tmp_path)
     assert run.stdout.strip() == "[] 9 {'artifact'}", run.stderr
 
 
 def test_the_wheel_demo_finds_the_examples_it_carries(wheel_python: Path, tmp_path: Path) -> None:
     """``virf demo`` without a folder, run where there is no ./examples."""
-    run = subprocess.run(
-        [str(wheel_python.with_name("virf")), "demo"],
-        capture_output=True,
-        text=True,
-        cwd=tmp_path,
-        env=_without_checkout_env(),
-        timeout=300,
-    )
+    run = _installed([wheel_python.with_name("virf"), "demo"], tmp_path)
     assert run.returncode == 0, run.stdout + run.stderr
     shipped = sorted(p.parent.name for p in (ROOT / "examples").glob("*/plan.txt"))
     assert len(shipped) > 10
@@ -166,14 +148,7 @@ def test_the_wheel_service_lists_the_examples_it_carries(
         "print(bundled_examples().relative_to(bundled_examples().parents[1]))\n"
         "print(' '.join(names)); print(walk['plan'].splitlines()[0])\n"
     )
-    run = subprocess.run(
-        [str(wheel_python), "-c", probe],
-        capture_output=True,
-        text=True,
-        cwd=tmp_path,
-        env=_without_checkout_env(),
-        timeout=300,
-    )
+    run = _installed([wheel_python, "-c", probe], tmp_path)
     assert run.returncode == 0, run.stderr
     where, names, first_step = run.stdout.splitlines()
     assert where == "virf/examples"
