@@ -94,6 +94,19 @@ class Engine(ABC):
             check_deadline(f"before the {self.name} engine classified the facts")
             return self._classify(Fact.sorted(set(facts)), list(concepts))
 
+    def classify_shared(
+        self,
+        shared: frozenset[Fact],
+        extra: Collection[Fact],
+        concepts: Sequence[str],
+        *,
+        deadline: float | None = None,
+    ) -> Classification:
+        """:meth:`classify` of ``shared | extra``, where ``shared`` is the set
+        the enclosing :meth:`sharing` block was given: an engine that
+        prepared for it needs only ``extra``, what one step adds."""
+        return self.classify([*shared, *extra], concepts, deadline=deadline)
+
     def entails(
         self,
         facts: Iterable[Fact],

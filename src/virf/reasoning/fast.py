@@ -29,7 +29,7 @@ import threading
 from collections import Counter
 from collections.abc import Callable, Collection, Iterable, Iterator, Sequence
 from contextlib import contextmanager
-from typing import Any
+from typing import Any, NamedTuple
 
 from virf.errors import VirfError
 from virf.ontology.fragment import Axiom, Expr, Fragment
@@ -57,6 +57,10 @@ _INTERNAL = ("owl:", "aux:", "{", "undefined:", "_:")
 # bookkeeping (and switching axioms on re-applies their rules to the whole
 # model), which a handful of questions do not repay.
 BATCH_FROM = 6
+# Journal entries a sharing block's model may grow by and still be rolled
+# back after it; past this, building the TBox's model again (about a
+# millisecond) is cheaper.
+_ROLLBACK_AT_MOST = 4000
 
 
 def fragment_of(tbox: TBox) -> Fragment:
@@ -120,6 +124,25 @@ def _halving(
     return [answers[i] for i in range(len(tested)) if tested[i]]
 
 
+class _Core(NamedTuple):
+    """The model a :meth:`FastEngine.sharing` block grew once: its facts, and
+    the individuals they name."""
+
+    model: Model
+    facts: frozenset[Fact]
+    individuals: frozenset[str]
+
+
+def _individuals(facts: Iterable[Fact]) -> frozenset[str]:
+    """The ABox individuals the facts name (a classification's candidates)."""
+    out: set[str] = set()
+    for f in facts:
+        out.add(f.subject)
+        if f.kind is FactKind.OBJECT:
+            out.add(f.object)
+    return frozenset(out)
+
+
 class FastEngine(Engine):
     """Exact answers without a DL reasoner for the fragment VIRF's ontology uses."""
 
@@ -133,8 +156,9 @@ class FastEngine(Engine):
         self._reference: Engine | None = None
         self._counts: Counter[str] = Counter()
         self._lock = threading.Lock()
-        self._core: tuple[Model, frozenset[Fact]] | None = None  # see sharing()
-        self._held: Model | None = None  # the program's spare model, while a block grows it
+        self._core: _Core | None = None  # see sharing()
+        self._spare: Model | None = None  # of the TBox's own facts, for sharing()
+        self._held: Model | None = None  # the spare model, while a block grows it
         self._query_ids = frozenset(
             a.id for a in self.fragment.query_axiom.values() if a.id is not None
         )
@@ -185,21 +209,27 @@ class FastEngine(Engine):
         if self.fragment.problems:
             raise Fallback("TBox outside the fragment: " + self.fragment.problems[0])
         core = self._core
-        if not without and core is not None and core[1].issubset(facts):
-            # The rules are monotone: the core's least model grown with the
-            # other facts is the least model of all of them.
-            m = core[0]
-            token = m.begin()
-            try:
-                self._load(m, [f for f in facts if f not in core[1]])
-                yield m, Evaluator(m, self._definitions(without), self.fragment.sinks)
-            finally:
-                m.rollback(token)
+        if not without and core is not None and core.facts.issubset(facts):
+            with self._grown(core, [f for f in facts if f not in core.facts]) as grown:
+                yield grown
             return
         prog, disabled = self.program(without)
         with prog.scratch(disabled) as m:
             self._load(m, facts)
             yield m, Evaluator(m, self._definitions(without), self.fragment.sinks)
+
+    @contextmanager
+    def _grown(self, core: _Core, extra: list[Fact]) -> Iterator[tuple[Model, Evaluator]]:
+        """The core's model grown with ``extra`` (facts outside the core), for
+        the block's duration only.  The rules are monotone: the core's least
+        model grown with the other facts is the least model of all of them."""
+        m = core.model
+        token = m.begin()
+        try:
+            self._load(m, extra)
+            yield m, Evaluator(m, self.fragment.query_defs, self.fragment.sinks)
+        finally:
+            m.rollback(token)
 
     def _load(self, m: Model, facts: list[Fact]) -> None:
         """Add the facts to the model and apply the rules."""
@@ -227,18 +257,22 @@ class FastEngine(Engine):
         """Grow the model of ``facts`` once; a question in the block whose
         facts include them starts from it, and adds only the rest.
 
-        The model is the program's second model of the TBox's own facts,
-        grown for the block and rolled back after it, so a block costs what
-        its facts add (a block that starts while another holds it builds a
-        model of its own)."""
+        The model is a spare model of the TBox's own facts, grown for the
+        block.  After it, a small growth is rolled back and the model kept
+        for the next block; a large one (a scene of a thousand objects) is
+        dropped, since rolling it back entry by entry costs more than
+        building the TBox's model again (a block that starts while another
+        holds the spare builds a model of its own)."""
         with self._lock:
-            core: tuple[Model, frozenset[Fact]] | None = None
+            core: _Core | None = None
             token: Token | None = None
             if facts and not self.fragment.problems:
                 shared = frozenset(facts)
                 prog = self.program(frozenset())[0]
                 if self._held is None:
-                    m = self._held = prog.spare()
+                    if self._spare is None or self._spare.prog is not prog:
+                        self._spare = prog.model(journal=True)
+                    m = self._held = self._spare
                     token = m.begin()
                 else:
                     m = prog.model()
@@ -249,7 +283,7 @@ class FastEngine(Engine):
                     pass  # the questions will meet it themselves, one by one
                 else:
                     if m.clash is None:
-                        core = (m, shared)
+                        core = _Core(m, shared, _individuals(shared))
             before, self._core = self._core, core
         try:
             yield
@@ -258,8 +292,13 @@ class FastEngine(Engine):
                 # Blocks of two threads may end out of order: leave a newer core alone.
                 if self._core is core:
                     self._core = before
-                if token is not None and self._held is not None:
-                    self._held.rollback(token)
+                held = self._held
+                if token is not None and held is not None:
+                    assert held.journal is not None
+                    if len(held.journal) - token[0] > _ROLLBACK_AT_MOST:
+                        self._spare = None
+                    else:
+                        held.rollback(token)
                     self._held = None
 
     @staticmethod
@@ -325,29 +364,64 @@ class FastEngine(Engine):
     def _classify(self, facts: list[Fact], concepts: list[str]) -> Classification:
         def exact() -> Classification:
             with self._model(facts, frozenset()) as (m, ev):
-                if m.clash is not None:
-                    return Classification(False, {})
-                bad = ev.violations(self._checks(m))
-                if bad is not None:
-                    raise Fallback(f"candidate model violates: {bad}")
-                abox = {f.subject for f in facts} | {
-                    f.object for f in facts if f.kind is FactKind.OBJECT
-                }
-                found: dict[str, tuple[str, ...]] = {}
-                for concept in concepts:
-                    check_deadline("while the fast engine classified the facts")
-                    # Only where the concept holds in the model can it be entailed.
-                    where = ev.candidates(("C", concept))
-                    pool = abox if where is None else abox & where
-                    names = tuple(x for x in sorted(pool) if self._decide(ev, concept, x))
-                    if names:
-                        found[concept] = names
-                return Classification(True, found)
+                return self._instances(m, ev, _individuals(facts), concepts)
 
         result: Classification = self._answer(
             exact, lambda: self.reference._classify(facts, concepts)
         )
         return result
+
+    def classify_shared(
+        self,
+        shared: frozenset[Fact],
+        extra: Collection[Fact],
+        concepts: Sequence[str],
+        *,
+        deadline: float | None = None,
+    ) -> Classification:
+        """Grows the block's model with ``extra`` alone: a step costs what it
+        adds, not what the scene holds."""
+        core = self._core
+        if core is None or core.facts is not shared or self.fragment.problems:
+            return super().classify_shared(shared, extra, concepts, deadline=deadline)
+        unknown = [c for c in concepts if c not in self.tbox.vocabulary.classes]
+        if unknown:
+            return super().classify_shared(shared, extra, concepts, deadline=deadline)
+        added = Fact.sorted(f for f in extra if f not in shared)
+
+        def exact() -> Classification:
+            if self._core is not core:  # another thread's block replaced it
+                raise Fallback("the shared model changed")
+            with self._grown(core, added) as (m, ev):
+                return self._instances(m, ev, core.individuals | _individuals(added), concepts)
+
+        def fallback() -> Classification:
+            return self.reference._classify(Fact.sorted(shared | set(added)), list(concepts))
+
+        with until(deadline):
+            check_deadline(f"before the {self.name} engine classified the facts")
+            result: Classification = self._answer(exact, fallback)
+        return result
+
+    def _instances(
+        self, m: Model, ev: Evaluator, abox: frozenset[str], concepts: Sequence[str]
+    ) -> Classification:
+        """The instances among ``abox`` of each concept, in the grown model."""
+        if m.clash is not None:
+            return Classification(False, {})
+        bad = ev.violations(self._checks(m))
+        if bad is not None:
+            raise Fallback(f"candidate model violates: {bad}")
+        found: dict[str, tuple[str, ...]] = {}
+        for concept in concepts:
+            check_deadline("while the fast engine classified the facts")
+            # Only where the concept holds in the model can it be entailed.
+            where = ev.candidates(("C", concept))
+            pool = abox if where is None else abox & where
+            names = tuple(x for x in sorted(pool) if self._decide(ev, concept, x))
+            if names:
+                found[concept] = names
+        return Classification(True, found)
 
     def _entails(
         self, facts: list[Fact], concept: str, individual: str, without: frozenset[str]

@@ -42,6 +42,7 @@ from virf.world.plan import PlanStep
 from virf.world.scene import Scene
 from virf.world.simulate import Trace, simulate
 from virf.world.simulator import Simulator
+from virf.world.state import facts_copy
 
 if TYPE_CHECKING:
     from concurrent.futures import Future
@@ -202,12 +203,17 @@ class Verifier:
         and stop at the first definite finding when ``until_definite``."""
         explainer = Explainer(self.engine, self.vocab, deadline, self._tick, background=explain)
         trace = simulate(self.sim, self.sim.initial(scene), plan)
-        # What no step changes is reasoned about once, not at every step.
-        first, *rest = trace.states
-        unchanged = set(first.facts).intersection(*(state.facts for state in rest))
+        snapshots = [self._snapshot(trace, k) for k in range(len(trace.states))]
+        # What no step changes is reasoned about once, not at every step:
+        # closures and all.  Sets built from the snapshots' dicts reuse their
+        # hashes, so this costs no Python call per fact.
+        first, *rest = snapshots
+        unchanged = frozenset(set(first).intersection(*rest))
         with self.engine.sharing(unchanged, deadline=deadline):
             return self._classify_steps(
                 trace,
+                snapshots,
+                unchanged,
                 len(plan),
                 requirements,
                 deadline,
@@ -219,6 +225,8 @@ class Verifier:
     def _classify_steps(
         self,
         trace: Trace,
+        snapshots: list[dict[Fact, Provenance]],
+        unchanged: frozenset[Fact],
         plan_length: int,
         requirements: Sequence[Requirement | Unreadable],
         deadline: float,
@@ -242,21 +250,23 @@ class Verifier:
         # In order, one at a time, unless they are classified in parallel: a
         # definite finding usually ends the loop long before the last step.
         parallel = self.workers > 1 and len(states) > 1
-        built = [self._snapshot(trace, k) for k in range(len(states))] if parallel else []
-        ahead = self._classify_ahead(built, concept_lists, deadline) if parallel else []
+        ahead = self._classify_ahead(snapshots, concept_lists, deadline) if parallel else []
         self._pending = ahead
         for k in range(len(states)):
             self._step = k
             if time.monotonic() > deadline:
                 raise VerificationTimeout(f"more than {self.timeout_s:g}s at step {k}")
-            snapshot = built[k] if parallel else self._snapshot(trace, k)
+            snapshot = snapshots[k]
             action_ind = None
             if k < len(resolved):
                 action_ind = Simulator.action_individual(resolved[k].step)
             result = (
                 ahead[k].result()
                 if ahead
-                else self.engine.classify(snapshot.keys(), concept_lists[k], deadline=deadline)
+                # Only what this step adds to the shared facts is new to the engine.
+                else self.engine.classify_shared(
+                    unchanged, set(snapshot) - unchanged, concept_lists[k], deadline=deadline
+                )
             )
             checked = k
             if not result.consistent:
@@ -299,7 +309,7 @@ class Verifier:
     def _snapshot(self, trace: Trace, k: int) -> dict[Fact, Provenance]:
         """State k, its closure facts, and action k+1 (the one-step lookahead)."""
         state = trace.states[k]
-        snapshot: dict[Fact, Provenance] = dict(state.facts)
+        snapshot = facts_copy(state.facts)
         snapshot.update(self.sim.closure_facts(state))
         if k < len(trace.resolved):
             snapshot.update(self.sim.action_facts(state, trace.resolved[k]))

@@ -15,7 +15,7 @@ from types import MappingProxyType
 
 from virf.ontology.tbox import Vocabulary
 from virf.schema import Fact, FactKind, Provenance
-from virf.world.state import PreconditionFailure, ResolvedStep, WorldState
+from virf.world.state import PreconditionFailure, ResolvedStep, WorldState, facts_copy
 
 # Actions whose only effect is one state of their target.
 RESULT_STATE = {
@@ -86,7 +86,7 @@ class Change:
         self.verb = r.step.verb
         self.agent = state.agent
         self.held = state.held()
-        self.facts = dict(state.facts)
+        self.facts = facts_copy(state.facts)
         self.objects = dict(state.objects)
         self.found = list(state.found)
 
@@ -142,9 +142,15 @@ class Change:
             objects=MappingProxyType(self.objects),
             # A liquid the scene declared can be poured or emptied away.
             order=tuple(o for o in self.state.order if o in self.objects),
-            facts=MappingProxyType(dict(sorted(self.facts.items()))),
+            facts=MappingProxyType(dict(sorted(self.facts.items(), key=_fact_order))),
             found=tuple(self.found),
         )
+
+
+def _fact_order(item: tuple[Fact, Provenance]) -> tuple[str, str, str, str]:
+    # The order of sorted(facts): comparing the kept keys directly skips a
+    # Python __eq__ and __lt__ per comparison.
+    return item[0]._order
 
 
 Handler = Callable[[Change], PreconditionFailure | None]

@@ -148,7 +148,18 @@ class PreconditionFailure:
     facts: tuple[Fact, ...] = field(default_factory=tuple)
 
 
+def facts_copy(facts: Mapping[Fact, Provenance]) -> dict[Fact, Provenance]:
+    """A mutable copy of a state's facts.  A dict (or a read-only view of
+    one) is copied with the hashes it keeps; rebuilding it key by key would
+    call ``Fact.__hash__``, a Python method, for every fact of every step."""
+    if isinstance(facts, dict | MappingProxyType):
+        return facts.copy()
+    return dict(facts)
+
+
 def diff(before: WorldState, after: WorldState) -> tuple[tuple[str, ...], tuple[str, ...]]:
-    added = tuple(f.render() for f in sorted(set(after.facts) - set(before.facts)))
-    removed = tuple(f.render() for f in sorted(set(before.facts) - set(after.facts)))
+    # Sets built from dicts reuse the dicts' hashes (see facts_copy).
+    old, new = set(facts_copy(before.facts)), set(facts_copy(after.facts))
+    added = tuple(f.render() for f in Fact.sorted(new - old))
+    removed = tuple(f.render() for f in Fact.sorted(old - new))
     return added, removed
