@@ -42,7 +42,7 @@ from virf.world.plan import PlanStep
 from virf.world.scene import Scene
 from virf.world.simulate import Trace, simulate
 from virf.world.simulator import Simulator
-from virf.world.state import facts_copy
+from virf.world.state import WorldState, facts_copy
 
 if TYPE_CHECKING:
     from concurrent.futures import Future
@@ -146,7 +146,7 @@ class Verifier:
     def snapshots(self, scene: Scene, plan: Sequence[PlanStep]) -> list[dict[Fact, Provenance]]:
         """The ABox the reasoner sees for each step (for baselines and tools)."""
         trace = simulate(self.sim, self.sim.initial(scene), plan)
-        return [self._snapshot(trace, k) for k in range(len(trace.states))]
+        return self._snapshots(trace)
 
     def findings(self, scene: Scene, plan: Sequence[PlanStep]) -> Walk:
         """Every finding of the plan, at every step, not only up to the first
@@ -203,7 +203,7 @@ class Verifier:
         and stop at the first definite finding when ``until_definite``."""
         explainer = Explainer(self.engine, self.vocab, deadline, self._tick, background=explain)
         trace = simulate(self.sim, self.sim.initial(scene), plan)
-        snapshots = [self._snapshot(trace, k) for k in range(len(trace.states))]
+        snapshots = self._snapshots(trace)
         # What no step changes is reasoned about once, not at every step:
         # closures and all.  Sets built from the snapshots' dicts reuse their
         # hashes, so this costs no Python call per fact.
@@ -306,14 +306,21 @@ class Verifier:
                 break
         return Walk(trace, findings, first_definite, checked)
 
-    def _snapshot(self, trace: Trace, k: int) -> dict[Fact, Provenance]:
-        """State k, its closure facts, and action k+1 (the one-step lookahead)."""
-        state = trace.states[k]
-        snapshot = facts_copy(state.facts)
-        snapshot.update(self.sim.closure_facts(state))
-        if k < len(trace.resolved):
-            snapshot.update(self.sim.action_facts(state, trace.resolved[k]))
-        return snapshot
+    def _snapshots(self, trace: Trace) -> list[dict[Fact, Provenance]]:
+        """Each state, its closure facts, and the next action (the one-step
+        lookahead).  A state's closures are those of the state before it,
+        read again only where the step changed something."""
+        out: list[dict[Fact, Provenance]] = []
+        since: tuple[WorldState, dict[Fact, Provenance]] | None = None
+        for k, state in enumerate(trace.states):
+            snapshot = facts_copy(state.facts)
+            closures = self.sim.closure_facts(state, since)
+            since = (state, closures)
+            snapshot.update(closures)
+            if k < len(trace.resolved):
+                snapshot.update(self.sim.action_facts(state, trace.resolved[k]))
+            out.append(snapshot)
+        return out
 
     def _classify_ahead(
         self, snapshots: list[dict[Fact, Provenance]], concepts: list[list[str]], deadline: float

@@ -15,7 +15,14 @@ from types import MappingProxyType
 
 from virf.ontology.tbox import Vocabulary
 from virf.schema import Fact, FactKind, Provenance
-from virf.world.state import PreconditionFailure, ResolvedStep, WorldState, facts_copy
+from virf.world.state import (
+    PreconditionFailure,
+    ResolvedStep,
+    WorldState,
+    carry_indexes,
+    facts_copy,
+    sorted_facts,
+)
 
 # Actions whose only effect is one state of their target.
 RESULT_STATE = {
@@ -79,8 +86,18 @@ class Change:
     """One step being applied: the state it starts in and working copies of
     the facts, objects and finds that become the next state."""
 
-    def __init__(self, vocab: Vocabulary, state: WorldState, r: ResolvedStep) -> None:
+    def __init__(
+        self,
+        vocab: Vocabulary,
+        state: WorldState,
+        r: ResolvedStep,
+        heaters: dict[frozenset[str], bool] | None = None,
+    ) -> None:
+        """``heaters`` remembers, per set of classes, whether things of them
+        heat what they hold (see :func:`heat`); a simulator keeps it for
+        every step, since a scene of a thousand objects has a few dozen."""
         self.vocab = vocab
+        self.heaters = {} if heaters is None else heaters
         self.state = state
         self.r = r
         self.verb = r.step.verb
@@ -137,20 +154,16 @@ class Change:
         self.drop(f for f in self.facts if obj in (f.subject, f.object) and f.predicate == "isNear")
 
     def result(self) -> WorldState:
-        return replace(
+        after = replace(
             self.state,
             objects=MappingProxyType(self.objects),
             # A liquid the scene declared can be poured or emptied away.
             order=tuple(o for o in self.state.order if o in self.objects),
-            facts=MappingProxyType(dict(sorted(self.facts.items(), key=_fact_order))),
+            facts=MappingProxyType(sorted_facts(self.facts)),
             found=tuple(self.found),
         )
-
-
-def _fact_order(item: tuple[Fact, Provenance]) -> tuple[str, str, str, str]:
-    # The order of sorted(facts): comparing the kept keys directly skips a
-    # Python __eq__ and __lt__ per comparison.
-    return item[0]._order
+        carry_indexes(self.state, after)
+        return after
 
 
 Handler = Callable[[Change], PreconditionFailure | None]
@@ -476,10 +489,12 @@ def heat(c: Change) -> None:
         ]
 
     for source, classes in objects.items():
-        if not (
-            c.vocab.any_is_a(classes, "HeatSourceObject")
-            or c.vocab.any_is_a(classes, "MicrowaveEmitterObject")
-        ):
+        heater = c.heaters.get(classes)
+        if heater is None:
+            heater = c.heaters[classes] = c.vocab.any_is_a(
+                classes, "HeatSourceObject"
+            ) or c.vocab.any_is_a(classes, "MicrowaveEmitterObject")
+        if not heater:
             continue
         if Fact(source, "hasState", "OnState") not in facts:
             continue

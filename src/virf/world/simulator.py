@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import difflib
 import re
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from types import MappingProxyType
 
 from virf.errors import EnvironmentProblem
@@ -38,6 +38,7 @@ from virf.world.state import (
     ResolvedStep,
     WorldState,
     diff,
+    facts_copy,
 )
 
 # What importers of this module have always found here.
@@ -58,6 +59,7 @@ class Simulator:
     def __init__(self, vocab: Vocabulary) -> None:
         self.vocab = vocab
         self._holders: dict[frozenset[str], tuple[bool, tuple[bool, ...]]] = {}
+        self._heaters: dict[frozenset[str], bool] = {}  # see Change
 
     # ------------------------------------------------------------------ setup
     def initial(self, scene: Scene) -> WorldState:
@@ -324,34 +326,80 @@ class Simulator:
         return f"Step{step.index}_{step.verb}"
 
     # ------------------------------------------------------------------ closure
-    def closure_facts(self, state: WorldState) -> dict[Fact, Provenance]:
+    def closure_facts(
+        self,
+        state: WorldState,
+        since: tuple[WorldState, Mapping[Fact, Provenance]] | None = None,
+    ) -> dict[Fact, Provenance]:
         """What the simulator believes are the complete contents of things.
 
         Known for the robot's own hand; for receptacles only as far as the
         scene says its listing is complete (``closed_world``), otherwise an
         open-world assumption that a finding must ask about.
+
+        ``since`` is an earlier state and its closure facts: only the holders
+        whose contents or states differ between the two are read again (a
+        step moves a few of a thousand objects).  The result is the same
+        dict, in the same order.
         """
         out: dict[Fact, Provenance] = {}
         held = state.objects_of(state.agent, "isHolding")
         out[Fact.closure(state.agent, "isHolding", held)] = Provenance.PLAN
-        for ind in state.order + tuple(sorted(set(state.objects) - set(state.order))):
-            vessel, kinds = self._holder_kinds(state.objects[ind])
-            if not (vessel or any(kinds)):
+        touched = self._touched(since[0], state) if since is not None else None
+        if since is None or touched is None:
+            for ind in state.order + tuple(sorted(set(state.objects) - set(state.order))):
+                out.update(self._holder_closures(state, ind))
+            return out
+        done: set[str] = set()
+        for f, prov in since[1].items():
+            ind = f.subject
+            if ind == state.agent and f.predicate == "isHolding":
                 continue
-            unknown_fill = state.has(ind, "hasState", "UnknownFillState")
-            for (rel, _), receptacle in zip(_HOLDERS, kinds, strict=True):
-                if receptacle or (rel == "contains" and vessel):
-                    members = state.objects_of(ind, rel)
-                    listed = (
-                        rel in state.closed_world or f"{rel}:{ind}" in state.closed_world
-                    ) or not receptacle
-                    known = (
-                        listed
-                        and ind not in state.unknown_contents
-                        and not (rel == "contains" and unknown_fill)
-                    )
-                    prov = Provenance.SCENE if known else Provenance.ASSUMED
-                    out[Fact.closure(ind, rel, members)] = prov
+            if ind not in touched:
+                out[f] = prov
+            elif ind not in done:
+                # The holder's closures keep their place: which relations it
+                # has closures for depends only on its classes.
+                done.add(ind)
+                out.update(self._holder_closures(state, ind))
+        return out
+
+    @staticmethod
+    def _touched(before: WorldState, after: WorldState) -> set[str] | None:
+        """The objects whose closures may differ from ``before`` to ``after``;
+        None when anything else they depend on changed."""
+        if (
+            before.agent != after.agent
+            or before.order != after.order
+            or before.closed_world != after.closed_world
+            or before.unknown_contents != after.unknown_contents
+            or before.objects != after.objects
+        ):
+            return None
+        # Sets built from the facts' dicts reuse their hashes.
+        changed = set(facts_copy(before.facts)) ^ set(facts_copy(after.facts))
+        return {f.subject for f in changed if f.predicate in _CLOSURE_INPUTS}
+
+    def _holder_closures(self, state: WorldState, ind: str) -> dict[Fact, Provenance]:
+        """The closure facts of one object (none unless it holds things)."""
+        out: dict[Fact, Provenance] = {}
+        vessel, kinds = self._holder_kinds(state.objects[ind])
+        if not (vessel or any(kinds)):
+            return out
+        unknown_fill = state.has(ind, "hasState", "UnknownFillState")
+        for (rel, _), receptacle in zip(_HOLDERS, kinds, strict=True):
+            if receptacle or (rel == "contains" and vessel):
+                members = state.objects_of(ind, rel)
+                listed = (
+                    rel in state.closed_world or f"{rel}:{ind}" in state.closed_world
+                ) or not receptacle
+                known = (
+                    listed
+                    and ind not in state.unknown_contents
+                    and not (rel == "contains" and unknown_fill)
+                )
+                prov = Provenance.SCENE if known else Provenance.ASSUMED
+                out[Fact.closure(ind, rel, members)] = prov
         return out
 
     def _holder_kinds(self, classes: frozenset[str]) -> tuple[bool, tuple[bool, ...]]:
@@ -370,7 +418,7 @@ class Simulator:
 
     # ------------------------------------------------------------------ effects
     def apply(self, state: WorldState, r: ResolvedStep) -> WorldState | PreconditionFailure:
-        change = Change(self.vocab, state, r)
+        change = Change(self.vocab, state, r, self._heaters)
         failure = lacking_affordance(change)
         if failure is None:
             # A verb without a handler changes nothing itself; running heat
@@ -388,6 +436,8 @@ class Simulator:
 MEANING_FLOOR = 0.5
 # What a receptacle holds, by relation and the class that makes one.
 _HOLDERS = (("contains", "ContainerReceptacle"), ("supports", "SurfaceReceptacle"))
+# The predicates of the facts a holder's closures are read from.
+_CLOSURE_INPUTS = frozenset({"contains", "supports", "hasState"})
 
 
 def _by_meaning(term: str, names: Iterable[str]) -> list[str]:

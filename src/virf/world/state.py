@@ -6,10 +6,12 @@ so every state of a run stays available to the reasoner and the report.
 
 from __future__ import annotations
 
+import operator
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
+from operator import attrgetter, itemgetter
 from types import MappingProxyType
 
 from virf.names import term_key
@@ -148,6 +150,39 @@ class PreconditionFailure:
     facts: tuple[Fact, ...] = field(default_factory=tuple)
 
 
+def carry_indexes(before: WorldState, after: WorldState) -> None:
+    """Give ``after`` the relation indexes ``before`` has built, updated for
+    the facts that differ, instead of a scan of all its facts on first use
+    (``after`` is ``before`` one step later: a few facts differ)."""
+    built = [name for name in ("_forward", "_backward") if name in before.__dict__]
+    if not built:
+        return
+    old = set(facts_copy(before.facts))
+    new = set(facts_copy(after.facts))
+    changed = [f for f in Fact.sorted(old ^ new) if f.kind is FactKind.OBJECT]
+    for name in built:
+        index: dict[tuple[str, str], list[str]] = dict(before.__dict__[name])
+        copied: set[tuple[str, str]] = set()
+        for f in changed:
+            key, value = (
+                ((f.subject, f.predicate), f.object)
+                if name == "_forward"
+                else ((f.predicate, f.object), f.subject)
+            )
+            if key not in copied:  # lists are shared with ``before`` until changed
+                copied.add(key)
+                index[key] = list(index.get(key, ()))
+            if f in new:
+                index[key].append(value)
+            else:
+                index[key].remove(value)
+                if not index[key]:
+                    del index[key]
+                    copied.discard(key)
+        # What cached_property would have stored on first use.
+        after.__dict__[name] = index
+
+
 def facts_copy(facts: Mapping[Fact, Provenance]) -> dict[Fact, Provenance]:
     """A mutable copy of a state's facts.  A dict (or a read-only view of
     one) is copied with the hashes it keeps; rebuilding it key by key would
@@ -155,6 +190,23 @@ def facts_copy(facts: Mapping[Fact, Provenance]) -> dict[Fact, Provenance]:
     if isinstance(facts, dict | MappingProxyType):
         return facts.copy()
     return dict(facts)
+
+
+def sorted_facts(facts: dict[Fact, Provenance]) -> dict[Fact, Provenance]:
+    """``dict(sorted(facts.items()))``, the order a state keeps its facts in,
+    compared by the facts' kept sort keys alone (no Python ``__lt__``), and
+    ``facts`` itself when it is in that order already (a step that only
+    removed or replaced facts)."""
+    keys = list(map(_ORDER, facts))
+    if all(map(operator.lt, keys, keys[1:])):
+        return facts
+    # Distinct facts have distinct keys, so the facts themselves are never compared.
+    ranked = sorted(zip(keys, facts, facts.values(), strict=True))
+    return dict(zip(map(_FACT, ranked), map(_PROVENANCE, ranked), strict=True))
+
+
+_ORDER = attrgetter("_order")
+_FACT, _PROVENANCE = itemgetter(1), itemgetter(2)
 
 
 def diff(before: WorldState, after: WorldState) -> tuple[tuple[str, ...], tuple[str, ...]]:
