@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from typing import TypeVar
 
 from virf.ontology.tbox import UnsafeStateConcept, Vocabulary
-from virf.reasoning import Engine
+from virf.reasoning import Engine, Proof
 from virf.schema import BackgroundKnowledge, Fact, FactKind, Phase, Provenance
 from virf.verify.findings import Finding, inconsistency
 from virf.verify.questions import rule_questions
@@ -210,9 +210,12 @@ def needed_background(
     vocab: Vocabulary,
     *,
     deadline: float | None = None,
+    hint: Collection[str] | None = None,
 ) -> list[str]:
     """Background axiom ids the entailment needs, given the minimal facts.
-    Each engine call stops at ``deadline`` (see :mod:`virf.reasoning`)."""
+    Each engine call stops at ``deadline`` (see :mod:`virf.reasoning`).
+    ``hint`` may name axioms of a proof from these facts (tested before it
+    is used, as every proof is)."""
     names: set[str] = {concept}
     for f in facts:
         names.update((f.subject, f.predicate))
@@ -255,7 +258,8 @@ def needed_background(
             facts, dropped, rest, tested, concept, individual, deadline=deadline
         )
 
-    return drop_greedily(order, holds, prove, each)
+    first = _tested(order, lambda _: hint, holds) if hint is not None else None
+    return drop_greedily(order, holds, prove, each, first, asked=first is not None)
 
 
 def _grown(names: set[str], vocab: Vocabulary) -> list[str]:
@@ -382,9 +386,19 @@ class Explainer:
             self.tick()
             return self.engine.entails(fs, usc.name, ind, deadline=self.deadline)
 
+        last: list[Proof | None] = [None]
+        # The axioms are ranked after the facts, in the background search's
+        # order: the fact search's last proof then also serves as that
+        # search's first (one proof fewer per finding), while every choice
+        # between facts is made as before.
+        axioms = sorted(self.vocab.background) if self.background else []
+
         def prove(kept: list[Fact], order: list[Fact]) -> Collection[Fact] | None:
             self.tick()
-            found = self.engine.proof(kept, usc.name, ind, order=order, deadline=self.deadline)
+            found = self.engine.proof(
+                kept, usc.name, ind, order=[*order, *axioms], deadline=self.deadline
+            )
+            last[0] = found
             return found.facts if found else None
 
         def each(kept: list[Fact], rest: list[Fact], tested: list[bool]) -> Iterator[bool]:
@@ -394,8 +408,17 @@ class Explainer:
             )
 
         facts = minimize(snapshot, holds, {ind}, self.vocab, prove, each)
+        proof = last[0]
         background_ids = (
-            needed_background(self.engine, facts, usc.name, ind, self.vocab, deadline=self.deadline)
+            needed_background(
+                self.engine,
+                facts,
+                usc.name,
+                ind,
+                self.vocab,
+                deadline=self.deadline,
+                hint=proof.axioms if proof is not None and proof.facts == set(facts) else None,
+            )
             if self.background
             else []
         )
