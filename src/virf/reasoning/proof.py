@@ -33,6 +33,7 @@ Atom = tuple[object, ...]
 # (structural: see Program.structural) the step uses.
 Derivation = tuple[list[Atom], str | None, frozenset[str]]
 _NONE: frozenset[str] = frozenset()
+_NO_TYPES: frozenset[str] = frozenset()
 _INDEXES: dict[int, tuple[Program, _Rules]] = {}
 _LATE = 1 << 30  # the rank of what the caller did not rank
 # A proof's worth: the ranks of the ranked items it uses (None: no proof).
@@ -107,6 +108,14 @@ class _Rules:
         for a, subs in prog.sub.items():
             for b, tag in subs:
                 self.sub[b].append((a, tag))
+        # The same, by the subclass too: a general class (PhysicalObject) has
+        # hundreds of subclasses, of which an element has a few.
+        self.sub_at: dict[str, dict[str, list[tuple[int, str | None]]]] = {}
+        for b, subs in self.sub.items():
+            by_sub: dict[str, list[tuple[int, str | None]]] = {}
+            for k, (a, tag) in enumerate(subs):
+                by_sub.setdefault(a, []).append((k, tag))
+            self.sub_at[b] = by_sub
         for rules in prog.conj.values():
             for body, head, tag in rules:
                 if (body, tag) not in self.conj[head]:
@@ -493,7 +502,19 @@ class Prover:
             x, b = str(a[1]), str(a[2])
             if b in (THING, nominal(x)):
                 yield [("e", x)], None, _NONE
-            for c, tag in rules.sub.get(b, ()):
+            # Only a class x has can be a premise (what the model lacks has no
+            # place in the journal); they are yielded in the rules' order.
+            subs = rules.sub.get(b, ())
+            ts = m.types.get(x, _NO_TYPES)
+            if len(subs) <= len(ts):
+                hits = [(c, tag) for c, tag in subs if c in ts]
+            else:
+                at = rules.sub_at[b]
+                hits = [
+                    (c, tag)
+                    for _, c, tag in sorted((i, c, tag) for c in ts if c in at for i, tag in at[c])
+                ]
+            for c, tag in hits:
                 yield [("t", x, c)], tag, _NONE
             for body, tag in rules.conj.get(b, ()):
                 yield [("t", x, c) for c in body], tag, _NONE
