@@ -279,11 +279,10 @@ class Prover:
             for c in e[1]:
                 self.query(c, x)
         elif tag == "or":
-            for c in e[1]:
-                if self.certain(c, x):
-                    self.query(c, x)
-                    return
-            raise NoProof("no disjunct holds")
+            options = [c for c in e[1] if self.certain(c, x)]
+            if not options:
+                raise NoProof("no disjunct holds")
+            self.query(self._best(options, x) if len(options) > 1 else options[0], x)
         elif tag == "some" or (tag == "min" and e[1] == 1):
             role, filler = (e[1], e[2]) if tag == "some" else (e[2], e[3])
             found = [y for y in sorted(m.rsucc(role, x)) if self.certain(filler, y)]
@@ -302,6 +301,27 @@ class Prover:
             self.refute(e[1], x)
         elif tag != "oneof":
             raise NoProof(f"cannot trace {tag}")
+
+    def _best(self, options: list[Expr], x: str) -> Expr:
+        """Of the disjuncts that hold, the one whose proof a deletion search
+        keeps (:func:`_key`): the first that held was often one the search
+        dropped (a vase's material, where the vase's class suffices), and
+        each such proof cost the search another."""
+        best, best_key = options[0], None
+        for c in options:
+            saved = (set(self.facts), set(self.axioms), set(self.structure), set(self.done))
+            try:
+                self.query(c, x)
+            except NoProof:
+                continue
+            else:
+                items = [*self.facts, *self.axioms, *self.structure]
+                key = _key(frozenset(r for i in items if (r := self.rank.get(i)) is not None))
+                if best_key is None or key > best_key:
+                    best, best_key = c, key
+            finally:
+                self.facts, self.axioms, self.structure, self.done = saved
+        return best
 
     def refute(self, e: Expr, x: str) -> None:
         """Support for ``not e(x)``: asserting ``e(x)`` derives a clash (how
