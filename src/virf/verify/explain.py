@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from typing import TypeVar
 
 from virf.ontology.tbox import UnsafeStateConcept, Vocabulary
-from virf.reasoning import Engine
+from virf.reasoning import Engine, Proof
 from virf.schema import BackgroundKnowledge, Fact, FactKind, Phase, Provenance
 from virf.verify.findings import Finding, inconsistency
 from virf.verify.questions import rule_questions
@@ -86,15 +86,39 @@ def minimize(
     ``prove(kept, order)`` may name facts of ``kept`` that suffice (a hint,
     tested), and ``each`` answer the tests of a proof's facts together (see
     :func:`drop_greedily`)."""
-    pool = _component(facts, start, vocab.individuals)
-    if not start or not holds(pool):
-        pool = list(facts)
-    ordered = sorted(pool, key=lambda f: (_DROP_FIRST[facts[f]], f))
+
+    def by_order(pool: Iterable[Fact]) -> list[Fact]:
+        return sorted(pool, key=lambda f: (_DROP_FIRST[facts[f]], f))
+
+    ordered = by_order(_component(facts, start, vocab.individuals))
 
     def hint(kept: list[Fact]) -> Collection[Fact] | None:
         return prove(kept, ordered) if prove else None
 
-    return sorted(drop_greedily(ordered, holds, hint if prove else None, each))
+    # The component suffices when a proof inside it does (entailment is
+    # monotone): the proof the search starts from answers that question too,
+    # one model instead of two.
+    first = _tested(ordered, hint, holds) if start and prove is not None else None
+    asked = first is not None
+    if not asked and (not start or not holds(ordered)):
+        ordered = by_order(facts)
+    elif prove is not None:
+        asked = True  # the pool's proof was asked for: none that helps
+    return sorted(drop_greedily(ordered, holds, hint if prove else None, each, first, asked))
+
+
+def _tested(
+    items: list[T],
+    prove: Callable[[list[T]], Collection[T] | None],
+    holds: Callable[[list[T]], bool],
+) -> set[T] | None:
+    """The items of a proof of ``items`` that hold on their own, when the
+    proof leaves some out (None when there is none, or it does not hold)."""
+    found = prove(items)
+    if found is None:
+        return None
+    kept = [x for x in items if x in found]
+    return set(kept) if len(kept) < len(items) and holds(kept) else None
 
 
 def drop_greedily(
@@ -102,6 +126,8 @@ def drop_greedily(
     holds: Callable[[list[T]], bool],
     prove: Callable[[list[T]], Collection[T] | None] | None = None,
     each: Callable[[list[T], list[T], list[bool]], Iterable[bool]] | None = None,
+    first: set[T] | None = None,
+    asked: bool = False,
 ) -> list[T]:
     """What is left of ``items`` after trying to drop each in turn, keeping
     it out when ``holds`` stays true: the one-at-a-time deletion, with the
@@ -124,15 +150,13 @@ def drop_greedily(
     proofs, or none; when the proof is the result, the search costs one
     call per item of it, plus one.  ``each(kept, rest, tested)`` asks those
     tests together: for each tested item of ``rest``, does ``kept`` with the
-    tested items before it and every item after it hold?"""
+    tested items before it and every item after it hold?  With ``asked``, the
+    caller has already asked for the first proof: ``first`` is what
+    :func:`_tested` made of it."""
     current = list(items)
 
     def proved() -> set[T] | None:
-        found = prove(current) if prove is not None else None
-        if found is None:
-            return None
-        kept = [x for x in current if x in found]
-        return set(kept) if len(kept) < len(current) and holds(kept) else None
+        return _tested(current, prove, holds) if prove is not None else None
 
     def one_by_one(kept: list[T], rest: list[T], tested: list[bool]) -> Iterator[bool]:
         before: list[T] = []
@@ -141,7 +165,7 @@ def drop_greedily(
                 yield holds(kept + before + rest[k + 1 :])
                 before.append(x)
 
-    known = proved()
+    known = first if asked else proved()
     proving = known is not None  # an engine without proofs is not asked again
     i, run = 0, 1
     while i < len(current):
@@ -186,9 +210,12 @@ def needed_background(
     vocab: Vocabulary,
     *,
     deadline: float | None = None,
+    hint: Collection[str] | None = None,
 ) -> list[str]:
     """Background axiom ids the entailment needs, given the minimal facts.
-    Each engine call stops at ``deadline`` (see :mod:`virf.reasoning`)."""
+    Each engine call stops at ``deadline`` (see :mod:`virf.reasoning`).
+    ``hint`` may name axioms of a proof from these facts (tested before it
+    is used, as every proof is)."""
     names: set[str] = {concept}
     for f in facts:
         names.update((f.subject, f.predicate))
@@ -231,7 +258,8 @@ def needed_background(
             facts, dropped, rest, tested, concept, individual, deadline=deadline
         )
 
-    return drop_greedily(order, holds, prove, each)
+    first = _tested(order, lambda _: hint, holds) if hint is not None else None
+    return drop_greedily(order, holds, prove, each, first, asked=first is not None)
 
 
 def _grown(names: set[str], vocab: Vocabulary) -> list[str]:
@@ -272,8 +300,17 @@ def _signature_index(vocab: Vocabulary) -> tuple[dict[str, list[str]], dict[str,
             subject = ax.text.split(" ", 1)[0]
             subject_of[ident] = None if subject.startswith("DisjointClasses") else subject
             # An axiom joins once a name of its signature and its subject are
-            # both named: index it under both, so either arrival finds it.
-            for n in ax.signature | ({subject} if subject_of[ident] else set()):
+            # both named: index it under both, so either arrival finds it.  A
+            # subject inside the signature is itself such a name, so the
+            # subject's arrival is the only one that matters: indexing it under
+            # every name made each common name (hasMaterial, Metal) walk
+            # hundreds of axioms that could not join yet.
+            keys = (
+                {subject}
+                if subject_of[ident] and subject in ax.signature
+                else ax.signature | ({subject} if subject_of[ident] else set())
+            )
+            for n in keys:
                 by_name.setdefault(n, []).append(ident)
         found = (vocab, by_name, subject_of)
         _INDEX[id(vocab)] = found
@@ -349,9 +386,19 @@ class Explainer:
             self.tick()
             return self.engine.entails(fs, usc.name, ind, deadline=self.deadline)
 
+        last: list[Proof | None] = [None]
+        # The axioms are ranked after the facts, in the background search's
+        # order: the fact search's last proof then also serves as that
+        # search's first (one proof fewer per finding), while every choice
+        # between facts is made as before.
+        axioms = sorted(self.vocab.background) if self.background else []
+
         def prove(kept: list[Fact], order: list[Fact]) -> Collection[Fact] | None:
             self.tick()
-            found = self.engine.proof(kept, usc.name, ind, order=order, deadline=self.deadline)
+            found = self.engine.proof(
+                kept, usc.name, ind, order=[*order, *axioms], deadline=self.deadline
+            )
+            last[0] = found
             return found.facts if found else None
 
         def each(kept: list[Fact], rest: list[Fact], tested: list[bool]) -> Iterator[bool]:
@@ -361,8 +408,17 @@ class Explainer:
             )
 
         facts = minimize(snapshot, holds, {ind}, self.vocab, prove, each)
+        proof = last[0]
         background_ids = (
-            needed_background(self.engine, facts, usc.name, ind, self.vocab, deadline=self.deadline)
+            needed_background(
+                self.engine,
+                facts,
+                usc.name,
+                ind,
+                self.vocab,
+                deadline=self.deadline,
+                hint=proof.axioms if proof is not None and proof.facts == set(facts) else None,
+            )
             if self.background
             else []
         )
