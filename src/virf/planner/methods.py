@@ -154,6 +154,8 @@ def run_method(
             read=read,
             deadline=deadline,
             on_turn=on_turn,
+            # VIRF-Reject's ablation gets the generic message and nothing more.
+            corrections=method.feedback == "diagnostic",
         )
     scene = build_scene(scene_data)
     messages = [
