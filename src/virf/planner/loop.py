@@ -147,7 +147,7 @@ def refine(
     read: Callable[[str], ReadPlan] = read_plan,
     deadline: Deadline | float = DEFAULT_DEADLINE_S,
     on_turn: Callable[[Turn], None] | None = None,
-    corrections: bool = False,
+    corrections: Tutor | None = None,
 ) -> LoopResult:
     """Run Algorithm 1 for one instruction in one scene.
 
@@ -159,9 +159,11 @@ def refine(
     number of seconds starts it now; a :class:`Deadline` started earlier
     (before loading, as ``virf plan`` does) counts from then.
     ``on_turn`` sees each turn of the transcript as it is added.
-    ``corrections`` adds to an UNSAFE report's feedback the corrected plans
-    the tutor has already verified SAFE (:mod:`virf.verify.repairs`), and
-    records them as a ``corrections`` turn."""
+    ``corrections``, a tutor with the same knowledge as ``tutor`` (usually
+    the same one), adds to an UNSAFE report's feedback the corrected plans it
+    has already verified SAFE (:mod:`virf.verify.repairs`), recorded as a
+    ``corrections`` turn; a harness that times ``tutor`` passes its untimed
+    tutor here, so the checks are not counted as verifications of proposals."""
     if max_iter < 1:
         raise ValueError("max_iter must be at least 1")
     deadline = Deadline.of(deadline)
@@ -299,12 +301,11 @@ def refine(
             return LoopResult("APPROVED", steps, i + 1, "the tutor approved the plan", tuple(log))
         # UNSAFE, ERROR, or UNKNOWN nobody could settle: the apprentice repairs.
         text = feedback(report)
-        if corrections:
+        if corrections is not None:
             # Searched within what is left of the run; whatever the apprentice
             # replies is verified again like any other proposal.
-            offered = candidates(
-                scene, plan, report, tutor, vocab, deadline=time.monotonic() + deadline.remaining()
-            )
+            left = time.monotonic() + deadline.remaining()
+            offered = candidates(scene, plan, report, corrections, vocab, deadline=left)
             if offered:
                 text += corrections_section(offered)
                 log.append(
