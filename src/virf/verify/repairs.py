@@ -165,8 +165,8 @@ def _drafts(
     for c in made:
         if c.plan and c.plan != lines:
             unique.setdefault(c.plan, c)
-    order = {id(c): n for n, c in enumerate(unique.values())}
-    return sorted(unique.values(), key=lambda c: (-c.kept, _KIND_ORDER[c.kind], order[id(c)]))
+    # A stable sort: among equals, the order the drafts were made in.
+    return sorted(unique.values(), key=lambda c: (-c.kept, _KIND_ORDER[c.kind]))
 
 
 def _state_at(trace: Trace, step: int | None) -> WorldState:
