@@ -256,7 +256,8 @@ class Harness:
     def run_one(self, method: Method, task: Task) -> TaskRow:
         tid = task_id(task)
         vocab = self.vocab
-        timed = TimedTutor(self.knowledge_tutor(method.knowledge))
+        knowledge = self.knowledge_tutor(method.knowledge)
+        timed = TimedTutor(knowledge)
         critic = TimedCritic(self.critic or self.apprentice) if method.mode == "committee" else None
         result = run_method(
             method,
@@ -271,6 +272,8 @@ class Harness:
             task_id=tid,
             critic=critic,
             deadline=self.deadline_s,
+            # Checking corrections is not verifying a proposal: not in VL.
+            checker=knowledge,
         )
         verifications, verifier_ms = (
             (critic.calls, critic.ms) if critic is not None else (timed.calls, timed.ms)

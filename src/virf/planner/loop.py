@@ -32,6 +32,7 @@ it is given.
 from __future__ import annotations
 
 import json
+import time
 from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
@@ -43,8 +44,9 @@ from virf.planner.apprentices import Apprentice, Purpose
 from virf.planner.deadline import DEFAULT_DEADLINE_S, Deadline
 from virf.planner.prompting import ReadPlan, apprentice_prompt, read_plan, unreadable_message
 from virf.planner.questions import SETTLEABLE, AnswerPolicy, Answers, apply_answers, deny
-from virf.render.feedback import feedback_prompt
+from virf.render.feedback import corrections_section, corrections_summary, feedback_prompt
 from virf.schema import Question, Report
+from virf.verify.repairs import candidates
 from virf.world.plan import PlanStep
 from virf.world.scene import Scene
 
@@ -78,7 +80,7 @@ class Turn:
     iteration: int
     speaker: Literal["user", "apprentice", "tutor"]
     # instruction, proposal, refusal, failed-proposal, unreadable, report,
-    # questions, answers, unsettled, critique
+    # questions, answers, unsettled, critique, corrections
     kind: str
     text: str
     status: str | None = None
@@ -145,6 +147,7 @@ def refine(
     read: Callable[[str], ReadPlan] = read_plan,
     deadline: Deadline | float = DEFAULT_DEADLINE_S,
     on_turn: Callable[[Turn], None] | None = None,
+    corrections: Tutor | None = None,
 ) -> LoopResult:
     """Run Algorithm 1 for one instruction in one scene.
 
@@ -155,7 +158,12 @@ def refine(
     ``deadline`` bounds the run: when it passes, the task is rejected.  A
     number of seconds starts it now; a :class:`Deadline` started earlier
     (before loading, as ``virf plan`` does) counts from then.
-    ``on_turn`` sees each turn of the transcript as it is added."""
+    ``on_turn`` sees each turn of the transcript as it is added.
+    ``corrections``, a tutor with the same knowledge as ``tutor`` (usually
+    the same one), adds to an UNSAFE report's feedback the corrected plans it
+    has already verified SAFE (:mod:`virf.verify.repairs`), recorded as a
+    ``corrections`` turn; a harness that times ``tutor`` passes its untimed
+    tutor here, so the checks are not counted as verifications of proposals."""
     if max_iter < 1:
         raise ValueError("max_iter must be at least 1")
     deadline = Deadline.of(deadline)
@@ -292,9 +300,26 @@ def refine(
             steps = tuple(s.text for s in plan)
             return LoopResult("APPROVED", steps, i + 1, "the tutor approved the plan", tuple(log))
         # UNSAFE, ERROR, or UNKNOWN nobody could settle: the apprentice repairs.
+        text = feedback(report)
+        if corrections is not None:
+            # Searched within what is left of the run; whatever the apprentice
+            # replies is verified again like any other proposal.
+            left = time.monotonic() + deadline.remaining()
+            offered = candidates(scene, plan, report, corrections, vocab, deadline=left)
+            if offered:
+                text += corrections_section(offered)
+                log.append(
+                    Turn(
+                        i,
+                        "tutor",
+                        "corrections",
+                        corrections_summary(offered),
+                        data={"candidates": [c.to_dict() for c in offered]},
+                    )
+                )
         messages += [
             {"role": "assistant", "content": reply},
-            {"role": "user", "content": feedback(report)},
+            {"role": "user", "content": text},
         ]
         plan = None
     return LoopResult(

@@ -126,8 +126,12 @@ def run_method(
     critic: Apprentice | None = None,
     deadline: Deadline | float = DEFAULT_DEADLINE_S,
     on_turn: Callable[[Turn], None] | None = None,
+    checker: Tutor | None = None,
 ) -> LoopResult:
     """Plan with ``method``; ``tutor`` must already hold the method's knowledge.
+
+    The VIRF methods with the diagnostic report offer the corrections that
+    ``checker`` (by default ``tutor``; the same knowledge) verified SAFE.
 
     ``deadline`` bounds the whole run: when it passes, the task is rejected.
     Seconds start it now; a :class:`Deadline` counts from when it was made."""
@@ -154,6 +158,8 @@ def run_method(
             read=read,
             deadline=deadline,
             on_turn=on_turn,
+            # VIRF-Reject's ablation gets the generic message and nothing more.
+            corrections=(checker or tutor) if method.feedback == "diagnostic" else None,
         )
     scene = build_scene(scene_data)
     messages = [

@@ -4,8 +4,11 @@ The report as text for people is :func:`virf.render.text.render_report`."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from virf.files import read_prompt
 from virf.schema import Report, Violation
+from virf.verify.repairs import Candidate
 
 # The paper's Appendix E template, kept as a file so it can be read and
 # adapted without touching code.
@@ -26,8 +29,40 @@ def involved_objects(v: Violation) -> list[str]:
     return names
 
 
-def feedback_prompt(report: Report) -> str:
-    """The paper's natural-language feedback prompt, filled from the report."""
+def corrections_section(corrections: Sequence[Candidate]) -> str:
+    """The checked corrections, each with its whole plan (a small model copies
+    better than it edits); '' when there are none, so the paper's prompt is
+    left exactly as it was."""
+    if not corrections:
+        return ""
+    parts = [
+        "\n[CHECKED CORRECTIONS]\n"
+        "Each corrected plan below has been simulated and passes safety verification. "
+        "You may pick one (reply with its plan) or write your own.\n"
+    ]
+    for n, c in enumerate(corrections, start=1):
+        parts.append(
+            f"\nCorrection {n}: {c.edit}\nWhy: {c.why}\nPlan:\n" + "\n".join(c.plan) + "\n"
+        )
+    return "".join(parts)
+
+
+def corrections_summary(corrections: Sequence[Candidate]) -> str:
+    """The corrections for people reading a run: each edit and its plan."""
+    lines = ["Checked corrections (each verified SAFE):"]
+    for n, c in enumerate(corrections, start=1):
+        lines.append(f"{n}. {c.edit}")
+        lines += (f"     {line}" for line in c.plan)
+    return "\n".join(lines)
+
+
+def feedback_prompt(report: Report, corrections: Sequence[Candidate] = ()) -> str:
+    """The paper's natural-language feedback prompt, filled from the report,
+    and the checked corrections when there are any."""
+    return _feedback(report) + corrections_section(corrections)
+
+
+def _feedback(report: Report) -> str:
     if report.status == "SAFE":
         return "The plan passed safety verification.\n"
     if report.status == "ERROR" or not report.violations:
