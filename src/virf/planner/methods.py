@@ -34,6 +34,7 @@ from typing import Any, Literal
 from virf.errors import InputError, closest
 from virf.ontology.tbox import UnsafeStateConcept, Vocabulary
 from virf.planner.apprentices import Apprentice, Purpose
+from virf.planner.constraint import plan_constraint
 from virf.planner.deadline import DEFAULT_DEADLINE_S, Deadline
 from virf.planner.loop import SYSTEM, LoopResult, Outcome, Transcript, Turn, Tutor, refine
 from virf.planner.prompting import (
@@ -156,6 +157,8 @@ def run_method(
             on_turn=on_turn,
         )
     scene = build_scene(scene_data)
+    # These methods never change the scene: one constraint serves every proposal.
+    constraint = plan_constraint(scene, vocab)
     messages = [
         {"role": "system", "content": SYSTEM},
         {"role": "user", "content": apprentice_prompt(instruction, scene, rules) + suffix},
@@ -179,6 +182,7 @@ def run_method(
             # Every proposal after the first answers feedback: a report or a critique.
             purpose=Purpose.PLAN if i == 0 else Purpose.REPAIR,
             deadline=deadline,
+            constraint=constraint,
         )
         if not p.ok or p.text is None:
             log.append(Turn(i, "apprentice", "failed-proposal", p.reason))
