@@ -177,7 +177,7 @@ def test_the_reasoning_grammar_wraps_the_plan(vocab: Vocabulary) -> None:
     assert rules["root"] == (
         f'"{REFUSAL}" | "REASONING:\\n" note{{1,3}} "PLAN:\\n" ("{REFUSAL}" | plan)'
     )
-    assert rules["note"] == '[^\\n]{1,160} "\\n"'
+    assert rules["note"] == '[^\\n]{1,120} "\\n"'
     assert {k: v for k, v in rules.items() if k not in ("root", "note")} == dict(
         line.split(" ::= ", 1) for line in c.gbnf().splitlines() if not line.startswith("root")
     )
@@ -206,12 +206,20 @@ def test_the_json_schema_lists_the_valid_lines(vocab: Vocabulary) -> None:
     assert schema["required"] == ["steps"] and schema["additionalProperties"] is False
 
 
+class Constrained(ScriptedApprentice):
+    """A scripted apprentice that says it decodes within the constraint."""
+
+    @property
+    def constrained(self) -> bool:
+        return True
+
+
 def test_the_loop_hands_the_scene_constraint_to_the_apprentice(tutor: LogicTutor) -> None:
     vocab = tutor.tbox.vocabulary
     data = load_scene_data(EXAMPLES / "burner-left-on" / "scene.json")
     scene = build_scene(data, vocab)
     # An unreadable reply and a plan: the repair is asked with the constraint too.
-    scripted = ScriptedApprentice(["find the moon", "find Pot_1"])
+    scripted = Constrained(["find the moon", "find Pot_1"])
     result = refine(
         "Find the pot.", data, scripted, tutor.verifier, lambda d: build_scene(d, vocab), vocab
     )
@@ -219,12 +227,17 @@ def test_the_loop_hands_the_scene_constraint_to_the_apprentice(tutor: LogicTutor
     assert [r.constraint for r in scripted.requests] == [plan_constraint(scene, vocab)] * 2
     # Not part of what is logged: the messages are what the model was told.
     assert "constraint" not in json.dumps(scripted.requests[1].as_messages())
+    # An apprentice that would not use it (a replay, a scripted one) costs
+    # the loop nothing: no constraint is built.
+    plain = ScriptedApprentice(["find Pot_1"])
+    refine("Find the pot.", data, plain, tutor.verifier, lambda d: build_scene(d, vocab), vocab)
+    assert plain.requests[0].constraint is None
 
 
 def test_one_shot_methods_hand_it_over_too(tutor: LogicTutor) -> None:
     vocab = tutor.tbox.vocabulary
     data = load_scene_data(EXAMPLES / "burner-left-on" / "scene.json")
-    scripted = ScriptedApprentice(["find Pot_1"])
+    scripted = Constrained(["find Pot_1"])
     run_method(
         get_method("impulsive"),
         "Heat the pot.",

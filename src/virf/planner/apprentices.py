@@ -238,7 +238,8 @@ class Apprentice(ABC):
 
     @property
     def constrained(self) -> bool:
-        """Whether plans are decoded within the request's constraint."""
+        """Whether plans are decoded within the request's constraint; the
+        loop builds one only for an apprentice that uses it."""
         return False
 
     def propose(

@@ -25,6 +25,7 @@ offered at all.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any, Final
 
 from virf.ontology.tbox import Vocabulary
@@ -34,12 +35,13 @@ from virf.world.language import LIQUIDS, VERBS
 from virf.world.scene import Scene
 
 # SmolLM2 writes about 4 characters a token: 15 lines of ~6 tokens, after at
-# most 3 reasoning lines of ~40 tokens, end well inside the local planner's
-# 256-token budget, so a constrained reply always ends by the grammar rather
-# than being cut off mid-line (which the reader would drop or misread).
+# most 3 reasoning lines of ~30 tokens, fit the local planner's 256-token
+# budget, so a constrained reply ends by the grammar rather than being cut
+# off mid-line (the local planner drops such a line; a smaller --max-tokens
+# can still cut one).
 MAX_LINES: Final = 15
 MAX_REASONING_LINES: Final = 3
-MAX_REASONING_CHARS: Final = 160
+MAX_REASONING_CHARS: Final = 120
 REASONING_MARK: Final = "REASONING:"
 PLAN_MARK: Final = "PLAN:"
 
@@ -138,6 +140,7 @@ def _may_take(verb: str, classes: frozenset[str], vocab: Vocabulary) -> bool:
     return affordance is None or not type_lacks(vocab, classes, affordance)
 
 
+@lru_cache(maxsize=8192)
 def _reads_back(verb: str, name: str) -> bool:
     """Whether the loop's reader reads the line as this verb on this name
     and nothing else (every liquid, for a fill)."""

@@ -159,6 +159,24 @@ def _asks_reasoning(request: ProposalRequest) -> bool:
     return template("thinker").strip() in task
 
 
+def _cut_off(body: Any) -> bool:
+    """Whether generation stopped at max_tokens rather than where it chose to."""
+    try:
+        return bool(body["choices"][0]["finish_reason"] == "length")
+    except (KeyError, IndexError, TypeError):
+        return False
+
+
+def _whole_lines(text: str) -> tuple[str | None, str | None]:
+    """A constrained reply cut off by max_tokens, without its last line: the
+    grammar could not finish that line, and a name cut short ("find Stove")
+    would be read as whichever object it happens to name."""
+    kept = text.rpartition("\n")[0]
+    if not kept.strip():
+        return None, "the reply was cut off by max_tokens before its first line ended"
+    return kept, None
+
+
 def _llama() -> Any:
     try:
         import llama_cpp
@@ -293,6 +311,8 @@ class LocalApprentice(Apprentice):
             "prompt_tokens": content.prompt_tokens,
             "completion_tokens": content.completion_tokens,
         }
+        if grammar is not None and content.text is not None and _cut_off(body):
+            return (*_whole_lines(content.text), usage)
         return content.text, content.problem, usage
 
     def _propose(self, request: ProposalRequest) -> Proposal:

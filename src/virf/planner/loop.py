@@ -189,7 +189,7 @@ def refine(
                 purpose=Purpose.PLAN if i == 0 else Purpose.REPAIR,
                 deadline=deadline,
                 # From the scene as it is now: answers may have changed it.
-                constraint=plan_constraint(scene, vocab),
+                constraint=plan_constraint(scene, vocab) if apprentice.constrained else None,
             )
             if not proposal.ok or proposal.text is None:
                 log.append(Turn(i, "apprentice", "failed-proposal", proposal.reason))

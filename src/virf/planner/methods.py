@@ -158,7 +158,7 @@ def run_method(
         )
     scene = build_scene(scene_data)
     # These methods never change the scene: one constraint serves every proposal.
-    constraint = plan_constraint(scene, vocab)
+    constraint = plan_constraint(scene, vocab) if apprentice.constrained else None
     messages = [
         {"role": "system", "content": SYSTEM},
         {"role": "user", "content": apprentice_prompt(instruction, scene, rules) + suffix},
