@@ -13,6 +13,7 @@ from typing import Any
 import pytest
 from chat_support import ChatServer, completion, error
 
+from virf.errors import EnvironmentProblem
 from virf.planner import (
     ClientSettings,
     OpenAIApprentice,
@@ -151,3 +152,27 @@ def test_the_setting_reaches_both_kinds_of_model_planner() -> None:
         assert app.constrained
     # Recordings answer as they were recorded: the setting changes nothing.
     assert not make_apprentice("scripted", constrain=True).constrained
+
+
+def test_a_server_error_that_names_the_option_falls_back_too(server: ChatServer) -> None:
+    # llama.cpp's server validates response_format and answers HTTP 500.
+    server.queue(
+        error(
+            500,
+            "1 validation error: ('body', 'response_format', 'type') Input should be "
+            "'text' or 'json_object'",
+        ),
+        completion("find Pot_1"),
+    )
+    with served(server, constrain=True) as app:
+        got = ask(app)
+    assert got.ok and got.text == "find Pot_1"
+    assert app.plain_text_reason and "HTTP 500" in app.plain_text_reason
+    assert [("response_format" in s.body) for s in server.seen] == [True, False]
+
+
+def test_other_server_errors_still_stop_the_run(server: ChatServer) -> None:
+    server.queue(error(500, "out of memory", {"x-should-retry": "false"}))
+    with served(server, constrain=True) as app, pytest.raises(EnvironmentProblem):
+        ask(app)
+    assert app.plain_text_reason is None

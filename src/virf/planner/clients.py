@@ -45,8 +45,9 @@ JSON schema whose steps are the valid plan lines,
 :meth:`virf.planner.constraint.PlanConstraint.json_schema`); the JSON reply
 becomes plan text before it is logged or read, so replays and the reader see
 what an unconstrained reply would look like.  A server that rejects the
-option (HTTP 400 or 422) is asked again at once in plain text, and for the
-rest of the run; a warning and the logged call's reason say so.
+option (HTTP 400 or 422, or an error that names ``response_format``) is
+asked again at once in plain text, and for the rest of the run; a warning
+and the logged call's reason say so.
 """
 
 from __future__ import annotations
@@ -486,11 +487,16 @@ class OpenAIApprentice(Apprentice):
 
 
 def _refuses_option(exc: openai.OpenAIError) -> bool:
-    """Whether an error is a server refusing a request it cannot parse or
-    support (as opposed to a prompt that is too long, or any other failure)."""
-    if not isinstance(exc, openai.APIStatusError) or exc.status_code not in (400, 422):
+    """Whether an error is a server refusing a request with structured output:
+    a 400 or 422 that is not a prompt too long, or any other status whose
+    message names the option (llama.cpp's server answers a ``json_schema``
+    it cannot validate with HTTP 500)."""
+    if not isinstance(exc, openai.APIStatusError):
         return False
-    return _CONTEXT_OVERFLOW.search(str(exc.body) + exc.response.text) is None
+    said = str(exc.body) + exc.response.text
+    if exc.status_code in (400, 422):
+        return _CONTEXT_OVERFLOW.search(said) is None
+    return "response_format" in said
 
 
 def plan_text(reply: str) -> str:
