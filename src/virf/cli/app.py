@@ -268,6 +268,14 @@ TopPOpt = Annotated[float | None, typer.Option(help="Nucleus sampling (top-p).")
 MaxTokensOpt = Annotated[int | None, typer.Option(help="Longest reply, in tokens.")]
 ModelTimeoutOpt = Annotated[float | None, typer.Option(help="Seconds to wait for one model reply.")]
 SeedOpt = Annotated[int | None, typer.Option(help="Sampling seed, where the server supports it.")]
+ConstrainOpt = Annotated[
+    bool | None,
+    typer.Option(
+        "--constrain/--no-constrain",
+        help="Hold the model's plans to the actions the scene allows (a grammar for local: "
+        "planners, on by default; a JSON schema for openai: servers, off by default).",
+    ),
+]
 
 
 def _fail(message: str, code: int = EXIT_BAD_INPUT) -> typer.Exit:

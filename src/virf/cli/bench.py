@@ -13,6 +13,7 @@ import typer
 from virf.cli.app import (
     ApiKeyEnvOpt,
     BaseUrlOpt,
+    ConstrainOpt,
     EngineOpt,
     KbOpt,
     MaxTokensOpt,
@@ -267,6 +268,7 @@ def bench_agents(
     temperature: TemperatureOpt = None,
     top_p: TopPOpt = None,
     max_tokens: MaxTokensOpt = None,
+    constrain: ConstrainOpt = None,
     timeout: ModelTimeoutOpt = None,
     deadline: Annotated[
         float | None,
@@ -343,7 +345,7 @@ def bench_agents(
             if v is not None
         }
         apprentice = make_apprentice(
-            planner, base_url=base_url, api_key_env=api_key_env, **sampling
+            planner, base_url=base_url, api_key_env=api_key_env, constrain=constrain, **sampling
         )
         closing.enter_context(apprentice)
         judge = None
@@ -356,8 +358,15 @@ def bench_agents(
             base_url=base_url,
             max_iter=max_iter,
             answers=answers,
-            # A deadline given here changes which tasks are rejected: part of the run.
-            sampling=sampling if deadline is None else {**sampling, "deadline_s": deadline_s},
+            sampling={
+                **sampling,
+                # A deadline given here changes which tasks are rejected, and
+                # constrained plans are other plans: both are part of the run.
+                # An unconstrained run keeps the configuration (and the stored
+                # rows) it always had.
+                **({} if deadline is None else {"deadline_s": deadline_s}),
+                **({"constrain": True} if apprentice.constrained else {}),
+            },
         )
         tutor = LogicTutor(engine=config.engine, kb=kb)
         if db is None:

@@ -12,6 +12,7 @@ import typer
 from virf.cli.app import (
     ApiKeyEnvOpt,
     BaseUrlOpt,
+    ConstrainOpt,
     EngineOpt,
     KbOpt,
     MaxTokensOpt,
@@ -61,6 +62,7 @@ def plan(
     seed: SeedOpt = None,
     top_p: TopPOpt = None,
     max_tokens: MaxTokensOpt = None,
+    constrain: ConstrainOpt = None,
     timeout: Annotated[
         float | None,
         typer.Option(
@@ -205,6 +207,7 @@ def plan(
             top_p=top_p,
             max_tokens=max_tokens,
             timeout_s=timeout,
+            constrain=constrain,
         )
         if chosen.knowledge != "all":
             tutor = tutor.restricted(

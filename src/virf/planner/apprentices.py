@@ -32,13 +32,16 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
 from types import TracebackType
-from typing import Annotated, Any, Final, Self
+from typing import TYPE_CHECKING, Annotated, Any, Final, Self
 
 from pydantic import Field
 
 from virf.errors import InputError, Record, Says, read_input_file
 from virf.planner.deadline import Deadline
 from virf.planner.runlog import CallRecord, RunLog, last_attempts
+
+if TYPE_CHECKING:
+    from virf.planner.constraint import PlanConstraint
 
 ROLES: Final = ("system", "user", "assistant")
 
@@ -130,7 +133,10 @@ class ProposalRequest:
     ``deadline`` is the run's: a client abandons a request still running when
     it passes.  It is not part of what is logged or replayed, nor is
     ``purpose`` (a replay is keyed by task, iteration and method, as before).
-    ``images`` go with the last user message.
+    ``images`` go with the last user message.  ``constraint`` holds the
+    plan lines the scene allows, for an apprentice that can restrict its
+    decoding to them (:mod:`virf.planner.constraint`); it is not logged or
+    replayed either: the messages say everything the model was told.
     """
 
     messages: tuple[tuple[str, str], ...]
@@ -140,6 +146,7 @@ class ProposalRequest:
     purpose: Purpose
     deadline: Deadline | None = None
     images: tuple[Attachment, ...] = ()
+    constraint: PlanConstraint | None = None
 
     def as_messages(self) -> list[dict[str, Any]]:
         out: list[dict[str, Any]] = [
@@ -162,6 +169,7 @@ def check_request(
     purpose: Purpose,
     deadline: Deadline | None = None,
     images: Sequence[Attachment] = (),
+    constraint: PlanConstraint | None = None,
 ) -> ProposalRequest:
     """Validate the loop's arguments once, for every apprentice alike."""
     try:
@@ -195,7 +203,7 @@ def check_request(
     if not all(isinstance(image, Attachment) for image in images):
         raise InputError("images must be Attachment objects")
     return ProposalRequest(
-        tuple(pairs), task_id, iteration, method, purpose, deadline, tuple(images)
+        tuple(pairs), task_id, iteration, method, purpose, deadline, tuple(images), constraint
     )
 
 
@@ -228,6 +236,12 @@ class Apprentice(ABC):
         """The model name sent to a server, when there is one."""
         return None
 
+    @property
+    def constrained(self) -> bool:
+        """Whether plans are decoded within the request's constraint; the
+        loop builds one only for an apprentice that uses it."""
+        return False
+
     def propose(
         self,
         messages: Sequence[Mapping[str, str]],
@@ -238,14 +252,19 @@ class Apprentice(ABC):
         purpose: Purpose,
         deadline: Deadline | None = None,
         images: Sequence[Attachment] = (),
+        constraint: PlanConstraint | None = None,
     ) -> Proposal:
         """Ask for what ``purpose`` names: a plan, a repaired plan, a critique,
         a draft or (with ``images``) one reading of them.  Never returns an
         empty or malformed reply as ``ok``.
 
         A request still running when ``deadline`` passes is abandoned and
-        comes back as a failed proposal; offline apprentices answer at once."""
-        request = check_request(messages, task_id, iteration, method, purpose, deadline, images)
+        comes back as a failed proposal; offline apprentices answer at once.
+        ``constraint`` (the plan lines the scene allows) is a hint an
+        apprentice may decode within; the reply is read and verified as any."""
+        request = check_request(
+            messages, task_id, iteration, method, purpose, deadline, images, constraint
+        )
         return self._propose(request)
 
     @abstractmethod

@@ -41,7 +41,8 @@ class ClientSettings:
     vLLM, Ollama and llama.cpp accept it, but not every compatible server does.
     ``max_tokens_field`` is ``max_completion_tokens`` for OpenAI's reasoning
     models, which reject ``max_tokens``; most other servers know only
-    ``max_tokens``.
+    ``max_tokens``.  ``constrain`` asks the server for a plan as JSON whose
+    steps are the scene's valid lines (``response_format``), where it can.
     """
 
     model: str
@@ -55,6 +56,7 @@ class ClientSettings:
     timeout_s: float = 120.0
     seed: int | None = None
     max_retries: int = 4
+    constrain: bool = False
 
     def __post_init__(self) -> None:
         if not isinstance(self.model, str) or not self.model.strip():

@@ -38,11 +38,24 @@ The synchronous client offers no such handle: a read blocked in a worker
 thread is not woken by closing the client from another thread, so the thread
 would outlive the request.  Streaming with a check between chunks would still
 wait for each whole chunk, and not every compatible server streams.
+
+With ``constrain`` set, a request for a plan that carries the scene's
+constraint asks for structured output (``response_format`` with a strict
+JSON schema whose steps are the valid plan lines,
+:meth:`virf.planner.constraint.PlanConstraint.json_schema`); the JSON reply
+becomes plan text before it is logged or read, so replays and the reader see
+what an unconstrained reply would look like.  A server that rejects the
+option (HTTP 400 or 422, or an error that names ``response_format``) is
+asked again at once in plain text, and for the rest of the run; a warning
+and the logged call's reason say so.
 """
 
 from __future__ import annotations
 
 import asyncio
+import dataclasses
+import json
+import logging
 import re
 import time
 from collections.abc import Callable, Coroutine, Mapping
@@ -72,6 +85,7 @@ from virf.planner.chat import BASE_URL_ENV, ClientSettings, one_line, read_reply
 from virf.planner.runlog import RunLog
 
 _T = TypeVar("_T")
+_LOG = logging.getLogger(__name__)
 
 # Raw reply bodies can be large HTML error pages; the log keeps enough to debug.
 _RAW_LOG_LIMIT: Final = 10_000
@@ -121,6 +135,8 @@ class _Reply:
     attempts: int
     # A context overflow would fail the same way again, so it is not re-asked.
     reask: bool = True
+    # What the log should know of a call that succeeded differently than asked.
+    note: str = ""
 
 
 class _ReplyDeadline(openai.OpenAIError):
@@ -209,6 +225,8 @@ class OpenAIApprentice(Apprentice):
         # reused from one proposal to the next.
         self._runner = asyncio.Runner()
         self._closed = False
+        # Why structured output is off for the rest of the run, once a server refused it.
+        self.plain_text_reason: str | None = None
 
     @property
     def label(self) -> str:
@@ -217,6 +235,24 @@ class OpenAIApprentice(Apprentice):
     @property
     def model(self) -> str:
         return self.settings.model
+
+    @property
+    def constrained(self) -> bool:
+        return self.settings.constrain
+
+    def _response_format(self, request: ProposalRequest) -> dict[str, Any] | None:
+        constraint = request.constraint
+        if (
+            not self.settings.constrain
+            or self.plain_text_reason is not None
+            or constraint is None
+            or not request.purpose.asks_for_plan
+        ):
+            return None
+        return {
+            "type": "json_schema",
+            "json_schema": {"name": "plan", "strict": True, "schema": constraint.json_schema()},
+        }
 
     def close(self) -> None:
         if self._closed:
@@ -269,7 +305,7 @@ class OpenAIApprentice(Apprentice):
             )
         # The last call carries the proposal's outcome, so a replay exported
         # from the log reproduces the proposal exactly.
-        self._log_reply(request, last, len(replies), proposal.reason)
+        self._log_reply(request, last, len(replies), proposal.reason or last.note)
         return proposal
 
     def _log_reply(self, request: ProposalRequest, reply: _Reply, ask: int, reason: str) -> None:
@@ -285,7 +321,9 @@ class OpenAIApprentice(Apprentice):
             ask=ask,
         )
 
-    async def _create(self, request: ProposalRequest) -> Any:
+    async def _create(
+        self, request: ProposalRequest, response_format: dict[str, Any] | None = None
+    ) -> Any:
         remaining = request.deadline.remaining() if request.deadline is not None else None
         if remaining is not None and remaining <= 0:
             raise _RunDeadline
@@ -294,7 +332,8 @@ class OpenAIApprentice(Apprentice):
                 return await self._client.chat.completions.with_raw_response.create(
                     model=self.settings.model,
                     messages=_sdk_messages(request),
-                    extra_body=self.settings.request_body(),
+                    extra_body=self.settings.request_body()
+                    | ({"response_format": response_format} if response_format else {}),
                 )
         except TimeoutError:
             raise _RunDeadline from None
@@ -302,8 +341,9 @@ class OpenAIApprentice(Apprentice):
     def _ask(self, request: ProposalRequest, ask: int) -> _Reply:
         started = time.perf_counter()
         sent = self._http.sent
+        response_format = self._response_format(request)
         try:
-            raw = self._run(self._create(request))
+            raw = self._run(self._create(request, response_format))
         except (_RunDeadline, _ReplyDeadline) as exc:
             latency_ms = (time.perf_counter() - started) * 1000
             if isinstance(exc, _RunDeadline):
@@ -316,12 +356,16 @@ class OpenAIApprentice(Apprentice):
             return _Reply(None, problem, None, None, None, latency_ms, attempts, reask=False)
         except openai.OpenAIError as exc:
             latency_ms = (time.perf_counter() - started) * 1000
+            if response_format is not None and _refuses_option(exc):
+                return self._in_plain_text(request, ask, exc, latency_ms)
             return self._failed_call(request, ask, exc, latency_ms)
         latency_ms = (time.perf_counter() - started) * 1000
         # Older SDKs lack the counter; the attempt itself is then all we know.
         attempts = int(getattr(raw, "retries_taken", 0)) + 1
         body = raw.http_response.text
         content = read_reply(body)
+        if response_format is not None and content.text is not None:
+            content = content._replace(text=plan_text(content.text))
         return _Reply(
             text=content.text,
             problem=content.problem,
@@ -331,6 +375,25 @@ class OpenAIApprentice(Apprentice):
             completion_tokens=content.completion_tokens,
             latency_ms=latency_ms,
             attempts=attempts,
+        )
+
+    def _in_plain_text(
+        self, request: ProposalRequest, ask: int, exc: openai.OpenAIError, latency_ms: float
+    ) -> _Reply:
+        """The server refused structured output: ask again without it, now
+        and for the rest of the run, and say so."""
+        assert isinstance(exc, openai.APIStatusError)
+        self.plain_text_reason = (
+            f"{self.endpoint.base_url} refused structured output (HTTP {exc.status_code}: "
+            f"{self._server_message(exc)}); plans are asked for in plain text from now on"
+        )
+        _LOG.warning("%s", self.plain_text_reason)
+        reply = self._ask(request, ask)
+        return dataclasses.replace(
+            reply,
+            latency_ms=reply.latency_ms + latency_ms,
+            attempts=reply.attempts + 1,
+            note=self.plain_text_reason,
         )
 
     def _failed_call(
@@ -421,6 +484,32 @@ class OpenAIApprentice(Apprentice):
         # A proxy may echo the request headers; the key must not reach a log.
         key = self.endpoint.api_key
         return text.replace(key, "***") if len(key) >= 8 else text
+
+
+def _refuses_option(exc: openai.OpenAIError) -> bool:
+    """Whether an error is a server refusing a request with structured output:
+    a 400 or 422 that is not a prompt too long, or any other status whose
+    message names the option (llama.cpp's server answers a ``json_schema``
+    it cannot validate with HTTP 500)."""
+    if not isinstance(exc, openai.APIStatusError):
+        return False
+    said = str(exc.body) + exc.response.text
+    if exc.status_code in (400, 422):
+        return _CONTEXT_OVERFLOW.search(said) is None
+    return "response_format" in said
+
+
+def plan_text(reply: str) -> str:
+    """A structured reply (``{"steps": [...]}``) as the plan text the reader
+    reads, one step a line; any other reply unchanged, for the reader to judge."""
+    try:
+        data = json.loads(reply)
+    except (json.JSONDecodeError, RecursionError):
+        return reply
+    steps = data.get("steps") if isinstance(data, dict) else None
+    if not isinstance(steps, list) or not steps or not all(isinstance(x, str) for x in steps):
+        return reply
+    return "\n".join(steps)
 
 
 def _raise(error: VirfError) -> NoReturn:

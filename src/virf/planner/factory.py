@@ -87,7 +87,9 @@ def local_apprentice(
     remote = sorted(set(settings) & {"base_url", "api_key", "api_key_env", "top_p", "replies"})
     if remote:
         raise InputError(f"'{remote[0]}' is not a setting of a local planner")
-    local = {k: settings[k] for k in ("temperature", "seed", "max_tokens") if k in settings}
+    local = {
+        k: settings[k] for k in ("temperature", "seed", "max_tokens", "constrain") if k in settings
+    }
     assert spec.argument is not None  # the kind takes a model name or file
     return LocalApprentice(
         LocalSettings(model=spec.argument, **local), run_log=run_log, environ=environ

@@ -14,6 +14,12 @@ by the chat-completions client's own reader, re-asked once when it is empty,
 and logged like any model call.
 Generation is greedy (temperature 0) with a fixed seed: the same prompt
 gives the same plan.
+
+When a request for a plan carries the scene's constraint
+(:mod:`virf.planner.constraint`), decoding is held to its grammar: every
+line the model writes is a valid action on an object the scene has and that
+may take it, or the reply is ``TASK_ABORT``.  ``constrain=False``
+(``--no-constrain``) lets the model write freely, for comparison.
 """
 
 from __future__ import annotations
@@ -23,6 +29,7 @@ import importlib.util
 import json
 import os
 import time
+from collections import OrderedDict
 from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cache
@@ -44,6 +51,9 @@ THREADS_ENV: Final = "VIRF_LLM_THREADS"
 # SmolLM2's training context; the +Rules prompts do not fit and fail as a
 # prompt that is too long, as they would on a server.
 DEFAULT_CONTEXT: Final = 8192
+# Grammars kept per apprentice: a run plans in one scene at a time, and a
+# benchmark revisits each task's scene for every method.
+GRAMMAR_CACHE: Final = 64
 
 
 @dataclass(frozen=True)
@@ -69,6 +79,8 @@ class LocalSettings:
     # each call (about 25 MB for 2,000 tokens) and resumes from the longest
     # stored prefix, so only the new tail is read.  0 turns it off.
     state_cache_bytes: int = 2 << 30
+    # Decode plans within the scene's grammar when the request carries one.
+    constrain: bool = True
 
     def __post_init__(self) -> None:
         # The server client's own checks: llama.cpp reads max_tokens <= 0 as
@@ -138,6 +150,33 @@ def few_shot(reasoning: bool) -> tuple[tuple[str, str], ...]:
     return tuple(out)
 
 
+def _asks_reasoning(request: ProposalRequest) -> bool:
+    """Whether the task (the first user message) asks for REASONING and
+    PLAN, as the thinking methods do; the replies that follow keep its form."""
+    pairs = request.messages
+    at = 1 if pairs and pairs[0][0] == "system" else 0
+    task = next((c for r, c in pairs[at:] if r == "user"), "")
+    return template("thinker").strip() in task
+
+
+def _cut_off(body: Any) -> bool:
+    """Whether generation stopped at max_tokens rather than where it chose to."""
+    try:
+        return bool(body["choices"][0]["finish_reason"] == "length")
+    except (KeyError, IndexError, TypeError):
+        return False
+
+
+def _whole_lines(text: str) -> tuple[str | None, str | None]:
+    """A constrained reply cut off by max_tokens, without its last line: the
+    grammar could not finish that line, and a name cut short ("find Stove")
+    would be read as whichever object it happens to name."""
+    kept = text.rpartition("\n")[0]
+    if not kept.strip():
+        return None, "the reply was cut off by max_tokens before its first line ended"
+    return kept, None
+
+
 def _llama() -> Any:
     try:
         import llama_cpp
@@ -179,6 +218,7 @@ class LocalApprentice(Apprentice):
             ) from None
         if settings.state_cache_bytes > 0:
             self._llm.set_cache(llama_cpp.LlamaRAMCache(capacity_bytes=settings.state_cache_bytes))
+        self._grammars: OrderedDict[str, Any] = OrderedDict()
 
     @property
     def label(self) -> str:
@@ -187,6 +227,39 @@ class LocalApprentice(Apprentice):
     @property
     def model(self) -> str:
         return self.path.name
+
+    @property
+    def constrained(self) -> bool:
+        return self.settings.constrain
+
+    def _grammar(self, request: ProposalRequest) -> Any:
+        """The llama.cpp grammar this request's reply must follow, or None."""
+        constraint = request.constraint
+        if not self.settings.constrain or constraint is None or not request.purpose.asks_for_plan:
+            return None
+        text = constraint.gbnf(reasoning=_asks_reasoning(request))
+        grammar = self._grammars.get(text)
+        if grammar is None:
+            llama_cpp = _llama()
+            # llama.cpp parses a grammar only when a generation starts, and a
+            # grammar it cannot parse then is a null sampler in the chain,
+            # which crashes the process: parse it once here instead.
+            parsed = llama_cpp.llama_sampler_init_grammar(
+                self._llm._model.vocab, text.encode("utf-8"), b"root"
+            )
+            if not parsed:
+                raise EnvironmentProblem(
+                    f"llama.cpp cannot parse the plan grammar of task {request.task_id}; "
+                    "run with --no-constrain"
+                )
+            llama_cpp.llama_sampler_free(parsed)
+            grammar = llama_cpp.LlamaGrammar.from_string(text, verbose=False)
+            self._grammars[text] = grammar
+            if len(self._grammars) > GRAMMAR_CACHE:
+                self._grammars.popitem(last=False)
+        else:
+            self._grammars.move_to_end(text)
+        return grammar
 
     def _sent(self, request: ProposalRequest) -> ProposalRequest:
         """The request as the model gets it (and the log records it): the
@@ -197,13 +270,14 @@ class LocalApprentice(Apprentice):
             return request
         pairs = list(request.messages)
         at = 1 if pairs and pairs[0][0] == "system" else 0
-        task = next((c for r, c in pairs[at:] if r == "user"), "")
         # The examples take the form the task asks for, with or without REASONING.
-        pairs[at:at] = few_shot(template("thinker").strip() in task)
+        pairs[at:at] = few_shot(_asks_reasoning(request))
         return dataclasses.replace(request, messages=tuple(pairs))
 
-    def _ask(self, request: ProposalRequest) -> tuple[str | None, str | None, dict[str, Any]]:
-        """One generation: (text, problem, usage)."""
+    def _ask(
+        self, request: ProposalRequest, grammar: Any = None
+    ) -> tuple[str | None, str | None, dict[str, Any]]:
+        """One generation, within ``grammar`` when given: (text, problem, usage)."""
         stop_at = request.deadline
         # The chat call cannot be interrupted; a generation is bounded by
         # max_tokens instead (seconds for this model), and none starts once
@@ -220,6 +294,7 @@ class LocalApprentice(Apprentice):
                 seed=self.settings.seed,
                 max_tokens=self.settings.max_tokens,
                 repeat_penalty=self.settings.repeat_penalty,
+                grammar=grammar,
             )
         except Exception as exc:
             # llama.cpp says "Requested tokens (N) exceed context window of M";
@@ -236,15 +311,18 @@ class LocalApprentice(Apprentice):
             "prompt_tokens": content.prompt_tokens,
             "completion_tokens": content.completion_tokens,
         }
+        if grammar is not None and content.text is not None and _cut_off(body):
+            return (*_whole_lines(content.text), usage)
         return content.text, content.problem, usage
 
     def _propose(self, request: ProposalRequest) -> Proposal:
         if request.images:
             raise InputError(f"{self.label} reads no images; use a vision model for perception")
+        grammar = self._grammar(request)
         request = self._sent(request)
         results = []
         for ask in (1, 2):
-            text, problem, usage = self._ask(request)
+            text, problem, usage = self._ask(request, grammar)
             results.append(usage)
             # A prompt too long, or a deadline passed, would fail the same way again.
             final = (

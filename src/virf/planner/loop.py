@@ -41,6 +41,7 @@ from typing import Any, Literal, Protocol
 from virf.errors import clip
 from virf.ontology.tbox import Vocabulary
 from virf.planner.apprentices import Apprentice, Purpose
+from virf.planner.constraint import plan_constraint
 from virf.planner.deadline import DEFAULT_DEADLINE_S, Deadline
 from virf.planner.prompting import ReadPlan, apprentice_prompt, read_plan, unreadable_message
 from virf.planner.questions import SETTLEABLE, AnswerPolicy, Answers, apply_answers, deny
@@ -195,6 +196,8 @@ def refine(
                 # Past the first iteration the last message is feedback to act on.
                 purpose=Purpose.PLAN if i == 0 else Purpose.REPAIR,
                 deadline=deadline,
+                # From the scene as it is now: answers may have changed it.
+                constraint=plan_constraint(scene, vocab) if apprentice.constrained else None,
             )
             if not proposal.ok or proposal.text is None:
                 log.append(Turn(i, "apprentice", "failed-proposal", proposal.reason))

@@ -34,6 +34,7 @@ from typing import Any, Literal
 from virf.errors import InputError, closest
 from virf.ontology.tbox import UnsafeStateConcept, Vocabulary
 from virf.planner.apprentices import Apprentice, Purpose
+from virf.planner.constraint import plan_constraint
 from virf.planner.deadline import DEFAULT_DEADLINE_S, Deadline
 from virf.planner.loop import SYSTEM, LoopResult, Outcome, Transcript, Turn, Tutor, refine
 from virf.planner.prompting import (
@@ -162,6 +163,8 @@ def run_method(
             corrections=(checker or tutor) if method.feedback == "diagnostic" else None,
         )
     scene = build_scene(scene_data)
+    # These methods never change the scene: one constraint serves every proposal.
+    constraint = plan_constraint(scene, vocab) if apprentice.constrained else None
     messages = [
         {"role": "system", "content": SYSTEM},
         {"role": "user", "content": apprentice_prompt(instruction, scene, rules) + suffix},
@@ -185,6 +188,7 @@ def run_method(
             # Every proposal after the first answers feedback: a report or a critique.
             purpose=Purpose.PLAN if i == 0 else Purpose.REPAIR,
             deadline=deadline,
+            constraint=constraint,
         )
         if not p.ok or p.text is None:
             log.append(Turn(i, "apprentice", "failed-proposal", p.reason))

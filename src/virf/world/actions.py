@@ -59,15 +59,28 @@ def is_catalogue_type(vocab: Vocabulary, classes: frozenset[str]) -> bool:
 
 
 def lacks(vocab: Vocabulary, obj: str, state: WorldState, affordance: str) -> bool:
+    return type_lacks(vocab, state.objects.get(obj, frozenset()), affordance)
+
+
+def type_lacks(vocab: Vocabulary, classes: frozenset[str], affordance: str) -> bool:
+    """Whether an object of ``classes`` certainly lacks ``affordance``; the
+    rule :func:`lacks` applies, for callers that hold a scene rather than a
+    state (the planner's constrained decoding)."""
     # Only catalogue types declare their affordances: for any other type a
     # missing one says nothing, and neither does one only some instances of
     # the type have (AI2-THOR's bowls break unless they are plastic).
-    classes = state.objects.get(obj, frozenset())
     return (
         is_catalogue_type(vocab, classes)
         and not vocab.any_is_a(classes, affordance)
         and not vocab.may_afford(classes, affordance)
     )
+
+
+def cannot_receive(vocab: Vocabulary, classes: frozenset[str]) -> bool:
+    """Whether ``put`` certainly refuses an object of ``classes`` as the
+    place: a catalogue type that is no receptacle.  An open-world type might
+    be one, so it is not refused."""
+    return is_catalogue_type(vocab, classes) and not vocab.any_is_a(classes, "Receptacle")
 
 
 def portion_name(kind: str, source: str) -> str:
@@ -277,7 +290,7 @@ def _put(c: Change) -> PreconditionFailure | None:
             Fact(agent, "isHolding", held),
         )
     classes = c.state.objects[target]
-    if is_catalogue_type(c.vocab, classes) and not c.vocab.any_is_a(classes, "Receptacle"):
+    if cannot_receive(c.vocab, classes):
         return c.fail(
             "Precondition_NotAReceptacle",
             target,
