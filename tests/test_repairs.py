@@ -101,6 +101,44 @@ def test_dropping_the_dangerous_step_is_not_offered_when_only_moves_remain(
     assert all(c.kind != "drop" for c in offered)
 
 
+# A filled bowl to heat in a microwave, written as a small model writes it:
+# nothing found first, the door never opened.
+TERSE = ["pick Bowl_1", "put Microwave_1", "turn_on Microwave_1", "turn_off Microwave_1"]
+
+
+def test_steps_a_plan_lacks_are_supplied_one_after_another(tutor: LogicTutor, vocab: Any) -> None:
+    # As in a benchmark scene, the robot must find each object before using it.
+    scene = build_scene({**microwave_scene(bowl=True), "unlocated_by_default": True}, vocab)
+    report, offered = checked(tutor, scene, parse_plan(TERSE))
+    assert report.violations[0].id == "LogicalInconsistency_ActionOnUnlocatedObject"
+    first = offered[0]
+    assert first.kind == "insert" and first.kept == len(TERSE)
+    assert first.plan == (
+        "find Bowl_1",
+        "pick Bowl_1",
+        "find Microwave_1",
+        "open Microwave_1",
+        "put Microwave_1",
+        "close Microwave_1",
+        "turn_on Microwave_1",
+        "turn_off Microwave_1",
+    )
+    assert first.edit.startswith("insert `find Bowl_1` before `pick Bowl_1`; ")
+    assert_all_safe(tutor, scene, offered)
+
+
+def test_nothing_is_supplied_where_the_danger_is_the_material(
+    tutor: LogicTutor, vocab: Any
+) -> None:
+    # The twin: every step is in place, and the pot is metal. No step the
+    # plan lacks would end that, so no supplied plan is offered.
+    scene = build_scene({**microwave_scene(bowl=False), "unlocated_by_default": True}, vocab)
+    report, offered = checked(tutor, scene, parse_plan(HEAT_POT))
+    assert report.status == "UNSAFE"
+    assert not [c for c in offered if "before `" in c.edit]
+    assert_all_safe(tutor, scene, offered)
+
+
 def test_metal_pot_with_a_ceramic_bowl_in_the_scene_offers_the_bowl(
     tutor: LogicTutor, vocab: Any
 ) -> None:

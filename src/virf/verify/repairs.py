@@ -42,6 +42,11 @@ from virf.world.state import WorldState
 
 MAX_OFFERED = 3
 MAX_TRIED = 12
+# Missing preconditions supplied one after another before a plan passes.
+MAX_CHAIN = 4
+# The verb whose effect is a data value an action needs: only the find
+# handler sets isLocated (Change.located), so it is the one way to supply it.
+SUPPLIES = {("isLocated", "false"): "find"}
 # The search's time when neither the caller nor the tutor says otherwise.
 DEFAULT_BUDGET_S = 30.0
 # Substitutes tried per involved object: the closest types first.
@@ -128,7 +133,17 @@ def candidates(
         return ()
     offered: list[Candidate] = []
     tried = 0
+    # First the plan with what its steps lack supplied before them (the step
+    # that finds the object, the door opened): it keeps every line, and a
+    # small model's plans usually lack several such steps, so each draft is
+    # verified and the next missing one supplied, up to MAX_CHAIN.
+    chain, spent = _supplied(plan, report, scene, vocab, tutor, limit, max_tried)
+    tried += spent
+    if chain is not None:
+        offered.append(chain)
     for draft in drafts:
+        if chain is not None and draft.plan == chain.plan:
+            continue
         if tried >= max_tried or len(offered) >= max_offered or time.monotonic() > limit:
             break
         try:
@@ -145,6 +160,89 @@ def candidates(
         if verdict.status == "SAFE":
             offered.append(draft)
     return tuple(offered)
+
+
+def _supplied(
+    plan: Sequence[PlanStep],
+    report: Report,
+    scene: Scene,
+    vocab: Vocabulary,
+    tutor: Checker,
+    limit: float,
+    max_tried: int,
+) -> tuple[Candidate | None, int]:
+    """The plan with each missing precondition of its dangerous step supplied
+    just before it, repeated while the next report names another; (the
+    candidate if the tutor finds the result SAFE, verifications spent)."""
+    steps = list(plan)
+    edits: list[str] = []
+    reasons: list[str] = []
+    spent = 0
+    sim = Simulator(vocab)
+    for _ in range(MAX_CHAIN):
+        if spent >= max_tried or time.monotonic() > limit:
+            return None, spent
+        try:
+            trace = simulate(sim, sim.initial(scene), steps)
+            supply = _supply(report, steps, trace, vocab)
+            if supply is None:
+                return None, spent
+            at, line, why = supply
+            before = steps[at - 1].text
+            # Parsed whole again: a step's number is part of it.
+            texts = [s.text for s in steps]
+            steps = list(parse_plan([*texts[: at - 1], line, *texts[at - 1 :]]))
+            spent += 1
+            report = tutor.verify(scene, steps)
+        except Exception:
+            return None, spent  # fail closed: nothing offered from a draft that broke
+        edits.append(f"insert `{line}` before `{before}`")
+        reasons.append(why)
+        if report.status == "SAFE":
+            return (
+                Candidate(
+                    "insert",
+                    "; ".join(edits),
+                    tuple(s.text for s in steps),
+                    "; ".join(reasons),
+                    len(plan),
+                ),
+                spent,
+            )
+        if report.status != "UNSAFE":
+            return None, spent
+    return None, spent
+
+
+def _supply(
+    report: Report, steps: Sequence[PlanStep], trace: Trace, vocab: Vocabulary
+) -> tuple[int, str, str] | None:
+    """The first step the dangerous step lacks: (its 1-based place, the line,
+    why), from the facts of the finding that hold before the step and that
+    one action ends (a closed door: open; an object not located: find)."""
+    k = report.dangerous_step
+    if k is None or not 1 <= k <= len(steps) or k > len(trace.states):
+        return None
+    before = trace.states[k - 1]
+    for v in report.violations:
+        if not v.definite or v.step != k:
+            continue
+        for t in v.triggering_facts:
+            verb = (
+                UNDO.get(t.object)
+                if t.predicate == "hasState"
+                else SUPPLIES.get((t.predicate, t.object))
+            )
+            if verb is None or t.subject not in before.objects:
+                continue
+            if verb in AFFORDANCE and lacks(vocab, t.subject, before, AFFORDANCE[verb]):
+                continue
+            if t.predicate == "hasState" and not before.has(t.subject, "hasState", t.object):
+                continue  # the step itself made the state: undoing it comes after
+            line = f"{verb} {t.subject}"
+            why = f"{v.id} holds at `{steps[k - 1].text}` ({v.trigger_reason}); `{line}` ends it"
+            return k, line, why
+    return None
 
 
 # ---------------------------------------------------------------- drafts
