@@ -81,8 +81,10 @@ class PlanConstraint:
                 f"root ::= {abort} | {_literal(REASONING_MARK + chr(10))} "
                 f"note{{1,{MAX_REASONING_LINES}}} {_literal(PLAN_MARK + chr(10))} ({abort} | plan)",
                 # A free line that cannot run on for ever, and not an empty
-                # one, so the section cannot be padded with newlines.
-                f'note ::= [^\\n]{{1,{MAX_REASONING_CHARS}}} "\\n"',
+                # one, so the section cannot be padded with newlines.  It may
+                # not start with P: a note reading "PLAN:" would let the model
+                # write its plan as free text, outside the grammar of lines.
+                f'note ::= [^P\\n] [^\\n]{{0,{MAX_REASONING_CHARS - 1}}} "\\n"',
             ]
         else:
             rules = [f"root ::= {abort} | plan"]

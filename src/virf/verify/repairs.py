@@ -43,7 +43,7 @@ from virf.world.state import WorldState
 MAX_OFFERED = 3
 MAX_TRIED = 12
 # Missing preconditions supplied one after another before a plan passes.
-MAX_CHAIN = 4
+MAX_CHAIN = 8
 # The verb whose effect is a data value an action needs: only the find
 # handler sets isLocated (Change.located), so it is the one way to supply it.
 SUPPLIES = {("isLocated", "false"): "find"}
