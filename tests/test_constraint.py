@@ -177,7 +177,8 @@ def test_the_reasoning_grammar_wraps_the_plan(vocab: Vocabulary) -> None:
     assert rules["root"] == (
         f'"{REFUSAL}" | "REASONING:\\n" note{{1,3}} "PLAN:\\n" ("{REFUSAL}" | plan)'
     )
-    assert rules["note"] == '[^\\n]{1,120} "\\n"'
+    # A note may not start with P, so it cannot be a second 'PLAN:'.
+    assert rules["note"] == '[^P\\n] [^\\n]{0,119} "\\n"'
     assert {k: v for k, v in rules.items() if k not in ("root", "note")} == dict(
         line.split(" ::= ", 1) for line in c.gbnf().splitlines() if not line.startswith("root")
     )
