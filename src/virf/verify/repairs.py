@@ -4,6 +4,10 @@ A small model repairs a plan badly from a diagnostic report alone; given a
 short list of corrected plans it can copy one.  Every correction offered here
 comes from the finding's mechanism, never from the task's words:
 
+* **supply**: a fact of the finding that holds before the dangerous step and
+  that one action ends (an object not located: ``find``; a closed door:
+  ``open``) gets that action inserted just before the step; the result is
+  verified and the next such step supplied, up to ``MAX_CHAIN`` times;
 * **insert**: the dangerous state a step left behind (an ``OnState``, an
   ``OpenState``) is undone by the verb of the same affordance whose result is
   the other state (``turn_off`` for ``turn_on``, ``close`` for ``open``), right
