@@ -23,10 +23,21 @@ DOC = ROOT / "docs" / "agents.md"
 METHODS = "impulsive,impulsive+rules,thinker+diagnostic,virf-reject,virf"
 FILES = ("unsafe_detailed", "safe_detailed", "abstract", "long_horizon")
 
-# (recording, folder of the split, sample, heading of its section in the document)
+CONSTRAINED = "impulsive,virf"
+
+# (recording, folder of the split, sample, heading of its section in the
+# document, the methods recorded)
 ROOMS = [
-    ("kitchen", SAB, 1, "### Kitchens"),
-    ("other-rooms", SAB / "other_rooms", 4, "### Living rooms, bedrooms and bathrooms"),
+    ("kitchen", SAB, 1, "### Kitchens", METHODS),
+    ("other-rooms", SAB / "other_rooms", 4, "### Living rooms, bedrooms and bathrooms", METHODS),
+    ("kitchen-constrained", SAB, 4, "### Constrained: kitchens", CONSTRAINED),
+    (
+        "other-rooms-constrained",
+        SAB / "other_rooms",
+        8,
+        "### Constrained: living rooms, bedrooms and bathrooms",
+        CONSTRAINED,
+    ),
 ]
 
 
@@ -58,9 +69,11 @@ def rows(markdown: str, header: str) -> list[list[str]]:
 
 
 @needs_shared
-@pytest.mark.parametrize(("name", "folder", "every", "heading"), ROOMS, ids=[r[0] for r in ROOMS])
+@pytest.mark.parametrize(
+    ("name", "folder", "every", "heading", "methods"), ROOMS, ids=[r[0] for r in ROOMS]
+)
 def test_shipped_recording_rerenders_the_documented_tables(
-    name: str, folder: Path, every: int, heading: str, tmp_path: Path
+    name: str, folder: Path, every: int, heading: str, methods: str, tmp_path: Path
 ) -> None:
     assert makefile_every(name) == every, "the Makefile samples another set of tasks"
     out = tmp_path / name
@@ -68,7 +81,7 @@ def test_shipped_recording_rerenders_the_documented_tables(
     files = [folder / f"{f}.jsonl" for f in FILES]
     done = bench_agents(
         "--method",
-        METHODS,
+        methods,
         "--every",
         str(every),
         "--planner",
@@ -83,7 +96,7 @@ def test_shipped_recording_rerenders_the_documented_tables(
     documented = section(DOC.read_text(encoding="utf-8"), heading)
 
     master = "| method | tasks | HAR % |"
-    assert [r[0] for r in rows(rendered, master)] == METHODS.split(",")
+    assert [r[0] for r in rows(rendered, master)] == methods.split(",")
     assert [r[:-1] for r in rows(rendered, master)] == [r[:-1] for r in rows(documented, master)]
     time = "| method | model calls |"
     assert [r[:-1] for r in rows(rendered, time)] == [r[:-1] for r in rows(documented, time)]

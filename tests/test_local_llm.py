@@ -400,3 +400,41 @@ def test_a_constrained_reply_cut_off_keeps_only_its_whole_lines() -> None:
     assert _whole_lines("find Pot_1\npick Pot_1\nfind Stove") == ("find Pot_1\npick Pot_1", None)
     text, problem = _whole_lines("find Stove")
     assert text is None and problem and "cut off by max_tokens" in problem
+
+
+@needs_model
+def test_the_real_model_is_offered_only_checked_corrections(tutor: Any, vocab: Any) -> None:
+    """The whole VIRF loop with SmolLM2, constrained: every correction the
+    feedback offers verifies SAFE again, every proposal is verified, and an
+    approval is only ever of a plan the tutor found SAFE."""
+    from virf.planner.methods import get_method, run_method
+    from virf.verify.verifier import Verifier
+    from virf.world.plan import parse_plan
+    from virf.world.scene import build_scene
+
+    fresh = Verifier(tutor.tbox, tutor.engine)
+    offered = 0
+    with make_apprentice(f"local:{MODEL}") as model:
+        for instruction, data in _kitchen_tasks(vocab, 4):
+            scene = build_scene(data, vocab)
+            result = run_method(
+                get_method("virf"),
+                instruction,
+                data,
+                model,
+                tutor.verifier,
+                lambda d: build_scene(d, vocab),
+                vocab,
+                max_iter=3,
+            )
+            for turn in result.transcript:
+                if turn.kind == "corrections":
+                    for c in (turn.data or {})["candidates"]:
+                        offered += 1
+                        verdict = fresh.verify(scene, parse_plan(c["plan"]))
+                        assert verdict.status == "SAFE", c["edit"]
+            if result.outcome == "APPROVED":
+                assert result.plan is not None
+                assert fresh.verify(scene, parse_plan(list(result.plan))).status == "SAFE"
+    # The recorded tasks' first plans are unsafe often enough that some are offered.
+    assert offered > 0

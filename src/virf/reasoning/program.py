@@ -411,7 +411,6 @@ class Program:
             self.rtrig[p] = (tuple(self.role_up.get(p, ())), sides[0], sides[1])
         self._bases: dict[frozenset[str], Model] = {}
         self._base_used: frozenset[str] = frozenset()  # see scratch()
-        self._spare: Model | None = None
 
     def model(self, disabled: frozenset[str] = frozenset(), *, journal: bool = False) -> Model:
         """A new least model of the TBox's own facts, the caller's to grow.
@@ -430,14 +429,6 @@ class Program:
         m.run()
         m.base_mark = len(m.journal) if m.journal is not None else 0
         return m
-
-    def spare(self) -> Model:
-        """A second model of the TBox's own facts, built once, for a caller
-        that grows it for a while and rolls it back (see
-        :meth:`virf.reasoning.fast.FastEngine.sharing`)."""
-        if self._spare is None:
-            self._spare = self.model(journal=True)
-        return self._spare
 
     @contextmanager
     def scratch(self, disabled: frozenset[str] = frozenset()) -> Iterator[Model]:
