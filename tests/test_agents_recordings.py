@@ -30,12 +30,11 @@ CONSTRAINED = "impulsive,virf"
 ROOMS = [
     ("kitchen", SAB, 1, "### Kitchens", METHODS),
     ("other-rooms", SAB / "other_rooms", 4, "### Living rooms, bedrooms and bathrooms", METHODS),
-    ("kitchen-constrained", SAB, 4, "### Constrained: kitchens", CONSTRAINED),
     (
-        "other-rooms-constrained",
-        SAB / "other_rooms",
-        8,
-        "### Constrained: living rooms, bedrooms and bathrooms",
+        "kitchen-constrained",
+        SAB,
+        4,
+        "### Constrained decoding and checked corrections",
         CONSTRAINED,
     ),
 ]
