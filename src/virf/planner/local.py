@@ -69,12 +69,6 @@ class LocalSettings:
     # Greedy decoding of a small model falls into loops ("1. The robot
     # must ... 2. The robot must ..."); llama.cpp's usual penalty stops them.
     repeat_penalty: float = 1.1
-    # Within a grammar no reply can loop (its notes and lines are bounded),
-    # and the penalty then does harm: it punishes the tokens of the last 64,
-    # which are the checked correction the feedback has just shown.  With
-    # 1.1, SmolLM2 took 4 of 89 offered corrections in the kitchens; with
-    # 1.0 it copies one whole (docs/agents.md).
-    constrained_repeat_penalty: float = 1.0
     context: int = DEFAULT_CONTEXT
     threads: int | None = None
     few_shot: bool = True
@@ -299,11 +293,7 @@ class LocalApprentice(Apprentice):
                 temperature=self.settings.temperature,
                 seed=self.settings.seed,
                 max_tokens=self.settings.max_tokens,
-                repeat_penalty=(
-                    self.settings.repeat_penalty
-                    if grammar is None
-                    else self.settings.constrained_repeat_penalty
-                ),
+                repeat_penalty=self.settings.repeat_penalty,
                 grammar=grammar,
             )
         except Exception as exc:
