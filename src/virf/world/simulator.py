@@ -14,6 +14,7 @@ import difflib
 import re
 from collections.abc import Iterable, Mapping
 from types import MappingProxyType
+from typing import Any
 
 from virf.errors import EnvironmentProblem
 from virf.names import name_words, term_key
@@ -440,6 +441,12 @@ _HOLDERS = (("contains", "ContainerReceptacle"), ("supports", "SurfaceReceptacle
 _CLOSURE_INPUTS = frozenset({"contains", "supports", "hasState"})
 
 
+# Sentence vectors of name words, by text: the model and its input are fixed,
+# so a vector never goes stale; the bound only caps memory (384 floats each).
+_VECTORS: dict[str, Any] = {}  # text -> float32 vector (numpy)
+_VECTORS_KEPT = 20_000
+
+
 def _by_meaning(term: str, names: Iterable[str]) -> list[str]:
     """Names of the scene nearest ``term`` in meaning (the bundled sentence
     embedder), for a word neither spelling nor the catalogue resolves. Only
@@ -449,12 +456,24 @@ def _by_meaning(term: str, names: Iterable[str]) -> list[str]:
     pool = sorted(set(names))
     if not pool or not re.search(r"[A-Za-z]{2}", term):
         return []
+    texts = [name_words(n) for n in pool]
+    query_text = name_words(term)
     try:
         embedder = default_embedder()
-        vectors = embedder.encode([name_words(n) for n in pool])
-        query = embedder.encode([name_words(term)])[0]
+        # A scene's names are asked about again and again (every plan that
+        # names a missing object, every iteration of the loop); encoding
+        # them is most of a verification's time on this path, so each text
+        # is encoded once per process.  Alone, not in a batch: a batch pads
+        # its texts to one width, and a vector must not depend on which
+        # scene first asked for it (the same input, the same report).
+        new = [t for t in dict.fromkeys([*texts, query_text]) if t not in _VECTORS]
+        if len(_VECTORS) + len(new) > _VECTORS_KEPT:
+            _VECTORS.clear()
+        for text in new:
+            _VECTORS[text] = embedder.encode([text])[0]
     except (EnvironmentProblem, OSError):  # no model: spelling alone
         return []
-    scores = [round(float(v), 4) for v in (vectors @ query).tolist()]
+    query = _VECTORS[query_text]
+    scores = [round(float(_VECTORS[t] @ query), 4) for t in texts]
     ranked = sorted(zip(scores, pool, strict=True), key=lambda sp: (-sp[0], sp[1]))
     return [name for score, name in ranked if score >= MEANING_FLOOR]
