@@ -140,7 +140,8 @@ bench-report: sab-files $(STAMP)
 
 # The agent table of the local model (docs/agents.md), re-rendered offline in
 # seconds from the recorded runs in examples/agents/smollm2 (every kitchen task
-# of the dev split; every 4th task of each other-rooms file).  No model and no
+# of the dev split; every 4th task of each other-rooms file; and the constrained
+# run with checked corrections, impulsive and virf on every 4th kitchen task).  No model and no
 # network, but the tasks themselves: the development split in $(SAB), from
 # ../shared or `make benchmarks` (sab-split checks it is that split: the
 # replies are looked up by file and line).  Recording them again needs
