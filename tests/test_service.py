@@ -193,6 +193,7 @@ def test_a_run_streams_its_dialogue(dialogue_client: TestClient) -> None:
         ("turn", "instruction"),
         ("turn", "proposal"),
         ("turn", "report"),
+        ("turn", "corrections"),
         ("turn", "proposal"),
         ("turn", "report"),
         ("result", None),

@@ -537,9 +537,14 @@ def test_a_plan_run_streams_its_dialogue_to_approval(browser: Browser, url: str)
             ("user", "instruction"),
             ("apprentice", "proposal"),
             ("tutor", "report"),
+            ("tutor", "corrections"),
             ("apprentice", "proposal"),
             ("tutor", "report"),
         ]
+        # The checked correction keeps its plan's lines apart.
+        offered = page.locator("[data-kind=corrections] [data-testid=turn-text]")
+        expect(offered).to_contain_text("close Fridge_1")
+        assert "\n" in offered.inner_text()
         first, second = page.get_by_test_id("iteration").all()
         expect(first.get_by_role("heading")).to_have_text("Iteration 1")
         expect(first.get_by_test_id("turn-status")).to_have_text("UNSAFE")

@@ -181,7 +181,7 @@ def check_knowledge_base(
     """``virf kb check``: the reference reasoner's verdict on the TBox (starts
     the JVM) and what the fast engine makes of it."""
     from virf.ontology import check
-    from virf.reasoning.fast import fragment_summary
+    from virf.reasoning.program import fragment_summary
 
     result = check.check_tbox(scenario, kb)
     result["fast_engine"] = fragment_summary(load_tbox(scenario, kb=kb))

@@ -68,21 +68,6 @@ def fragment_of(tbox: TBox) -> Fragment:
     return tbox.fragment
 
 
-def fragment_summary(tbox: TBox) -> dict[str, Any]:
-    """Whether the fast engine can answer for this TBox itself, and how."""
-    frag = fragment_of(tbox)
-    prog = compile_program(frag, frozenset())
-    return {
-        "exact_fragment": frag.exact,
-        "problems": frag.problems,
-        "query_classes": len(frag.query_defs),
-        "sink_classes": len(frag.sinks),
-        "kb_axioms": len(frag.kb),
-        "compiled_axioms": len(frag.kb) - len(prog.checks),
-        "model_checked_axioms": len(prog.checks),
-    }
-
-
 def _halving(
     m: Model,
     tested: Sequence[bool],

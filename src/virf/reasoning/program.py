@@ -25,6 +25,7 @@ from typing import Any
 
 from virf.ontology.fragment import Axiom, Expr, Fragment, Role
 from virf.ontology.iri import NOTHING, THING
+from virf.ontology.tbox import TBox
 from virf.reasoning.chase import Model, nominal
 
 
@@ -484,3 +485,18 @@ _STRUCTURAL = {
     "chain",
     "dfunc",
 }
+
+
+def fragment_summary(tbox: TBox) -> dict[str, Any]:
+    """Whether the fast engine can answer for this TBox itself, and how."""
+    frag = tbox.fragment
+    prog = compile_program(frag, frozenset())
+    return {
+        "exact_fragment": frag.exact,
+        "problems": frag.problems,
+        "query_classes": len(frag.query_defs),
+        "sink_classes": len(frag.sinks),
+        "kb_axioms": len(frag.kb),
+        "compiled_axioms": len(frag.kb) - len(prog.checks),
+        "model_checked_axioms": len(prog.checks),
+    }

@@ -1164,7 +1164,8 @@
     const body =
       (turn.kind === "answers" && answersList(turn.text)) ||
       (turn.kind === "unsettled" && unsettledList(turn.data)) ||
-      (turn.kind === "proposal"
+      // A correction lists whole plans, one step a line, as a proposal does.
+      (turn.kind === "proposal" || turn.kind === "corrections"
         ? el("pre", { class: "plan-text", "data-testid": "turn-text", text: turn.text })
         : el("div", { class: "turn-text", "data-testid": "turn-text", text: turn.text }));
     const extra = [];
