@@ -206,9 +206,9 @@ def llama_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
             proc.kill()
 
 
-@needs_model
-def test_virf_plan_against_llama_cpps_server(cli: Any, llama_server: str) -> None:
-    result = cli(
+def _plan_on_server(cli: Any, server: str, *extra: str) -> Any:
+    """`virf plan` of the fridge dialogue against llama.cpp's server."""
+    return cli(
         "plan",
         "--scene",
         DIALOGUE / "scene.json",
@@ -217,13 +217,17 @@ def test_virf_plan_against_llama_cpps_server(cli: Any, llama_server: str) -> Non
         "--planner",
         "openai:smollm2",
         "--base-url",
-        llama_server,
-        "--max-iter",
-        "2",
+        server,
+        *extra,
         "--seed",
         "0",
         "--json",
     )
+
+
+@needs_model
+def test_virf_plan_against_llama_cpps_server(cli: Any, llama_server: str) -> None:
+    result = _plan_on_server(cli, llama_server, "--max-iter", "2")
     assert result.exit_code in (0, 1), result.output
     data = json.loads(result.stdout)
     assert [t for t in data["transcript"] if t["speaker"] == "apprentice"]
@@ -367,23 +371,7 @@ def test_no_constrain_still_plans(cli: Any) -> None:
 def test_a_constrained_served_plan_against_llama_cpps_server(cli: Any, llama_server: str) -> None:
     # Whether this server takes response_format's json_schema or refuses it,
     # the run ends with a verified outcome (the fallback is plain text).
-    result = cli(
-        "plan",
-        "--scene",
-        DIALOGUE / "scene.json",
-        "--instruction",
-        (DIALOGUE / "instruction.txt").read_text().strip(),
-        "--planner",
-        "openai:smollm2",
-        "--base-url",
-        llama_server,
-        "--constrain",
-        "--max-iter",
-        "1",
-        "--seed",
-        "0",
-        "--json",
-    )
+    result = _plan_on_server(cli, llama_server, "--constrain", "--max-iter", "1")
     assert result.exit_code in (0, 1), result.output
     data = json.loads(result.stdout)
     assert [t for t in data["transcript"] if t["speaker"] == "apprentice"]
