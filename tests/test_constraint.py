@@ -225,7 +225,9 @@ def test_the_loop_hands_the_scene_constraint_to_the_apprentice(tutor: LogicTutor
         "Find the pot.", data, scripted, tutor.verifier, lambda d: build_scene(d, vocab), vocab
     )
     assert result.outcome == "APPROVED"
-    assert [r.constraint for r in scripted.requests] == [plan_constraint(scene, vocab)] * 2
+    # Narrowed to what the instruction names: the pot, and the counter it is on.
+    focused = plan_constraint(scene, vocab).narrowed(frozenset({"Pot_1", "CounterTop_1"}))
+    assert [r.constraint for r in scripted.requests] == [focused] * 2
     # Not part of what is logged: the messages are what the model was told.
     assert "constraint" not in json.dumps(scripted.requests[1].as_messages())
     # An apprentice that would not use it (a replay, a scripted one) costs
@@ -249,4 +251,5 @@ def test_one_shot_methods_hand_it_over_too(tutor: LogicTutor) -> None:
         vocab,
     )
     (request,) = scripted.requests
-    assert request.constraint == plan_constraint(build_scene(data, vocab), vocab)
+    whole = plan_constraint(build_scene(data, vocab), vocab)
+    assert request.constraint == whole.narrowed(frozenset({"Pot_1", "CounterTop_1"}))

@@ -56,6 +56,11 @@ class PlanConstraint:
     def objects_of(self, verb: str) -> tuple[str, ...]:
         return next((names for v, names in self.takes if v == verb), ())
 
+    def narrowed(self, objects: frozenset[str]) -> PlanConstraint:
+        """These lines about ``objects`` only (:mod:`virf.planner.focus`)."""
+        takes = ((verb, tuple(n for n in names if n in objects)) for verb, names in self.takes)
+        return PlanConstraint(tuple((verb, names) for verb, names in takes if names))
+
     def lines(self) -> tuple[str, ...]:
         """Every valid plan line, in a fixed order."""
         out: list[str] = []

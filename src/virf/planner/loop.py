@@ -41,8 +41,8 @@ from typing import Any, Literal, Protocol
 from virf.errors import clip
 from virf.ontology.tbox import Vocabulary
 from virf.planner.apprentices import Apprentice, Purpose
-from virf.planner.constraint import plan_constraint
 from virf.planner.deadline import DEFAULT_DEADLINE_S, Deadline
+from virf.planner.focus import Focus
 from virf.planner.prompting import ReadPlan, apprentice_prompt, read_plan, unreadable_message
 from virf.planner.questions import SETTLEABLE, AnswerPolicy, Answers, apply_answers, deny
 from virf.render.feedback import corrections_section, corrections_summary, feedback_prompt
@@ -177,6 +177,7 @@ def refine(
     ]
     log: list[Turn] = Transcript(Turn(0, "user", "instruction", instruction), on_turn)
     plan: tuple[PlanStep, ...] | None = None  # the plan under verification
+    offered_lines: list[str] = []  # the plan lines of the corrections offered
     reply = ""
     for i in range(max_iter):
         if deadline.expired():
@@ -197,7 +198,13 @@ def refine(
                 purpose=Purpose.PLAN if i == 0 else Purpose.REPAIR,
                 deadline=deadline,
                 # From the scene as it is now: answers may have changed it.
-                constraint=plan_constraint(scene, vocab) if apprentice.constrained else None,
+                # (and widened by every correction offered so far, which the
+                # apprentice may copy).
+                constraint=(
+                    Focus.of(instruction, scene, vocab).widen(offered_lines).constraint()
+                    if apprentice.constrained
+                    else None
+                ),
             )
             if not proposal.ok or proposal.text is None:
                 log.append(Turn(i, "apprentice", "failed-proposal", proposal.reason))
@@ -310,6 +317,7 @@ def refine(
             left = time.monotonic() + deadline.remaining()
             offered = candidates(scene, plan, report, corrections, vocab, deadline=left)
             if offered:
+                offered_lines += [line for c in offered for line in c.plan]
                 text += corrections_section(offered)
                 log.append(
                     Turn(

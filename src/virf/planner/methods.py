@@ -34,8 +34,8 @@ from typing import Any, Literal
 from virf.errors import InputError, closest
 from virf.ontology.tbox import UnsafeStateConcept, Vocabulary
 from virf.planner.apprentices import Apprentice, Purpose
-from virf.planner.constraint import plan_constraint
 from virf.planner.deadline import DEFAULT_DEADLINE_S, Deadline
+from virf.planner.focus import Focus
 from virf.planner.loop import SYSTEM, LoopResult, Outcome, Transcript, Turn, Tutor, refine
 from virf.planner.prompting import (
     REFUSAL,
@@ -164,7 +164,7 @@ def run_method(
         )
     scene = build_scene(scene_data)
     # These methods never change the scene: one constraint serves every proposal.
-    constraint = plan_constraint(scene, vocab) if apprentice.constrained else None
+    constraint = Focus.of(instruction, scene, vocab).constraint() if apprentice.constrained else None
     messages = [
         {"role": "system", "content": SYSTEM},
         {"role": "user", "content": apprentice_prompt(instruction, scene, rules) + suffix},
