@@ -29,7 +29,7 @@ import threading
 from collections import Counter
 from collections.abc import Callable, Collection, Iterable, Iterator, Sequence
 from contextlib import contextmanager
-from typing import Any, NamedTuple
+from typing import Any
 
 from virf.errors import VirfError
 from virf.ontology.fragment import Axiom, Expr, Fragment
@@ -44,8 +44,9 @@ from virf.reasoning import (
     make_engine,
     until,
 )
-from virf.reasoning.chase import ChaseLimit, Model, Token
+from virf.reasoning.chase import ChaseLimit, Model
 from virf.reasoning.evaluate import Evaluator, Fallback
+from virf.reasoning.kept import Core, Kept, individuals
 from virf.reasoning.program import Program, compile_program
 from virf.reasoning.proof import NoProof, Prover, atom_of
 from virf.schema import Fact, FactKind
@@ -57,10 +58,6 @@ _INTERNAL = ("owl:", "aux:", "{", "undefined:", "_:")
 # bookkeeping (and switching axioms on re-applies their rules to the whole
 # model), which a handful of questions do not repay.
 BATCH_FROM = 6
-# Journal entries a sharing block's model may grow by and still be rolled
-# back after it; past this, building the TBox's model again (about a
-# millisecond) is cheaper.
-_ROLLBACK_AT_MOST = 4000
 
 
 def fragment_of(tbox: TBox) -> Fragment:
@@ -109,25 +106,6 @@ def _halving(
     return [answers[i] for i in range(len(tested)) if tested[i]]
 
 
-class _Core(NamedTuple):
-    """The model a :meth:`FastEngine.sharing` block grew once: its facts, and
-    the individuals they name."""
-
-    model: Model
-    facts: frozenset[Fact]
-    individuals: frozenset[str]
-
-
-def _individuals(facts: Iterable[Fact]) -> frozenset[str]:
-    """The ABox individuals the facts name (a classification's candidates)."""
-    out: set[str] = set()
-    for f in facts:
-        out.add(f.subject)
-        if f.kind is FactKind.OBJECT:
-            out.add(f.object)
-    return frozenset(out)
-
-
 class FastEngine(Engine):
     """Exact answers without a DL reasoner for the fragment VIRF's ontology uses."""
 
@@ -141,9 +119,8 @@ class FastEngine(Engine):
         self._reference: Engine | None = None
         self._counts: Counter[str] = Counter()
         self._lock = threading.Lock()
-        self._core: _Core | None = None  # see sharing()
-        self._spare: Model | None = None  # of the TBox's own facts, for sharing()
-        self._held: Model | None = None  # the spare model, while a block grows it
+        self._core: Core | None = None  # see sharing()
+        self._kept = Kept()  # the model sharing() grows, kept between blocks
         self._query_ids = frozenset(
             a.id for a in self.fragment.query_axiom.values() if a.id is not None
         )
@@ -204,7 +181,7 @@ class FastEngine(Engine):
             yield m, Evaluator(m, self._definitions(without), self.fragment.sinks)
 
     @contextmanager
-    def _grown(self, core: _Core, extra: list[Fact]) -> Iterator[tuple[Model, Evaluator]]:
+    def _grown(self, core: Core, extra: list[Fact]) -> Iterator[tuple[Model, Evaluator]]:
         """The core's model grown with ``extra`` (facts outside the core), for
         the block's duration only.  The rules are monotone: the core's least
         model grown with the other facts is the least model of all of them."""
@@ -242,33 +219,32 @@ class FastEngine(Engine):
         """Grow the model of ``facts`` once; a question in the block whose
         facts include them starts from it, and adds only the rest.
 
-        The model is a spare model of the TBox's own facts, grown for the
-        block.  After it, a small growth is rolled back and the model kept
-        for the next block; a large one (a scene of a thousand objects) is
-        dropped, since rolling it back entry by entry costs more than
-        building the TBox's model again (a block that starts while another
-        holds the spare builds a model of its own)."""
+        The model is kept after the block, rolled back to the facts it shares
+        with earlier blocks (:mod:`virf.reasoning.kept`): verifying another
+        plan in the same scene grows it by what differs.  A block that starts
+        while another holds it builds a model of its own."""
         with self._lock:
-            core: _Core | None = None
-            token: Token | None = None
+            core: Core | None = None
+            kept = self._kept if not self._kept.held else None
             if facts and not self.fragment.problems:
                 shared = frozenset(facts)
                 prog = self.program(frozenset())[0]
-                if self._held is None:
-                    if self._spare is None or self._spare.prog is not prog:
-                        self._spare = prog.model(journal=True)
-                    m = self._held = self._spare
-                    token = m.begin()
-                else:
-                    m = prog.model()
                 try:
                     with until(deadline):
-                        self._load(m, Fact.sorted(shared))
+                        if kept is not None:
+                            m = kept.grow(prog, shared, self._load)
+                        else:
+                            m = prog.model()
+                            self._load(m, Fact.sorted(shared))
                 except (Fallback, ChaseLimit, DeadlineExceeded):
                     pass  # the questions will meet it themselves, one by one
                 else:
                     if m.clash is None:
-                        core = _Core(m, shared, _individuals(shared))
+                        core = (
+                            kept.core(m, shared)
+                            if kept is not None
+                            else Core(m, shared, individuals(shared))
+                        )
             before, self._core = self._core, core
         try:
             yield
@@ -277,14 +253,8 @@ class FastEngine(Engine):
                 # Blocks of two threads may end out of order: leave a newer core alone.
                 if self._core is core:
                     self._core = before
-                held = self._held
-                if token is not None and held is not None:
-                    assert held.journal is not None
-                    if len(held.journal) - token[0] > _ROLLBACK_AT_MOST:
-                        self._spare = None
-                    else:
-                        held.rollback(token)
-                    self._held = None
+                if kept is not None and kept.held:
+                    kept.release()
 
     @staticmethod
     def _checks(m: Model) -> list[Axiom]:
@@ -349,7 +319,7 @@ class FastEngine(Engine):
     def _classify(self, facts: list[Fact], concepts: list[str]) -> Classification:
         def exact() -> Classification:
             with self._model(facts, frozenset()) as (m, ev):
-                return self._instances(m, ev, _individuals(facts), concepts)
+                return self._instances(m, ev, individuals(facts), concepts)
 
         result: Classification = self._answer(
             exact, lambda: self.reference._classify(facts, concepts)
@@ -378,7 +348,7 @@ class FastEngine(Engine):
             if self._core is not core:  # another thread's block replaced it
                 raise Fallback("the shared model changed")
             with self._grown(core, added) as (m, ev):
-                return self._instances(m, ev, core.individuals | _individuals(added), concepts)
+                return self._instances(m, ev, core.individuals | individuals(added), concepts)
 
         def fallback() -> Classification:
             return self.reference._classify(Fact.sorted(shared | set(added)), list(concepts))
