@@ -17,6 +17,7 @@ from typing import Any
 from virf.ontology.fragment import Axiom, Expr, Role
 from virf.ontology.iri import NOTHING, THING
 from virf.reasoning.chase import Model
+from virf.reasoning.prior import Prior, Values
 
 _NONE: frozenset[str] = frozenset()
 
@@ -29,10 +30,23 @@ class Evaluator:
     """Query evaluation over one model: classical truth, certain truth, and
     the search for a falsifying extension."""
 
-    def __init__(self, model: Model, defs: dict[str, Expr], sinks: frozenset[str]) -> None:
+    def __init__(
+        self,
+        model: Model,
+        defs: dict[str, Expr],
+        sinks: frozenset[str],
+        prior: Prior | None = None,
+    ) -> None:
+        """With ``prior`` (the previous step's answers), the classical truth
+        at an individual the change cannot reach is taken from it; either
+        way, the answers read while the model is as given are kept in
+        :attr:`values`, for the next step."""
         self.m = model
         self.defs = defs
         self.sinks = sinks
+        self.prior = prior
+        self._at = model.version
+        self.values: Values = {}
         self._version = -1
         self._classical: dict[tuple[Expr, str], bool] = {}
         self._cert: dict[tuple[Expr, str], bool] = {}
@@ -56,8 +70,16 @@ class Evaluator:
         key = (e, x)
         hit = self._classical.get(key)
         if hit is None:
-            hit = self._holds(e, x)
+            # Only the model as given is the one the prior's change is from
+            # (a refutation grows it, and rolls back after).
+            as_given = self.m.version == self._at
+            if as_given and self.prior is not None:
+                hit = self.prior.holds(self.m, e, x)
+            if hit is None:
+                hit = self._holds(e, x)
             self._classical[key] = hit
+            if as_given:
+                self.values[key] = hit
         return hit
 
     def _holds(self, e: Expr, x: str) -> bool:

@@ -47,6 +47,7 @@ from virf.reasoning import (
 from virf.reasoning.chase import ChaseLimit, Model
 from virf.reasoning.evaluate import Evaluator, Fallback
 from virf.reasoning.kept import Core, Kept, individuals
+from virf.reasoning.prior import Atoms, Prior, Values, atoms
 from virf.reasoning.program import Program, compile_program
 from virf.reasoning.proof import NoProof, Prover, atom_of
 from virf.schema import Fact, FactKind
@@ -121,6 +122,8 @@ class FastEngine(Engine):
         self._lock = threading.Lock()
         self._core: Core | None = None  # see sharing()
         self._kept = Kept()  # the model sharing() grows, kept between blocks
+        # The last step classify_shared grew the core by: its atoms and answers.
+        self._last: tuple[Core, Atoms, Values] | None = None
         self._query_ids = frozenset(
             a.id for a in self.fragment.query_axiom.values() if a.id is not None
         )
@@ -253,6 +256,7 @@ class FastEngine(Engine):
                 # Blocks of two threads may end out of order: leave a newer core alone.
                 if self._core is core:
                     self._core = before
+                    self._last = None
                 if kept is not None and kept.held:
                     kept.release()
 
@@ -347,8 +351,23 @@ class FastEngine(Engine):
         def exact() -> Classification:
             if self._core is not core:  # another thread's block replaced it
                 raise Fallback("the shared model changed")
-            with self._grown(core, added) as (m, ev):
-                return self._instances(m, ev, core.individuals | individuals(added), concepts)
+            m, defs, sinks = core.model, self.fragment.query_defs, self.fragment.sinks
+            token = m.begin()
+            try:
+                self._load(m, added)
+                grown = atoms(m, token[0])
+                # The previous step grew the same core: where the two steps'
+                # atoms differ is all that can change an answer.
+                last = self._last
+                prior = None
+                if last is not None and last[0] is core:
+                    prior = Prior(last[2], defs, sinks, last[1] ^ grown)
+                ev = Evaluator(m, defs, sinks, prior)
+                found = self._instances(m, ev, core.individuals | individuals(added), concepts)
+                self._last = (core, grown, ev.values)
+                return found
+            finally:
+                m.rollback(token)
 
         def fallback() -> Classification:
             return self.reference._classify(Fact.sorted(shared | set(added)), list(concepts))
