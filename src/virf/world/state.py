@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import operator
 import re
+from bisect import bisect_left
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
-from bisect import bisect_left
 from itertools import compress, count
 from operator import attrgetter
 from types import MappingProxyType
@@ -158,7 +158,8 @@ def changed(before: WorldState, after: WorldState) -> frozenset[Fact]:
     report each ask it of a step, and each time it is a pass over every fact."""
     kept = after.__dict__.get("_changed")
     if kept is not None and kept[0] is before:
-        return kept[1]
+        known: frozenset[Fact] = kept[1]
+        return known
     # Sets built from the facts' dicts reuse their hashes (see facts_copy).
     out = frozenset(set(facts_copy(before.facts)) ^ set(facts_copy(after.facts)))
     after.__dict__["_changed"] = (before, out)
