@@ -47,21 +47,40 @@ class Evaluator:
         self.prior = prior
         self._at = model.version
         self.values: Values = {}
-        self._version = -1
+        self._version = model.version
         self._classical: dict[tuple[Expr, str], bool] = {}
         self._cert: dict[tuple[Expr, str], bool] = {}
         self._cert_not: dict[tuple[Expr, str], bool] = {}
         self._candidates: dict[str, AbstractSet[str] | None] = {}
         self._lazy: dict[tuple[Role, Expr, str], set[str]] = {}
+        self._kept: tuple[Any, ...] | None = None  # the caches of the model as given
 
     def _fresh(self) -> None:
-        if self._version != self.m.version:
-            self._version = self.m.version
-            self._classical.clear()
-            self._cert.clear()
-            self._cert_not.clear()
-            self._candidates.clear()
-            self._lazy.clear()
+        """Caches hold for one state of the model.  Those of the model as
+        given are put aside while a question grows it (a negation or a
+        refutation asserts something, and rolls it back): every concept read
+        them again after each, and the candidates of a step cost more than
+        the rest of its classification."""
+        version = self.m.version
+        if self._version == version:
+            return
+        if self._version == self._at:
+            self._kept = (
+                self._classical,
+                self._cert,
+                self._cert_not,
+                self._candidates,
+                self._lazy,
+            )
+        if version == self._at and self._kept is not None:
+            (self._classical, self._cert, self._cert_not, self._candidates, self._lazy) = (
+                self._kept
+            )
+            self._kept = None
+        else:
+            self._classical, self._cert, self._cert_not = {}, {}, {}
+            self._candidates, self._lazy = {}, {}
+        self._version = version
 
     # ------------------------------------------------------------------ classical
     def holds(self, e: Expr, x: str) -> bool:
@@ -415,6 +434,25 @@ class Evaluator:
         if k == "ddomain":
             return sub(("or", (("dvalue", a[0], True), ("dvalue", a[0], False))), a[1])
         raise Fallback(f"no model check for {k}")
+
+
+def required(
+    e: Expr, defs: dict[str, Expr], sinks: AbstractSet[str], lazy: AbstractSet[str]
+) -> frozenset[str]:
+    """Knowledge-base classes that :meth:`Evaluator.candidates` intersects
+    ``e``'s candidates with: where one has no member, ``e`` has none (read
+    from the definitions alone, once per concept)."""
+    tag = e[0]
+    if tag == "C":
+        if e[1] in defs:
+            return required(defs[e[1]], defs, sinks, lazy)
+        return frozenset() if e[1] == THING or e[1] in sinks else frozenset({e[1]})
+    if tag == "and":
+        return frozenset().union(*(required(c, defs, sinks, lazy) for c in e[1]))
+    if tag == "some" or (tag == "min" and int(e[1]) >= 1):
+        role, filler = (e[1], e[2]) if tag == "some" else (e[2], e[3])
+        return frozenset() if role[0] in lazy else required(filler, defs, sinks, lazy)
+    return frozenset()
 
 
 def _assertable(e: Expr, defs: dict[str, Expr]) -> bool:

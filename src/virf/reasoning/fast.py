@@ -45,7 +45,7 @@ from virf.reasoning import (
     until,
 )
 from virf.reasoning.chase import ChaseLimit, Model
-from virf.reasoning.evaluate import Evaluator, Fallback
+from virf.reasoning.evaluate import Evaluator, Fallback, required
 from virf.reasoning.kept import Core, Kept, individuals
 from virf.reasoning.prior import Atoms, Prior, Values, atoms
 from virf.reasoning.program import Program, compile_program
@@ -122,6 +122,7 @@ class FastEngine(Engine):
         self._lock = threading.Lock()
         self._core: Core | None = None  # see sharing()
         self._kept = Kept()  # the model sharing() grows, kept between blocks
+        self._required: dict[str, frozenset[str]] = {}  # see _needs
         # The last step classify_shared grew the core by: its atoms and answers.
         self._last: tuple[Core, Atoms, Values] | None = None
         self._query_ids = frozenset(
@@ -387,8 +388,13 @@ class FastEngine(Engine):
         if bad is not None:
             raise Fallback(f"candidate model violates: {bad}")
         found: dict[str, tuple[str, ...]] = {}
+        members = m.members
         for concept in concepts:
             check_deadline("while the fast engine classified the facts")
+            # A class the concept needs has no member: it has no candidate
+            # (most concepts, in most steps, are settled here).
+            if any(not members.get(c) for c in self._needs(concept, ev.defs)):
+                continue
             # Only where the concept holds in the model can it be entailed.
             where = ev.candidates(("C", concept))
             pool = abox if where is None else abox & where
@@ -396,6 +402,17 @@ class FastEngine(Engine):
             if names:
                 found[concept] = names
         return Classification(True, found)
+
+    def _needs(self, concept: str, defs: dict[str, Expr]) -> frozenset[str]:
+        """The knowledge-base classes the concept's candidates require."""
+        if defs is not self.fragment.query_defs:
+            return frozenset()
+        needs = self._required.get(concept)
+        if needs is None:
+            lazy = self.program(frozenset())[0].lazy
+            needs = required(("C", concept), defs, self.fragment.sinks, lazy)
+            self._required[concept] = needs
+        return needs
 
     def _entails(
         self, facts: list[Fact], concept: str, individual: str, without: frozenset[str]
