@@ -10,7 +10,7 @@ engine asks the reference reasoner (see :mod:`virf.reasoning.fast`).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from collections.abc import Set as AbstractSet
 from typing import Any
 
@@ -73,9 +73,7 @@ class Evaluator:
                 self._lazy,
             )
         if version == self._at and self._kept is not None:
-            (self._classical, self._cert, self._cert_not, self._candidates, self._lazy) = (
-                self._kept
-            )
+            (self._classical, self._cert, self._cert_not, self._candidates, self._lazy) = self._kept
             self._kept = None
         else:
             self._classical, self._cert, self._cert_not = {}, {}, {}
@@ -437,7 +435,7 @@ class Evaluator:
 
 
 def required(
-    e: Expr, defs: dict[str, Expr], sinks: AbstractSet[str], lazy: AbstractSet[str]
+    e: Expr, defs: dict[str, Expr], sinks: AbstractSet[str], lazy: Collection[str]
 ) -> frozenset[str]:
     """Knowledge-base classes that :meth:`Evaluator.candidates` intersects
     ``e``'s candidates with: where one has no member, ``e`` has none (read

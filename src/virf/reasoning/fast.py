@@ -44,6 +44,7 @@ from virf.reasoning import (
     make_engine,
     until,
 )
+from virf.reasoning.batch import halving
 from virf.reasoning.chase import ChaseLimit, Model
 from virf.reasoning.evaluate import Evaluator, Fallback, required
 from virf.reasoning.kept import Core, Kept, individuals
@@ -64,47 +65,6 @@ BATCH_FROM = 6
 def fragment_of(tbox: TBox) -> Fragment:
     """The TBox as fast-engine terms (compiled with the knowledge artifact)."""
     return tbox.fragment
-
-
-def _halving(
-    m: Model,
-    tested: Sequence[bool],
-    add: Callable[[Model, list[int]], None],
-    decide: Callable[[Model], bool],
-) -> list[bool]:
-    """For each tested item ``i``, in order, ``decide`` on ``m`` grown with
-    the tested items before ``i`` and every item after it (``m`` holds none
-    of them to begin with; ``add`` grows it with some).  The items are
-    halved: the first half's questions are asked with the second half
-    added, the second's with the first half's tested items added, each
-    rolled back after (with the rules switched off, which ``add`` may
-    change)."""
-    answers: dict[int, bool] = {}
-
-    def solve(lo: int, hi: int) -> None:
-        # m holds the tested items before lo and every item after hi.
-        targets = [i for i in range(lo, hi + 1) if tested[i]]
-        if not targets:
-            return
-        if len(targets) == 1 and targets[0] == hi:
-            # Items lo..hi-1 are untested ones before it: left out.
-            answers[hi] = decide(m)
-            return
-        mid = (lo + hi) // 2
-        for half, chosen in (
-            ((lo, mid), list(range(mid + 1, hi + 1))),
-            ((mid + 1, hi), [i for i in range(lo, mid + 1) if tested[i]]),
-        ):
-            token, off = m.begin(), m.disabled
-            try:
-                add(m, chosen)
-                solve(*half)
-            finally:
-                m.rollback(token)
-                m.disabled = off
-
-    solve(0, len(tested) - 1)
-    return [answers[i] for i in range(len(tested)) if tested[i]]
 
 
 class FastEngine(Engine):
@@ -448,9 +408,9 @@ class FastEngine(Engine):
         deadline: float | None = None,
     ) -> Iterator[bool]:
         """The questions answered on one model of ``kept``, halving the items
-        (:func:`_halving`): an item is added about log n times instead of n
-        times (a chain of a hundred facts, each tested, cost a hundred
-        models)."""
+        (:func:`~virf.reasoning.batch.halving`): an item is added about log n
+        times instead of n times (a chain of a hundred facts, each tested,
+        cost a hundred models)."""
         if individual.startswith(_INTERNAL) or sum(tested) < BATCH_FROM:
             return super().entails_each(kept, items, tested, concept, individual, deadline=deadline)
 
@@ -459,7 +419,7 @@ class FastEngine(Engine):
 
         def exact() -> list[bool]:
             with until(deadline), self._model(Fact.sorted(set(kept)), frozenset()) as (m, _):
-                return _halving(m, tested, add, lambda m: self._decided(m, concept, individual))
+                return halving(m, tested, add, lambda m: self._decided(m, concept, individual))
 
         def one_by_one() -> list[bool]:
             return list(
@@ -509,7 +469,7 @@ class FastEngine(Engine):
             prog, disabled = self.program(frozenset(dropped) | frozenset(items))
             with until(deadline), prog.scratch(disabled) as m:
                 self._load(m, Fact.sorted(set(facts)))
-                return _halving(m, tested, add, lambda m: self._decided(m, concept, individual))
+                return halving(m, tested, add, lambda m: self._decided(m, concept, individual))
 
         result: list[bool] = self._answer(exact, lambda: list(one_by_one()))
         return iter(result)
