@@ -185,12 +185,65 @@ class Evaluator:
         key = (role, filler, test.__name__)
         hit = self._lazy.get(key)
         if hit is None:
-            pool = self.candidates(filler)
-            where = self.m.types.keys() if pool is None else pool
-            ends = [y for y in where if y in self.m.types and test(filler, y)]
-            hit = self.m.reach_any(role[0], ends, not role[1])
+            found = self.where(filler) if test == self.holds else None
+            if found is None:
+                pool = self.candidates(filler)
+                where = self.m.types.keys() if pool is None else pool
+                found = {y for y in where if y in self.m.types and test(filler, y)}
+            hit = self.m.reach_any(role[0], found, not role[1])
             self._lazy[key] = hit
         return hit
+
+    def where(self, e: Expr) -> set[str] | None:
+        """Every individual of the model at which ``e`` holds classically,
+        read with set operations over the class and role tables (None when
+        ``e`` needs counting or a search over a role no table holds).  A
+        filler asked about every object of a thousand (what may a running
+        heater enclose?) cost one evaluation per object."""
+        m, tag = self.m, e[0]
+        if tag == "C":
+            name = e[1]
+            if name in self.defs:
+                return self.where(self.defs[name])
+            if name in self.sinks:
+                return set(m.types)
+            return set(m.members.get(name, _NONE))
+        if tag in ("and", "or"):
+            parts: list[set[str]] = []
+            for c in e[1]:
+                part = self.where(c)
+                if part is None:
+                    return None
+                parts.append(part)
+            if tag == "or":
+                return set().union(*parts)
+            return parts[0].intersection(*parts[1:]) if parts else set(m.types)
+        if tag == "not":
+            inner = self.where(e[1])
+            return None if inner is None else m.types.keys() - inner
+        if tag in ("some", "all", "value"):
+            role = e[1]
+            back = (role[0], not role[1])
+            if role[0] in m.lazy:
+                if tag != "some":
+                    return None
+                return set(self._lazy_some(role, e[2], self.holds))
+            if tag == "value":
+                return set(m.rsucc(back, e[2])) if e[2] in m.types else set()
+            inner = self.where(e[2])
+            if inner is None:
+                return None
+            if tag == "all":  # no successor outside the filler
+                inner = m.types.keys() - inner
+            found: set[str] = set()
+            for y in inner:
+                found |= m.rsucc(back, y)
+            return found if tag == "some" else m.types.keys() - found
+        if tag == "oneof":
+            return {x for x in e[1] if x in m.types}
+        if tag == "dvalue":
+            return {x for x, table in m.data.items() if e[2] in table.get(e[1], _NONE)}
+        return None
 
     def bound(self, r: Role, x: str) -> frozenset[str] | None:
         """Individuals that every r-successor of x must be, from closure facts
