@@ -62,6 +62,11 @@ _INTERNAL = ("owl:", "aux:", "{", "undefined:", "_:")
 BATCH_FROM = 6
 
 
+# Atoms a step may add to the shared model and still have its answers kept
+# for the next step (see classify_shared).
+_PRIOR_AT_MOST = 1000
+
+
 def fragment_of(tbox: TBox) -> Fragment:
     """The TBox as fast-engine terms (compiled with the knowledge artifact)."""
     return tbox.fragment
@@ -316,16 +321,20 @@ class FastEngine(Engine):
             token = m.begin()
             try:
                 self._load(m, added)
-                grown = atoms(m, token[0])
+                assert m.journal is not None
+                # A step that changes much (a box moved with a thousand in it)
+                # leaves little an earlier answer could be kept for.
+                small = len(m.journal) - token[0] <= _PRIOR_AT_MOST
+                grown = atoms(m, token[0]) if small else frozenset()
                 # The previous step grew the same core: where the two steps'
                 # atoms differ is all that can change an answer.
                 last = self._last
                 prior = None
-                if last is not None and last[0] is core:
+                if small and last is not None and last[0] is core:
                     prior = Prior(last[2], defs, sinks, last[1] ^ grown)
                 ev = Evaluator(m, defs, sinks, prior)
                 found = self._instances(m, ev, core.individuals | individuals(added), concepts)
-                self._last = (core, grown, ev.values)
+                self._last = (core, grown, ev.values) if small else None
                 return found
             finally:
                 m.rollback(token)
