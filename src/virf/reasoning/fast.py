@@ -87,7 +87,7 @@ class FastEngine(Engine):
         self._lock = threading.Lock()
         self._core: Core | None = None  # see sharing()
         self._kept = Kept()  # the model sharing() grows, kept between blocks
-        self._required: dict[str, frozenset[str]] = {}  # see _needs
+        self._required: dict[str, list[frozenset[str]]] = {}  # see _needs
         # The last step classify_shared grew the core by: its atoms and answers.
         self._last: tuple[Core, Atoms, Values] | None = None
         self._query_ids = frozenset(
@@ -360,9 +360,10 @@ class FastEngine(Engine):
         members = m.members
         for concept in concepts:
             check_deadline("while the fast engine classified the facts")
-            # A class the concept needs has no member: it has no candidate
-            # (most concepts, in most steps, are settled here).
-            if any(not members.get(c) for c in self._needs(concept, ev.defs)):
+            # Every set of classes the concept needs lacks a member: it has
+            # no candidate (most concepts, in most steps, are settled here).
+            needs = self._needs(concept, ev.defs)
+            if not any(all(members.get(c) for c in alt) for alt in needs):
                 continue
             # Only where the concept holds in the model can it be entailed.
             where = ev.candidates(("C", concept))
@@ -372,10 +373,10 @@ class FastEngine(Engine):
                 found[concept] = names
         return Classification(True, found)
 
-    def _needs(self, concept: str, defs: dict[str, Expr]) -> frozenset[str]:
+    def _needs(self, concept: str, defs: dict[str, Expr]) -> list[frozenset[str]]:
         """The knowledge-base classes the concept's candidates require."""
         if defs is not self.fragment.query_defs:
-            return frozenset()
+            return [frozenset()]
         needs = self._required.get(concept)
         if needs is None:
             lazy = self.program(frozenset())[0].lazy
