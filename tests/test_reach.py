@@ -5,7 +5,8 @@
   every step's classes equal those of a fast engine that classifies the
   step's facts from nothing.
 * A query's filler asked about every object is read with set operations
-  (:meth:`Evaluator.where`): the same individuals as one by one.
+  (:meth:`Evaluator.where`): the same individuals as one by one; and a
+  concept whose required classes have no member has no candidate.
 * The model of what a plan's steps share is kept after the verification,
   rolled back to what later ones share (:mod:`virf.reasoning.kept`): plans
   verified one after another in the same scene, and in other scenes between
@@ -26,6 +27,7 @@ from virf.api import LogicTutor
 from virf.bench.latency_cases import dev_cases
 from virf.ontology.fragment import Expr
 from virf.reasoning import make_engine
+from virf.reasoning.evaluate import required
 from virf.reasoning.fast import FastEngine
 from virf.schema import Fact, Report
 from virf.world.plan import PlanStep, parse_plan
@@ -131,6 +133,13 @@ def _where_as_holds(tutor: LogicTutor, facts: Sequence[Fact]) -> None:
             found = ev.where(e)
             if found is not None:
                 assert found == {y for y in m.types if ev.holds(e, y)}, name
+        # A concept whose every set of required classes lacks a member has no
+        # candidate (the classification skips it).
+        lazy = engine.program(frozenset())[0].lazy
+        for name in sorted(ev.defs):
+            needs = required(("C", name), ev.defs, engine.fragment.sinks, lazy)
+            if not any(all(m.members.get(c) for c in alt) for alt in needs):
+                assert ev.candidates(("C", name)) == set(), name
 
 
 def test_where_a_query_holds_read_by_sets(tutor: LogicTutor) -> None:
