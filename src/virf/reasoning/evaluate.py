@@ -10,13 +10,14 @@ engine asks the reference reasoner (see :mod:`virf.reasoning.fast`).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from collections.abc import Set as AbstractSet
 from typing import Any
 
 from virf.ontology.fragment import Axiom, Expr, Role
 from virf.ontology.iri import NOTHING, THING
 from virf.reasoning.chase import Model
+from virf.reasoning.prior import Prior, Values
 
 _NONE: frozenset[str] = frozenset()
 
@@ -29,25 +30,55 @@ class Evaluator:
     """Query evaluation over one model: classical truth, certain truth, and
     the search for a falsifying extension."""
 
-    def __init__(self, model: Model, defs: dict[str, Expr], sinks: frozenset[str]) -> None:
+    def __init__(
+        self,
+        model: Model,
+        defs: dict[str, Expr],
+        sinks: frozenset[str],
+        prior: Prior | None = None,
+    ) -> None:
+        """With ``prior`` (the previous step's answers), the classical truth
+        at an individual the change cannot reach is taken from it; either
+        way, the answers read while the model is as given are kept in
+        :attr:`values`, for the next step."""
         self.m = model
         self.defs = defs
         self.sinks = sinks
-        self._version = -1
+        self.prior = prior
+        self._at = model.version
+        self.values: Values = {}
+        self._version = model.version
         self._classical: dict[tuple[Expr, str], bool] = {}
         self._cert: dict[tuple[Expr, str], bool] = {}
         self._cert_not: dict[tuple[Expr, str], bool] = {}
         self._candidates: dict[str, AbstractSet[str] | None] = {}
         self._lazy: dict[tuple[Role, Expr, str], set[str]] = {}
+        self._kept: tuple[Any, ...] | None = None  # the caches of the model as given
 
     def _fresh(self) -> None:
-        if self._version != self.m.version:
-            self._version = self.m.version
-            self._classical.clear()
-            self._cert.clear()
-            self._cert_not.clear()
-            self._candidates.clear()
-            self._lazy.clear()
+        """Caches hold for one state of the model.  Those of the model as
+        given are put aside while a question grows it (a negation or a
+        refutation asserts something, and rolls it back): every concept read
+        them again after each, and the candidates of a step cost more than
+        the rest of its classification."""
+        version = self.m.version
+        if self._version == version:
+            return
+        if self._version == self._at:
+            self._kept = (
+                self._classical,
+                self._cert,
+                self._cert_not,
+                self._candidates,
+                self._lazy,
+            )
+        if version == self._at and self._kept is not None:
+            (self._classical, self._cert, self._cert_not, self._candidates, self._lazy) = self._kept
+            self._kept = None
+        else:
+            self._classical, self._cert, self._cert_not = {}, {}, {}
+            self._candidates, self._lazy = {}, {}
+        self._version = version
 
     # ------------------------------------------------------------------ classical
     def holds(self, e: Expr, x: str) -> bool:
@@ -56,8 +87,16 @@ class Evaluator:
         key = (e, x)
         hit = self._classical.get(key)
         if hit is None:
-            hit = self._holds(e, x)
+            # Only the model as given is the one the prior's change is from
+            # (a refutation grows it, and rolls back after).
+            as_given = self.m.version == self._at
+            if as_given and self.prior is not None:
+                hit = self.prior.holds(self.m, e, x)
+            if hit is None:
+                hit = self._holds(e, x)
             self._classical[key] = hit
+            if as_given:
+                self.values[key] = hit
         return hit
 
     def _holds(self, e: Expr, x: str) -> bool:
@@ -146,12 +185,65 @@ class Evaluator:
         key = (role, filler, test.__name__)
         hit = self._lazy.get(key)
         if hit is None:
-            pool = self.candidates(filler)
-            where = self.m.types.keys() if pool is None else pool
-            ends = [y for y in where if y in self.m.types and test(filler, y)]
-            hit = self.m.reach_any(role[0], ends, not role[1])
+            found = self.where(filler) if test == self.holds else None
+            if found is None:
+                pool = self.candidates(filler)
+                where = self.m.types.keys() if pool is None else pool
+                found = {y for y in where if y in self.m.types and test(filler, y)}
+            hit = self.m.reach_any(role[0], found, not role[1])
             self._lazy[key] = hit
         return hit
+
+    def where(self, e: Expr) -> set[str] | None:
+        """Every individual of the model at which ``e`` holds classically,
+        read with set operations over the class and role tables (None when
+        ``e`` needs counting or a search over a role no table holds).  A
+        filler asked about every object of a thousand (what may a running
+        heater enclose?) cost one evaluation per object."""
+        m, tag = self.m, e[0]
+        if tag == "C":
+            name = e[1]
+            if name in self.defs:
+                return self.where(self.defs[name])
+            if name in self.sinks:
+                return set(m.types)
+            return set(m.members.get(name, _NONE))
+        if tag in ("and", "or"):
+            parts: list[set[str]] = []
+            for c in e[1]:
+                part = self.where(c)
+                if part is None:
+                    return None
+                parts.append(part)
+            if tag == "or":
+                return set().union(*parts)
+            return parts[0].intersection(*parts[1:]) if parts else set(m.types)
+        if tag == "not":
+            inner = self.where(e[1])
+            return None if inner is None else m.types.keys() - inner
+        if tag in ("some", "all", "value"):
+            role = e[1]
+            back = (role[0], not role[1])
+            if role[0] in m.lazy:
+                if tag != "some":
+                    return None
+                return set(self._lazy_some(role, e[2], self.holds))
+            if tag == "value":
+                return set(m.rsucc(back, e[2])) if e[2] in m.types else set()
+            inner = self.where(e[2])
+            if inner is None:
+                return None
+            if tag == "all":  # no successor outside the filler
+                inner = m.types.keys() - inner
+            found: set[str] = set()
+            for y in inner:
+                found |= m.rsucc(back, y)
+            return found if tag == "some" else m.types.keys() - found
+        if tag == "oneof":
+            return {x for x in e[1] if x in m.types}
+        if tag == "dvalue":
+            return {x for x, table in m.data.items() if e[2] in table.get(e[1], _NONE)}
+        return None
 
     def bound(self, r: Role, x: str) -> frozenset[str] | None:
         """Individuals that every r-successor of x must be, from closure facts
@@ -393,6 +485,39 @@ class Evaluator:
         if k == "ddomain":
             return sub(("or", (("dvalue", a[0], True), ("dvalue", a[0], False))), a[1])
         raise Fallback(f"no model check for {k}")
+
+
+def required(
+    e: Expr, defs: dict[str, Expr], sinks: AbstractSet[str], lazy: Collection[str]
+) -> list[frozenset[str]]:
+    """What :meth:`Evaluator.candidates` needs to find any candidate for
+    ``e``, read from the definitions alone: sets of knowledge-base classes,
+    one of which must have a member each (a disjunction's, one set per
+    disjunct).  Where none has, ``e`` has no candidate.  A set ``{}`` asks
+    nothing; a requirement left out only makes the test weaker."""
+    tag = e[0]
+    if tag == "C":
+        if e[1] in defs:
+            return required(defs[e[1]], defs, sinks, lazy)
+        return [frozenset()] if e[1] == THING or e[1] in sinks else [frozenset({e[1]})]
+    if tag == "and":
+        # One set of each conjunct's, in every combination (within a bound).
+        out: list[frozenset[str]] = [frozenset()]
+        for c in e[1]:
+            part = required(c, defs, sinks, lazy)
+            if len(out) * len(part) <= _REQUIRED_AT_MOST:
+                out = [a | b for a in out for b in part]
+        return out
+    if tag == "or":
+        return [x for c in e[1] for x in required(c, defs, sinks, lazy)]
+    if tag == "some" or (tag == "min" and int(e[1]) >= 1):
+        role, filler = (e[1], e[2]) if tag == "some" else (e[2], e[3])
+        return [frozenset()] if role[0] in lazy else required(filler, defs, sinks, lazy)
+    return [frozenset()]
+
+
+# Alternatives a requirement may list before a conjunct's are left out.
+_REQUIRED_AT_MOST = 16
 
 
 def _assertable(e: Expr, defs: dict[str, Expr]) -> bool:

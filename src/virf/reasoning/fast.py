@@ -29,7 +29,7 @@ import threading
 from collections import Counter
 from collections.abc import Callable, Collection, Iterable, Iterator, Sequence
 from contextlib import contextmanager
-from typing import Any, NamedTuple
+from typing import Any
 
 from virf.errors import VirfError
 from virf.ontology.fragment import Axiom, Expr, Fragment
@@ -44,8 +44,11 @@ from virf.reasoning import (
     make_engine,
     until,
 )
-from virf.reasoning.chase import ChaseLimit, Model, Token
-from virf.reasoning.evaluate import Evaluator, Fallback
+from virf.reasoning.batch import halving
+from virf.reasoning.chase import ChaseLimit, Model
+from virf.reasoning.evaluate import Evaluator, Fallback, required
+from virf.reasoning.kept import Core, Kept, individuals
+from virf.reasoning.prior import Atoms, Prior, Values, atoms
 from virf.reasoning.program import Program, compile_program
 from virf.reasoning.proof import NoProof, Prover, atom_of
 from virf.schema import Fact, FactKind
@@ -57,75 +60,16 @@ _INTERNAL = ("owl:", "aux:", "{", "undefined:", "_:")
 # bookkeeping (and switching axioms on re-applies their rules to the whole
 # model), which a handful of questions do not repay.
 BATCH_FROM = 6
-# Journal entries a sharing block's model may grow by and still be rolled
-# back after it; past this, building the TBox's model again (about a
-# millisecond) is cheaper.
-_ROLLBACK_AT_MOST = 4000
+
+
+# Atoms a step may add to the shared model and still have its answers kept
+# for the next step (see classify_shared).
+_PRIOR_AT_MOST = 1000
 
 
 def fragment_of(tbox: TBox) -> Fragment:
     """The TBox as fast-engine terms (compiled with the knowledge artifact)."""
     return tbox.fragment
-
-
-def _halving(
-    m: Model,
-    tested: Sequence[bool],
-    add: Callable[[Model, list[int]], None],
-    decide: Callable[[Model], bool],
-) -> list[bool]:
-    """For each tested item ``i``, in order, ``decide`` on ``m`` grown with
-    the tested items before ``i`` and every item after it (``m`` holds none
-    of them to begin with; ``add`` grows it with some).  The items are
-    halved: the first half's questions are asked with the second half
-    added, the second's with the first half's tested items added, each
-    rolled back after (with the rules switched off, which ``add`` may
-    change)."""
-    answers: dict[int, bool] = {}
-
-    def solve(lo: int, hi: int) -> None:
-        # m holds the tested items before lo and every item after hi.
-        targets = [i for i in range(lo, hi + 1) if tested[i]]
-        if not targets:
-            return
-        if len(targets) == 1 and targets[0] == hi:
-            # Items lo..hi-1 are untested ones before it: left out.
-            answers[hi] = decide(m)
-            return
-        mid = (lo + hi) // 2
-        for half, chosen in (
-            ((lo, mid), list(range(mid + 1, hi + 1))),
-            ((mid + 1, hi), [i for i in range(lo, mid + 1) if tested[i]]),
-        ):
-            token, off = m.begin(), m.disabled
-            try:
-                add(m, chosen)
-                solve(*half)
-            finally:
-                m.rollback(token)
-                m.disabled = off
-
-    solve(0, len(tested) - 1)
-    return [answers[i] for i in range(len(tested)) if tested[i]]
-
-
-class _Core(NamedTuple):
-    """The model a :meth:`FastEngine.sharing` block grew once: its facts, and
-    the individuals they name."""
-
-    model: Model
-    facts: frozenset[Fact]
-    individuals: frozenset[str]
-
-
-def _individuals(facts: Iterable[Fact]) -> frozenset[str]:
-    """The ABox individuals the facts name (a classification's candidates)."""
-    out: set[str] = set()
-    for f in facts:
-        out.add(f.subject)
-        if f.kind is FactKind.OBJECT:
-            out.add(f.object)
-    return frozenset(out)
 
 
 class FastEngine(Engine):
@@ -141,9 +85,11 @@ class FastEngine(Engine):
         self._reference: Engine | None = None
         self._counts: Counter[str] = Counter()
         self._lock = threading.Lock()
-        self._core: _Core | None = None  # see sharing()
-        self._spare: Model | None = None  # of the TBox's own facts, for sharing()
-        self._held: Model | None = None  # the spare model, while a block grows it
+        self._core: Core | None = None  # see sharing()
+        self._kept = Kept()  # the model sharing() grows, kept between blocks
+        self._required: dict[str, list[frozenset[str]]] = {}  # see _needs
+        # The last step classify_shared grew the core by: its atoms and answers.
+        self._last: tuple[Core, Atoms, Values] | None = None
         self._query_ids = frozenset(
             a.id for a in self.fragment.query_axiom.values() if a.id is not None
         )
@@ -204,7 +150,7 @@ class FastEngine(Engine):
             yield m, Evaluator(m, self._definitions(without), self.fragment.sinks)
 
     @contextmanager
-    def _grown(self, core: _Core, extra: list[Fact]) -> Iterator[tuple[Model, Evaluator]]:
+    def _grown(self, core: Core, extra: list[Fact]) -> Iterator[tuple[Model, Evaluator]]:
         """The core's model grown with ``extra`` (facts outside the core), for
         the block's duration only.  The rules are monotone: the core's least
         model grown with the other facts is the least model of all of them."""
@@ -242,33 +188,32 @@ class FastEngine(Engine):
         """Grow the model of ``facts`` once; a question in the block whose
         facts include them starts from it, and adds only the rest.
 
-        The model is a spare model of the TBox's own facts, grown for the
-        block.  After it, a small growth is rolled back and the model kept
-        for the next block; a large one (a scene of a thousand objects) is
-        dropped, since rolling it back entry by entry costs more than
-        building the TBox's model again (a block that starts while another
-        holds the spare builds a model of its own)."""
+        The model is kept after the block, rolled back to the facts it shares
+        with earlier blocks (:mod:`virf.reasoning.kept`): verifying another
+        plan in the same scene grows it by what differs.  A block that starts
+        while another holds it builds a model of its own."""
         with self._lock:
-            core: _Core | None = None
-            token: Token | None = None
+            core: Core | None = None
+            kept = self._kept if not self._kept.held else None
             if facts and not self.fragment.problems:
                 shared = frozenset(facts)
                 prog = self.program(frozenset())[0]
-                if self._held is None:
-                    if self._spare is None or self._spare.prog is not prog:
-                        self._spare = prog.model(journal=True)
-                    m = self._held = self._spare
-                    token = m.begin()
-                else:
-                    m = prog.model()
                 try:
                     with until(deadline):
-                        self._load(m, Fact.sorted(shared))
+                        if kept is not None:
+                            m = kept.grow(prog, shared, self._load)
+                        else:
+                            m = prog.model()
+                            self._load(m, Fact.sorted(shared))
                 except (Fallback, ChaseLimit, DeadlineExceeded):
                     pass  # the questions will meet it themselves, one by one
                 else:
                     if m.clash is None:
-                        core = _Core(m, shared, _individuals(shared))
+                        core = (
+                            kept.core(m, shared)
+                            if kept is not None
+                            else Core(m, shared, individuals(shared))
+                        )
             before, self._core = self._core, core
         try:
             yield
@@ -277,14 +222,9 @@ class FastEngine(Engine):
                 # Blocks of two threads may end out of order: leave a newer core alone.
                 if self._core is core:
                     self._core = before
-                held = self._held
-                if token is not None and held is not None:
-                    assert held.journal is not None
-                    if len(held.journal) - token[0] > _ROLLBACK_AT_MOST:
-                        self._spare = None
-                    else:
-                        held.rollback(token)
-                    self._held = None
+                    self._last = None
+                if kept is not None and kept.held:
+                    kept.release()
 
     @staticmethod
     def _checks(m: Model) -> list[Axiom]:
@@ -349,7 +289,7 @@ class FastEngine(Engine):
     def _classify(self, facts: list[Fact], concepts: list[str]) -> Classification:
         def exact() -> Classification:
             with self._model(facts, frozenset()) as (m, ev):
-                return self._instances(m, ev, _individuals(facts), concepts)
+                return self._instances(m, ev, individuals(facts), concepts)
 
         result: Classification = self._answer(
             exact, lambda: self.reference._classify(facts, concepts)
@@ -377,8 +317,27 @@ class FastEngine(Engine):
         def exact() -> Classification:
             if self._core is not core:  # another thread's block replaced it
                 raise Fallback("the shared model changed")
-            with self._grown(core, added) as (m, ev):
-                return self._instances(m, ev, core.individuals | _individuals(added), concepts)
+            m, defs, sinks = core.model, self.fragment.query_defs, self.fragment.sinks
+            token = m.begin()
+            try:
+                self._load(m, added)
+                assert m.journal is not None
+                # A step that changes much (a box moved with a thousand in it)
+                # leaves little an earlier answer could be kept for.
+                small = len(m.journal) - token[0] <= _PRIOR_AT_MOST
+                grown = atoms(m, token[0]) if small else frozenset()
+                # The previous step grew the same core: where the two steps'
+                # atoms differ is all that can change an answer.
+                last = self._last
+                prior = None
+                if small and last is not None and last[0] is core:
+                    prior = Prior(last[2], defs, sinks, last[1] ^ grown)
+                ev = Evaluator(m, defs, sinks, prior)
+                found = self._instances(m, ev, core.individuals | individuals(added), concepts)
+                self._last = (core, grown, ev.values) if small else None
+                return found
+            finally:
+                m.rollback(token)
 
         def fallback() -> Classification:
             return self.reference._classify(Fact.sorted(shared | set(added)), list(concepts))
@@ -398,8 +357,14 @@ class FastEngine(Engine):
         if bad is not None:
             raise Fallback(f"candidate model violates: {bad}")
         found: dict[str, tuple[str, ...]] = {}
+        members = m.members
         for concept in concepts:
             check_deadline("while the fast engine classified the facts")
+            # Every set of classes the concept needs lacks a member: it has
+            # no candidate (most concepts, in most steps, are settled here).
+            needs = self._needs(concept, ev.defs)
+            if not any(all(members.get(c) for c in alt) for alt in needs):
+                continue
             # Only where the concept holds in the model can it be entailed.
             where = ev.candidates(("C", concept))
             pool = abox if where is None else abox & where
@@ -407,6 +372,17 @@ class FastEngine(Engine):
             if names:
                 found[concept] = names
         return Classification(True, found)
+
+    def _needs(self, concept: str, defs: dict[str, Expr]) -> list[frozenset[str]]:
+        """The knowledge-base classes the concept's candidates require."""
+        if defs is not self.fragment.query_defs:
+            return [frozenset()]
+        needs = self._required.get(concept)
+        if needs is None:
+            lazy = self.program(frozenset())[0].lazy
+            needs = required(("C", concept), defs, self.fragment.sinks, lazy)
+            self._required[concept] = needs
+        return needs
 
     def _entails(
         self, facts: list[Fact], concept: str, individual: str, without: frozenset[str]
@@ -442,9 +418,9 @@ class FastEngine(Engine):
         deadline: float | None = None,
     ) -> Iterator[bool]:
         """The questions answered on one model of ``kept``, halving the items
-        (:func:`_halving`): an item is added about log n times instead of n
-        times (a chain of a hundred facts, each tested, cost a hundred
-        models)."""
+        (:func:`~virf.reasoning.batch.halving`): an item is added about log n
+        times instead of n times (a chain of a hundred facts, each tested,
+        cost a hundred models)."""
         if individual.startswith(_INTERNAL) or sum(tested) < BATCH_FROM:
             return super().entails_each(kept, items, tested, concept, individual, deadline=deadline)
 
@@ -453,7 +429,7 @@ class FastEngine(Engine):
 
         def exact() -> list[bool]:
             with until(deadline), self._model(Fact.sorted(set(kept)), frozenset()) as (m, _):
-                return _halving(m, tested, add, lambda m: self._decided(m, concept, individual))
+                return halving(m, tested, add, lambda m: self._decided(m, concept, individual))
 
         def one_by_one() -> list[bool]:
             return list(
@@ -503,7 +479,7 @@ class FastEngine(Engine):
             prog, disabled = self.program(frozenset(dropped) | frozenset(items))
             with until(deadline), prog.scratch(disabled) as m:
                 self._load(m, Fact.sorted(set(facts)))
-                return _halving(m, tested, add, lambda m: self._decided(m, concept, individual))
+                return halving(m, tested, add, lambda m: self._decided(m, concept, individual))
 
         result: list[bool] = self._answer(exact, lambda: list(one_by_one()))
         return iter(result)

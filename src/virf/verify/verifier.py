@@ -206,9 +206,10 @@ class Verifier:
         snapshots = self._snapshots(trace)
         # What no step changes is reasoned about once, not at every step:
         # closures and all.  Sets built from the snapshots' dicts reuse their
-        # hashes, so this costs no Python call per fact.
+        # hashes, so this costs no Python call per fact; a dict given to the
+        # intersection as it is would be hashed fact by fact.
         first, *rest = snapshots
-        unchanged = frozenset(set(first).intersection(*rest))
+        unchanged = frozenset(set(first).intersection(*map(set, rest)))
         with self.engine.sharing(unchanged, deadline=deadline):
             return self._classify_steps(
                 trace,

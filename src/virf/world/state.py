@@ -8,10 +8,12 @@ from __future__ import annotations
 
 import operator
 import re
+from bisect import bisect_left
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
-from operator import attrgetter, itemgetter
+from itertools import compress, count, islice
+from operator import attrgetter
 from types import MappingProxyType
 
 from virf.names import term_key
@@ -150,6 +152,20 @@ class PreconditionFailure:
     facts: tuple[Fact, ...] = field(default_factory=tuple)
 
 
+def changed(before: WorldState, after: WorldState) -> frozenset[Fact]:
+    """The facts in one of the two states and not the other.  Remembered on
+    ``after`` for ``before``: the relation indexes, the closures and the
+    report each ask it of a step, and each time it is a pass over every fact."""
+    kept = after.__dict__.get("_changed")
+    if kept is not None and kept[0] is before:
+        known: frozenset[Fact] = kept[1]
+        return known
+    # Sets built from the facts' dicts reuse their hashes (see facts_copy).
+    out = frozenset(set(facts_copy(before.facts)) ^ set(facts_copy(after.facts)))
+    after.__dict__["_changed"] = (before, out)
+    return out
+
+
 def carry_indexes(before: WorldState, after: WorldState) -> None:
     """Give ``after`` the relation indexes ``before`` has built, updated for
     the facts that differ, instead of a scan of all its facts on first use
@@ -157,13 +173,12 @@ def carry_indexes(before: WorldState, after: WorldState) -> None:
     built = [name for name in ("_forward", "_backward") if name in before.__dict__]
     if not built:
         return
-    old = set(facts_copy(before.facts))
-    new = set(facts_copy(after.facts))
-    changed = [f for f in Fact.sorted(old ^ new) if f.kind is FactKind.OBJECT]
+    new = after.facts
+    changes = [f for f in Fact.sorted(changed(before, after)) if f.kind is FactKind.OBJECT]
     for name in built:
         index: dict[tuple[str, str], list[str]] = dict(before.__dict__[name])
         copied: set[tuple[str, str]] = set()
-        for f in changed:
+        for f in changes:
             key, value = (
                 ((f.subject, f.predicate), f.object)
                 if name == "_forward"
@@ -198,20 +213,37 @@ def sorted_facts(facts: dict[Fact, Provenance]) -> dict[Fact, Provenance]:
     ``facts`` itself when it is in that order already (a step that only
     removed or replaced facts)."""
     keys = list(map(_ORDER, facts))
-    if all(map(operator.lt, keys, keys[1:])):
+    # A step's facts are the sorted facts before it, less what it removed,
+    # then what it added: find where the sorted run ends, and merge the
+    # rest into it (sorting every fact of a thousand objects' scene, as
+    # (key, fact, provenance) triples, at every step, cost twice this).
+    end = next(compress(count(1), map(operator.ge, keys, keys[1:])), len(keys))
+    if end == len(keys):
         return facts
-    # Distinct facts have distinct keys, so the facts themselves are never compared.
-    ranked = sorted(zip(keys, facts, facts.values(), strict=True))
-    return dict(zip(map(_FACT, ranked), map(_PROVENANCE, ranked), strict=True))
+    run = keys[:end]
+    added = list(islice(facts, end, None))
+    # The run is copied in slices from one pass over the items: a dict fed
+    # from its own items reuses their pairs, where a list of them was built
+    # pair by pair.  Distinct facts have distinct keys, so the facts
+    # themselves are never compared.
+    pairs = iter(facts.items())
+    out: dict[Fact, Provenance] = {}
+    start = 0
+    for i in sorted(range(end, len(keys)), key=keys.__getitem__):
+        at = bisect_left(run, keys[i], start)
+        out.update(islice(pairs, at - start))
+        f = added[i - end]
+        out[f] = facts[f]
+        start = at
+    out.update(islice(pairs, end - start))
+    return out
 
 
 _ORDER = attrgetter("_order")
-_FACT, _PROVENANCE = itemgetter(1), itemgetter(2)
 
 
 def diff(before: WorldState, after: WorldState) -> tuple[tuple[str, ...], tuple[str, ...]]:
-    # Sets built from dicts reuse the dicts' hashes (see facts_copy).
-    old, new = set(facts_copy(before.facts)), set(facts_copy(after.facts))
-    added = tuple(f.render() for f in Fact.sorted(new - old))
-    removed = tuple(f.render() for f in Fact.sorted(old - new))
+    both = Fact.sorted(changed(before, after))
+    added = tuple(f.render() for f in both if f in after.facts)
+    removed = tuple(f.render() for f in both if f not in after.facts)
     return added, removed

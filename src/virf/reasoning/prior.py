@@ -1,0 +1,125 @@
+"""What the previous step's model said, and where this step's can differ.
+
+The steps of a plan are classified on one shared model, each grown by what
+that step adds and rolled back after (:meth:`FastEngine.classify_shared`).
+Two steps' models differ in the atoms one step's growth holds and the
+other's does not, and a step moves a few objects of a thousand.  The
+classical truth of a query at an individual reads only the types, data and
+role edges of the individuals its roles lead to, so where none of those
+changed, the previous step's answer is this step's: the query is decided
+again only within reach of the change.
+
+For a query ``e``, :meth:`Prior.affected` is the set of individuals where
+``e`` may read something that changed (None: anywhere, for a query over a
+role that is searched rather than stored):
+
+* a class: the individuals whose types changed;
+* ``r some F``, ``r only F``, cardinalities: the individuals with a changed
+  ``r`` edge, and the ``r``-predecessors (in this model) of those where
+  ``F`` may differ.  A predecessor that only the other model had is linked
+  by a changed edge, so it is in the first set already;
+* ``r value i``: the individuals with a changed ``r`` edge;
+* a data value: the individuals whose data changed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any
+
+from virf.ontology.fragment import Expr
+from virf.reasoning.chase import Model
+
+# Journal entries that are atoms of the model: an element, a type, an edge, a datum.
+_ATOMS = frozenset({"e", "t", "r", "d"})
+
+Atoms = frozenset[tuple[Any, ...]]
+Values = dict[tuple[Expr, str], bool]
+
+
+def atoms(m: Model, since: int) -> Atoms:
+    """The atoms the model's journal recorded from position ``since`` on."""
+    assert m.journal is not None
+    return frozenset(e for e in m.journal[since:] if e[0] in _ATOMS)
+
+
+class Prior:
+    """The classical answers a step's model gave, and the atoms that differ
+    between that model and the one now asked about."""
+
+    def __init__(
+        self, values: Values, defs: dict[str, Expr], sinks: frozenset[str], diff: Iterable[Any]
+    ) -> None:
+        self.values = values
+        self.defs = defs
+        self.sinks = sinks
+        self.types: set[str] = set()
+        self.data: set[str] = set()
+        self.edges: dict[str, set[str]] = {}
+        for entry in diff:
+            tag = entry[0]
+            if tag in ("e", "t"):
+                self.types.add(entry[1])
+            elif tag == "d":
+                self.data.add(entry[1])
+            else:
+                self.edges.setdefault(entry[1], set()).update(entry[2:])
+        self._affected: dict[Expr, set[str] | None] = {}
+
+    def affected(self, m: Model, e: Expr) -> set[str] | None:
+        """Where ``e``'s classical truth may differ from the previous model's
+        (``m`` is this step's model, as grown)."""
+        if e in self._affected:
+            return self._affected[e]
+        found = self._find(m, e)
+        self._affected[e] = found
+        return found
+
+    def _find(self, m: Model, e: Expr) -> set[str] | None:
+        tag = e[0]
+        if tag == "C":
+            name = e[1]
+            if name in self.defs:
+                return self.affected(m, self.defs[name])
+            return set() if name in self.sinks else self.types
+        if tag in ("and", "or"):
+            out: set[str] = set()
+            for c in e[1]:
+                part = self.affected(m, c)
+                if part is None:
+                    return None
+                out |= part
+            return out
+        if tag == "not":
+            return self.affected(m, e[1])
+        if tag in ("some", "all", "min", "max"):
+            role, filler = (e[1], e[2]) if tag in ("some", "all") else (e[2], e[3])
+            if role[0] in m.lazy:
+                return None
+            inner = self.affected(m, filler)
+            if inner is None:
+                return None
+            out = set(self.edges.get(role[0], ()))
+            back = (role[0], not role[1])
+            for z in inner:
+                if z in m.types:
+                    out |= m.rsucc(back, z)
+            return out
+        if tag == "value":
+            return None if e[1][0] in m.lazy else self.edges.get(e[1][0], set())
+        if tag == "oneof":
+            return set()
+        if tag == "dvalue":
+            return self.data
+        return None
+
+    def holds(self, m: Model, e: Expr, x: str) -> bool | None:
+        """The previous model's answer to ``e(x)`` when it is this one's too;
+        None when it must be read again."""
+        known = self.values.get((e, x))
+        if known is None:
+            return None
+        where = self.affected(m, e)
+        if where is None or x in where:
+            return None
+        return known
