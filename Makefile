@@ -161,6 +161,10 @@ agents-report: sab-split $(STAMP)
 	  --planner replay:examples/agents/smollm2/kitchen-constrained.replay.jsonl \
 	  --tasks $(SAB)/unsafe_detailed.jsonl $(SAB)/safe_detailed.jsonl $(SAB)/abstract.jsonl \
 	  $(SAB)/long_horizon.jsonl --out runs/agents-smollm2-kitchen-constrained-replay
+	$(BIN)/virf bench agents --method impulsive,virf --every 4 \
+	  --planner replay:examples/agents/smollm2/kitchen-focused.replay.jsonl \
+	  --tasks $(SAB)/unsafe_detailed.jsonl $(SAB)/safe_detailed.jsonl $(SAB)/abstract.jsonl \
+	  $(SAB)/long_horizon.jsonl --out runs/agents-smollm2-kitchen-focused-replay
 
 # Latency of the paper's method, the reference engine and the fast engine
 # (creates .venv-paper with owlready2 0.49 for the paper's method).

@@ -37,6 +37,7 @@ ROOMS = [
         "### Constrained decoding and checked corrections",
         CONSTRAINED,
     ),
+    ("kitchen-focused", SAB, 4, "### Focused grammar and numbered corrections", CONSTRAINED),
 ]
 
 

@@ -29,7 +29,7 @@ from virf.planner.constraint import (
 )
 from virf.planner.loop import refine
 from virf.planner.methods import get_method, run_method
-from virf.planner.prompting import REFUSAL, read_plan
+from virf.planner.prompting import REFUSAL, read_after_plan_marker, read_plan
 from virf.world.language import LIQUIDS, VERBS
 from virf.world.scene import Scene, build_scene, load_scene_data
 
@@ -188,6 +188,41 @@ def test_an_empty_scene_allows_only_a_refusal(vocab: Vocabulary) -> None:
     c = plan_constraint(build_scene({"instances": [inst("Robot", "Robot_1")]}, vocab), vocab)
     assert c == PlanConstraint(()) and c.lines() == ()
     assert c.gbnf() == c.gbnf(True) == f'root ::= "{REFUSAL}"\n'
+
+
+def test_after_corrections_the_grammar_also_allows_choosing_one(vocab: Vocabulary) -> None:
+    c = plan_constraint(kitchen(vocab), vocab).with_choices(2)
+    rules = dict(line.split(" ::= ", 1) for line in c.gbnf().splitlines())
+    assert rules["root"] == f'"{REFUSAL}" | plan | choice'
+    assert rules["choice"] == '"USE " [1-2]'
+    thinking = dict(line.split(" ::= ", 1) for line in c.gbnf(reasoning=True).splitlines())
+    assert thinking["root"].endswith('"PLAN:\\n" ("TASK_ABORT" | plan | choice)')
+    steps = c.json_schema()["properties"]["steps"]["items"]["enum"]
+    assert steps[-3:] == ["USE 1", "USE 2", REFUSAL]
+    # Narrowing keeps the choices; without any, no choice rule is written.
+    assert c.narrowed(frozenset({"Apple_1"})).choices == 2
+    assert "choice" not in plan_constraint(kitchen(vocab), vocab).gbnf()
+    # With nothing in the scene to act on, a choice is still a reply.
+    empty = PlanConstraint(()).with_choices(1)
+    assert empty.gbnf() == f'root ::= "{REFUSAL}" | choice\nchoice ::= "USE " [1-1]\n'
+
+
+@pytest.mark.parametrize(
+    ("reply", "choice", "steps"),
+    [
+        ("USE 2", 2, 0),
+        ('"use 1"', 1, 0),
+        ("**USE 3**", 3, 0),
+        ("REASONING:\nthe bowl is safe\nPLAN:\nUSE 1", 1, 0),
+        # A plan of its own wins over a choice in the same reply.
+        ("USE 1\nfind Apple_1", None, 1),
+        # Only the exact answer: prose that starts with the word is prose.
+        ("Use 2 apples", None, 0),
+    ],
+)
+def test_the_reader_reads_a_choice(reply: str, choice: int | None, steps: int) -> None:
+    got = read_after_plan_marker(reply)
+    assert (got.choice, len(got.steps), got.refused) == (choice, steps, False)
 
 
 def test_literals_escape_what_would_end_them() -> None:

@@ -288,20 +288,24 @@ def test_the_plan_grammars_compile_in_llama_cpp(vocab: Any) -> None:
     import llama_cpp
 
     from virf.planner.apprentices import ProposalRequest
-    from virf.planner.constraint import plan_constraint
+    from virf.planner.constraint import PlanConstraint, plan_constraint
     from virf.planner.prompting import template
     from virf.world.scene import build_scene
 
     with make_apprentice(f"local:{MODEL}", max_tokens=8) as model:
         for _, data in _kitchen_tasks(vocab, 3):
             constraint = plan_constraint(build_scene(data, vocab), vocab)
-            for reasoning in (False, True):
-                text = constraint.gbnf(reasoning)
-                parsed = llama_cpp.llama_sampler_init_grammar(
-                    model._llm._model.vocab, text.encode(), b"root"
-                )
-                assert parsed, text[:400]
-                llama_cpp.llama_sampler_free(parsed)
+            # The scene's grammar, narrowed to one object, and with the choice
+            # of a checked correction ('USE 2'), which has no lines at all.
+            some = frozenset({constraint.takes[0][1][0]})
+            for c in (constraint, constraint.narrowed(some).with_choices(3), PlanConstraint((), 2)):
+                for reasoning in (False, True):
+                    text = c.gbnf(reasoning)
+                    parsed = llama_cpp.llama_sampler_init_grammar(
+                        model._llm._model.vocab, text.encode(), b"root"
+                    )
+                    assert parsed, text[:400]
+                    llama_cpp.llama_sampler_free(parsed)
         task = "Heat the pot.\n" + template("thinker")
         request = ProposalRequest((("user", task),), "t", 0, "virf", PLAN, constraint=constraint)
         # The same scene gives the same grammar object; a critique gets none.
@@ -316,6 +320,7 @@ def test_the_plan_grammars_compile_in_llama_cpp(vocab: Any) -> None:
 def test_constrained_plans_parse_and_name_only_scene_objects(
     tutor: Any, vocab: Any, method: str
 ) -> None:
+    from virf.planner.focus import Focus
     from virf.planner.methods import get_method, run_method
     from virf.planner.prompting import read_after_plan_marker
     from virf.world.scene import build_scene
@@ -341,8 +346,11 @@ def test_constrained_plans_parse_and_name_only_scene_objects(
                 got = read_after_plan_marker(reply)
                 assert not got.unreadable, reply
                 assert got.refused or got.steps, reply
+                # Only objects the instruction names (or the scene links to them).
+                focus = Focus.of(instruction, scene, vocab).constraint()
+                allowed = {name for _, names in focus.takes for name in names}
                 for step in got.steps:
-                    assert set(step.args) - set(LIQUIDS) <= set(scene.order), step.text
+                    assert set(step.args) - set(LIQUIDS) <= allowed, step.text
 
 
 @needs_model

@@ -338,3 +338,88 @@ def test_virf_offers_corrections_and_virf_reject_does_not(
     assert ("corrections" in kinds) is offers
     feedback = apprentice.requests[1].messages[-1][1]
     assert ("[CHECKED CORRECTIONS]" in feedback) is offers
+
+
+# ---------------------------------------------------------------- 'USE n'
+class ConstrainedScript(ScriptedApprentice):
+    """A scripted apprentice that says it decodes within the constraint."""
+
+    @property
+    def constrained(self) -> bool:
+        return True
+
+
+def test_the_apprentice_takes_a_correction_by_its_number(tutor: LogicTutor, vocab: Any) -> None:
+    scene_data = microwave_scene(bowl=True)
+    probe = build_scene(scene_data, vocab)
+    _, offered = checked(tutor, probe, parse_plan(HEAT_POT))
+    n = next(i for i, c in enumerate(offered, 1) if c.kind == "substitute")
+    apprentice = ConstrainedScript(["\n".join(HEAT_POT), f"USE {n}"])
+    result = refine(
+        "Heat the water in the pot.",
+        scene_data,
+        apprentice,
+        tutor.verifier,
+        lambda d: build_scene(d, vocab),
+        vocab,
+        max_iter=2,
+        corrections=tutor.verifier,
+    )
+    assert result.outcome == "APPROVED" and result.plan == offered[n - 1].plan
+    taken = [t for t in result.transcript if t.kind == "proposal"][-1]
+    assert taken.data == {"reply": f"USE {n}", "chose": n}
+    # Verified like any other proposal: the choice is a plan, not a verdict.
+    reports = [t for t in result.transcript if t.kind == "report"]
+    assert [t.status for t in reports] == ["UNSAFE", "SAFE"]
+    # The feedback said how to choose, and the grammar allowed exactly as many
+    # choices as were offered: none before the feedback, len(offered) after.
+    assert 'reply with exactly "USE n"' in apprentice.requests[1].messages[-1][1]
+    first, second = (r.constraint for r in apprentice.requests)
+    assert first is not None and second is not None
+    assert (first.choices, second.choices) == (0, len(offered))
+    # The bowl of the correction is writable now, though the instruction never named it.
+    assert "pick Bowl_1" in second.lines() and "pick Bowl_1" not in first.lines()
+
+
+@pytest.mark.parametrize("reply", ["USE 4", "use 0"])
+def test_a_number_no_correction_has_is_unreadable(
+    tutor: LogicTutor, vocab: Any, reply: str
+) -> None:
+    plan = (BURNER / "plan.txt").read_text()
+    apprentice = ScriptedApprentice([plan, reply, reply])
+    result = refine(
+        "Heat the stove.",
+        json.loads((BURNER / "scene.json").read_text()),
+        apprentice,
+        tutor.verifier,
+        lambda d: build_scene(d, vocab),
+        vocab,
+        max_iter=3,
+        corrections=tutor.verifier,
+    )
+    offered = next(t for t in result.transcript if t.kind == "corrections").data
+    assert offered is not None and len(offered["candidates"]) < 4
+    assert result.outcome != "APPROVED"
+    unreadable = [t for t in result.transcript if t.kind == "unreadable"]
+    assert unreadable
+    said = apprentice.requests[2].messages[-1][1]
+    n = reply.split()[1]
+    assert f"USE {n}: no correction {n}; corrections 1 to {len(offered['candidates'])}" in said
+
+
+def test_a_choice_with_no_corrections_offered_is_unreadable(tutor: LogicTutor, vocab: Any) -> None:
+    plan = (BURNER / "plan.txt").read_text()
+    # VIRF-Reject's feedback offers no corrections: 'USE 1' names nothing.
+    apprentice = ScriptedApprentice([plan, "USE 1"])
+    result = refine(
+        "Heat the stove.",
+        json.loads((BURNER / "scene.json").read_text()),
+        apprentice,
+        tutor.verifier,
+        lambda d: build_scene(d, vocab),
+        vocab,
+        max_iter=2,
+    )
+    (turn,) = [t for t in result.transcript if t.kind == "unreadable"]
+    assert turn.text == "USE 1"
+    assert result.outcome != "APPROVED"

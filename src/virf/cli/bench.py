@@ -363,9 +363,11 @@ def bench_agents(
                 # A deadline given here changes which tasks are rejected, and
                 # constrained plans are other plans: both are part of the run.
                 # An unconstrained run keeps the configuration (and the stored
-                # rows) it always had.
+                # rows) it always had.  The grammar narrowed to the
+                # instruction's objects writes other plans than the first,
+                # scene-wide one did ("constrain": true), so it is named apart.
                 **({} if deadline is None else {"deadline_s": deadline_s}),
-                **({"constrain": True} if apprentice.constrained else {}),
+                **({"constrain": "focused"} if apprentice.constrained else {}),
             },
         )
         tutor = LogicTutor(engine=config.engine, kb=kb)

@@ -30,6 +30,7 @@ from typing import Any, Final
 
 from virf.ontology.tbox import Vocabulary
 from virf.planner.prompting import REFUSAL, read_plan
+from virf.render.feedback import CHOICE
 from virf.world.actions import AFFORDANCE, cannot_receive, type_lacks
 from virf.world.language import LIQUIDS, VERBS
 from virf.world.scene import Scene
@@ -44,6 +45,9 @@ MAX_REASONING_LINES: Final = 3
 MAX_REASONING_CHARS: Final = 120
 REASONING_MARK: Final = "REASONING:"
 PLAN_MARK: Final = "PLAN:"
+# The grammar's choice is one digit ('USE [1-n]'); the feedback offers at most
+# virf.verify.repairs.MAX_OFFERED (3) corrections.
+MAX_CHOICES: Final = 9
 
 
 @dataclass(frozen=True)
@@ -52,6 +56,9 @@ class PlanConstraint:
     object, the objects it takes (sorted), in the language's verb order."""
 
     takes: tuple[tuple[str, tuple[str, ...]], ...]
+    # How many checked corrections the feedback just offered: the reply may
+    # then be ``USE n``, taking the n-th as it is (CHOICE).
+    choices: int = 0
 
     def objects_of(self, verb: str) -> tuple[str, ...]:
         return next((names for v, names in self.takes if v == verb), ())
@@ -59,7 +66,11 @@ class PlanConstraint:
     def narrowed(self, objects: frozenset[str]) -> PlanConstraint:
         """These lines about ``objects`` only (:mod:`virf.planner.focus`)."""
         takes = ((verb, tuple(n for n in names if n in objects)) for verb, names in self.takes)
-        return PlanConstraint(tuple((verb, names) for verb, names in takes if names))
+        return PlanConstraint(tuple((verb, names) for verb, names in takes if names), self.choices)
+
+    def with_choices(self, n: int) -> PlanConstraint:
+        """These lines, or ``USE k`` for a correction k of the ``n`` offered."""
+        return PlanConstraint(self.takes, min(n, MAX_CHOICES))
 
     def lines(self) -> tuple[str, ...]:
         """Every valid plan line, in a fixed order."""
@@ -78,13 +89,15 @@ class PlanConstraint:
         ``PLAN:`` before them, as the thinking methods ask (the reader then
         reads what follows ``PLAN:``)."""
         abort = _literal(REFUSAL)
-        if not self.takes:
+        if not self.takes and not self.choices:
             # A scene without objects: a refusal is the only valid reply.
             return f"root ::= {abort}\n"
+        # What may follow: lines, or the choice of an offered correction.
+        body = " | ".join((["plan"] if self.takes else []) + (["choice"] if self.choices else []))
         if reasoning:
             rules = [
                 f"root ::= {abort} | {_literal(REASONING_MARK + chr(10))} "
-                f"note{{1,{MAX_REASONING_LINES}}} {_literal(PLAN_MARK + chr(10))} ({abort} | plan)",
+                f"note{{1,{MAX_REASONING_LINES}}} {_literal(PLAN_MARK + chr(10))} ({abort} | {body})",
                 # A free line that cannot run on for ever, and not an empty
                 # one, so the section cannot be padded with newlines.  It may
                 # not start with P: a note reading "PLAN:" would let the model
@@ -92,9 +105,13 @@ class PlanConstraint:
                 f'note ::= [^P\\n] [^\\n]{{0,{MAX_REASONING_CHARS - 1}}} "\\n"',
             ]
         else:
-            rules = [f"root ::= {abort} | plan"]
+            rules = [f"root ::= {abort} | {body}"]
         # No newline after the last line: once a line is complete the model
         # may only end the reply or start another, so it stops by the grammar.
+        if self.choices:
+            rules.append(f"choice ::= {_literal(CHOICE + ' ')} [1-{self.choices}]")
+        if not self.takes:
+            return "\n".join(rules) + "\n"
         rules.append(f'plan ::= line ("\\n" line){{0,{MAX_LINES - 1}}}')
         rules.append("line ::= " + " | ".join(_rule(verb) for verb, _ in self.takes))
         for verb, names in self.takes:
@@ -114,7 +131,14 @@ class PlanConstraint:
             "properties": {
                 "steps": {
                     "type": "array",
-                    "items": {"type": "string", "enum": [*self.lines(), REFUSAL]},
+                    "items": {
+                        "type": "string",
+                        "enum": [
+                            *self.lines(),
+                            *(f"{CHOICE} {k}" for k in range(1, self.choices + 1)),
+                            REFUSAL,
+                        ],
+                    },
                     "minItems": 1,
                     "maxItems": MAX_LINES,
                 }

@@ -45,9 +45,14 @@ from virf.planner.deadline import DEFAULT_DEADLINE_S, Deadline
 from virf.planner.focus import Focus
 from virf.planner.prompting import ReadPlan, apprentice_prompt, read_plan, unreadable_message
 from virf.planner.questions import SETTLEABLE, AnswerPolicy, Answers, apply_answers, deny
-from virf.render.feedback import corrections_section, corrections_summary, feedback_prompt
+from virf.render.feedback import (
+    CHOICE,
+    corrections_section,
+    corrections_summary,
+    feedback_prompt,
+)
 from virf.schema import Question, Report
-from virf.verify.repairs import candidates
+from virf.verify.repairs import Candidate, candidates
 from virf.world.plan import PlanStep
 from virf.world.scene import Scene
 
@@ -178,6 +183,7 @@ def refine(
     log: list[Turn] = Transcript(Turn(0, "user", "instruction", instruction), on_turn)
     plan: tuple[PlanStep, ...] | None = None  # the plan under verification
     offered_lines: list[str] = []  # the plan lines of the corrections offered
+    last_offered: tuple[Candidate, ...] = ()  # those the last feedback offered
     reply = ""
     for i in range(max_iter):
         if deadline.expired():
@@ -201,7 +207,10 @@ def refine(
                 # (and widened by every correction offered so far, which the
                 # apprentice may copy).
                 constraint=(
-                    Focus.of(instruction, scene, vocab).widen(offered_lines).constraint()
+                    Focus.of(instruction, scene, vocab)
+                    .widen(offered_lines)
+                    .constraint()
+                    .with_choices(len(last_offered))
                     if apprentice.constrained
                     else None
                 ),
@@ -217,6 +226,9 @@ def refine(
                 )
             reply = proposal.text
             got = read(reply)
+            chose = got.choice
+            if chose is not None and not got.refused:
+                got = _chosen(chose, last_offered)
             if got.refused:
                 log.append(Turn(i, "apprentice", "refusal", reply))
                 return LoopResult(
@@ -242,7 +254,9 @@ def refine(
                     "apprentice",
                     "proposal",
                     "\n".join(s.text for s in plan),
-                    data={"reply": reply},  # the plan as read, and the words it came in
+                    # The plan as read, the words it came in, and the
+                    # correction it took ('USE 2'), if it took one.
+                    data={"reply": reply} | ({"chose": chose} if chose is not None else {}),
                 )
             )
         report = tutor.verify(scene, plan)
@@ -316,6 +330,7 @@ def refine(
             # replies is verified again like any other proposal.
             left = time.monotonic() + deadline.remaining()
             offered = candidates(scene, plan, report, corrections, vocab, deadline=left)
+            last_offered = tuple(offered)
             if offered:
                 offered_lines += [line for c in offered for line in c.plan]
                 text += corrections_section(offered)
@@ -361,3 +376,12 @@ def _unsettled(
         rows.append({"key": q.key, "why": why})
     text = "Still open: " + "; ".join(f"{r['key']} ({r['why']})" for r in rows)
     return Turn(iteration, "tutor", "unsettled", text, data={"unsettled": rows})
+
+
+def _chosen(n: int, offered: Sequence[Candidate]) -> ReadPlan:
+    """The reply 'USE n' read as the n-th correction's plan; a number that
+    names none is an unreadable line, answered with what may be said."""
+    if 1 <= n <= len(offered):
+        return read_plan("\n".join(offered[n - 1].plan))
+    choices = f"corrections 1 to {len(offered)} were offered" if offered else "none was offered"
+    return ReadPlan((), (f"{CHOICE} {n}: no correction {n}; {choices}",), False)

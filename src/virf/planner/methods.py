@@ -164,7 +164,9 @@ def run_method(
         )
     scene = build_scene(scene_data)
     # These methods never change the scene: one constraint serves every proposal.
-    constraint = Focus.of(instruction, scene, vocab).constraint() if apprentice.constrained else None
+    constraint = (
+        Focus.of(instruction, scene, vocab).constraint() if apprentice.constrained else None
+    )
     messages = [
         {"role": "system", "content": SYSTEM},
         {"role": "user", "content": apprentice_prompt(instruction, scene, rules) + suffix},

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from virf.errors import InputError
 from virf.files import read_prompt
 from virf.ontology.tbox import Vocabulary
+from virf.render.feedback import CHOICE
 from virf.world.plan import ACTION_WORDS, PlanStep, check_plan_size, parse_line
 from virf.world.scene import Scene
 
@@ -56,11 +57,15 @@ class ReadPlan:
     unreadable: tuple[str, ...]
     refused: bool
     problem: str | None = None
+    # 'USE n' with no plan: the reply takes the n-th checked correction the
+    # feedback offered; only the loop knows which plan that is.
+    choice: int | None = None
 
 
 _FENCE = re.compile(r"^\s*```")
 _BULLET = re.compile(r"^\s*(?:[-*•]\s+|\(?\d+\s*[.):]\s*|step\s*\d+\s*[.:)-]\s*)", re.I)
 _MARKUP = re.compile(r"\*+|`+")
+_CHOICE = re.compile(rf"{CHOICE}\s+(\d+)", re.IGNORECASE)
 
 
 def read_plan(reply: str) -> ReadPlan:
@@ -87,6 +92,7 @@ def read_plan(reply: str) -> ReadPlan:
     attempts: list[str] = []
     in_code = False
     problem: str | None = None
+    choice: int | None = None
     for raw in reply.splitlines():
         if _FENCE.match(raw):
             in_code = not in_code
@@ -97,6 +103,10 @@ def read_plan(reply: str) -> ReadPlan:
             continue
         if line.strip('"') == REFUSAL:
             refused = True
+            continue
+        chose = _CHOICE.fullmatch(line.strip('"'))
+        if chose is not None:
+            choice = choice or int(chose.group(1))
             continue
         if problem is not None:
             continue  # only a refusal still counts
@@ -121,9 +131,12 @@ def read_plan(reply: str) -> ReadPlan:
         steps.append(step)
     if problem is not None:
         return ReadPlan((), (), refused, problem)
-    if not steps:
-        unreadable += attempts
-    return ReadPlan(tuple(steps), tuple(unreadable), refused)
+    if steps:
+        # A plan of its own wins over a choice the same reply also made.
+        return ReadPlan(tuple(steps), tuple(unreadable), refused)
+    if choice is not None:
+        return ReadPlan((), (), refused, choice=choice)
+    return ReadPlan((), (*unreadable, *attempts), refused)
 
 
 def _json_plan(reply: str) -> list[str] | None:

@@ -29,6 +29,12 @@ def involved_objects(v: Violation) -> list[str]:
     return names
 
 
+# The reply that takes a checked correction as it is: 'USE 2'.  A small model
+# copies a short answer far more reliably than a whole plan (copying is what
+# llama.cpp's repeat penalty works against), and a large one saves the tokens.
+CHOICE = "USE"
+
+
 def corrections_section(corrections: Sequence[Candidate]) -> str:
     """The checked corrections, each with its whole plan (a small model copies
     better than it edits); '' when there are none, so the paper's prompt is
@@ -38,7 +44,8 @@ def corrections_section(corrections: Sequence[Candidate]) -> str:
     parts = [
         "\n[CHECKED CORRECTIONS]\n"
         "Each corrected plan below has been simulated and passes safety verification. "
-        "You may pick one (reply with its plan) or write your own.\n"
+        f'To take one as it is, reply with exactly "{CHOICE} n" for correction n '
+        f'(for example "{CHOICE} 1"); or reply with a plan of your own.\n'
     ]
     for n, c in enumerate(corrections, start=1):
         parts.append(
