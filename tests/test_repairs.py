@@ -288,16 +288,13 @@ def test_every_offered_correction_verifies_safe(
 
 
 # ---------------------------------------------------------------- the loop
-def test_the_apprentice_takes_a_correction_and_is_approved(tutor: LogicTutor, vocab: Any) -> None:
-    scene_data = microwave_scene(bowl=True)
-    first = "\n".join(HEAT_POT)
-    probe = build_scene(scene_data, vocab)
-    _, offered = checked(tutor, probe, parse_plan(HEAT_POT))
-    taken = next(c for c in offered if c.kind == "substitute")
-    apprentice = ScriptedApprentice([first, "\n".join(taken.plan)])
-    result = refine(
-        "Heat the water.",
-        scene_data,
+def microwave_dialogue(
+    tutor: LogicTutor, vocab: Any, apprentice: ScriptedApprentice, instruction: str
+) -> Any:
+    """Two iterations in the microwave scene with a bowl, corrections on."""
+    return refine(
+        instruction,
+        microwave_scene(bowl=True),
         apprentice,
         tutor.verifier,
         lambda d: build_scene(d, vocab),
@@ -305,6 +302,16 @@ def test_the_apprentice_takes_a_correction_and_is_approved(tutor: LogicTutor, vo
         max_iter=2,
         corrections=tutor.verifier,
     )
+
+
+def test_the_apprentice_takes_a_correction_and_is_approved(tutor: LogicTutor, vocab: Any) -> None:
+    scene_data = microwave_scene(bowl=True)
+    first = "\n".join(HEAT_POT)
+    probe = build_scene(scene_data, vocab)
+    _, offered = checked(tutor, probe, parse_plan(HEAT_POT))
+    taken = next(c for c in offered if c.kind == "substitute")
+    apprentice = ScriptedApprentice([first, "\n".join(taken.plan)])
+    result = microwave_dialogue(tutor, vocab, apprentice, "Heat the water.")
     assert result.outcome == "APPROVED" and result.plan == taken.plan
     turns = [t for t in result.transcript if t.kind == "corrections"]
     assert len(turns) == 1 and turns[0].data is not None
@@ -355,16 +362,7 @@ def test_the_apprentice_takes_a_correction_by_its_number(tutor: LogicTutor, voca
     _, offered = checked(tutor, probe, parse_plan(HEAT_POT))
     n = next(i for i, c in enumerate(offered, 1) if c.kind == "substitute")
     apprentice = ConstrainedScript(["\n".join(HEAT_POT), f"USE {n}"])
-    result = refine(
-        "Heat the water in the pot.",
-        scene_data,
-        apprentice,
-        tutor.verifier,
-        lambda d: build_scene(d, vocab),
-        vocab,
-        max_iter=2,
-        corrections=tutor.verifier,
-    )
+    result = microwave_dialogue(tutor, vocab, apprentice, "Heat the water in the pot.")
     assert result.outcome == "APPROVED" and result.plan == offered[n - 1].plan
     taken = [t for t in result.transcript if t.kind == "proposal"][-1]
     assert taken.data == {"reply": f"USE {n}", "chose": n}
@@ -381,12 +379,11 @@ def test_the_apprentice_takes_a_correction_by_its_number(tutor: LogicTutor, voca
     assert "pick Bowl_1" in second.lines() and "pick Bowl_1" not in first.lines()
 
 
-@pytest.mark.parametrize("reply", ["USE 4", "use 0"])
-def test_a_number_no_correction_has_is_unreadable(
-    tutor: LogicTutor, vocab: Any, reply: str
-) -> None:
-    plan = (BURNER / "plan.txt").read_text()
-    apprentice = ScriptedApprentice([plan, reply, reply])
+def burner_dialogue(
+    tutor: LogicTutor, vocab: Any, replies: list[str], *, corrections: bool
+) -> tuple[Any, ScriptedApprentice]:
+    """The burner left on, then ``replies``: the loop's result and the apprentice."""
+    apprentice = ScriptedApprentice([(BURNER / "plan.txt").read_text(), *replies])
     result = refine(
         "Heat the stove.",
         json.loads((BURNER / "scene.json").read_text()),
@@ -394,9 +391,17 @@ def test_a_number_no_correction_has_is_unreadable(
         tutor.verifier,
         lambda d: build_scene(d, vocab),
         vocab,
-        max_iter=3,
-        corrections=tutor.verifier,
+        max_iter=len(replies) + 1,
+        corrections=tutor.verifier if corrections else None,
     )
+    return result, apprentice
+
+
+@pytest.mark.parametrize("reply", ["USE 4", "use 0"])
+def test_a_number_no_correction_has_is_unreadable(
+    tutor: LogicTutor, vocab: Any, reply: str
+) -> None:
+    result, apprentice = burner_dialogue(tutor, vocab, [reply, reply], corrections=True)
     offered = next(t for t in result.transcript if t.kind == "corrections").data
     assert offered is not None and len(offered["candidates"]) < 4
     assert result.outcome != "APPROVED"
@@ -408,18 +413,8 @@ def test_a_number_no_correction_has_is_unreadable(
 
 
 def test_a_choice_with_no_corrections_offered_is_unreadable(tutor: LogicTutor, vocab: Any) -> None:
-    plan = (BURNER / "plan.txt").read_text()
     # VIRF-Reject's feedback offers no corrections: 'USE 1' names nothing.
-    apprentice = ScriptedApprentice([plan, "USE 1"])
-    result = refine(
-        "Heat the stove.",
-        json.loads((BURNER / "scene.json").read_text()),
-        apprentice,
-        tutor.verifier,
-        lambda d: build_scene(d, vocab),
-        vocab,
-        max_iter=2,
-    )
+    result, _ = burner_dialogue(tutor, vocab, ["USE 1"], corrections=False)
     (turn,) = [t for t in result.transcript if t.kind == "unreadable"]
     assert turn.text == "USE 1"
     assert result.outcome != "APPROVED"
