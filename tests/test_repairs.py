@@ -418,3 +418,24 @@ def test_a_choice_with_no_corrections_offered_is_unreadable(tutor: LogicTutor, v
     (turn,) = [t for t in result.transcript if t.kind == "unreadable"]
     assert turn.text == "USE 1"
     assert result.outcome != "APPROVED"
+
+
+def test_virf_plan_shows_which_correction_was_taken(tutor: LogicTutor, tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from virf.cli.main import app
+
+    replies = [(BURNER / "plan.txt").read_text(), "USE 1"]
+    replay = tmp_path / "replay.jsonl"
+    replay.write_text(
+        "".join(
+            json.dumps({"task_id": "burner", "iteration": i, "text": text}) + "\n"
+            for i, text in enumerate(replies)
+        )
+    )
+    args = ["plan", "--scene", str(BURNER / "scene.json"), "-i", "Heat the stove."]
+    args += ["-p", f"replay:{replay}", "--task-id", "burner"]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.stdout + result.stderr
+    assert "iteration 1 · apprentice · proposal · took correction 1" in result.stdout
+    assert "APPROVED after 2 iteration(s)" in result.stdout

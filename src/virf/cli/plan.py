@@ -316,6 +316,9 @@ def _print_dialogue(result: Any) -> None:
         label = f"iteration {t.iteration} · {t.speaker} · {t.kind}"
         if t.status:
             label += f" · {t.status}"
+        chose = (t.data or {}).get("chose") if t.kind == "proposal" else None
+        if chose is not None:
+            label += f" · took correction {chose}"
         console.print(Rule(label, align="left"))
         if t.kind == "report" and t.data:
             console.print(render_report(Report.model_validate(t.data)).rstrip(), markup=False)
