@@ -283,6 +283,27 @@ def _kitchen_tasks(vocab: Any, count: int) -> list[tuple[str, Any]]:
     return [(task.instruction, task.scene_data(vocab)) for task in tasks]
 
 
+def _run_on_kitchen_tasks(
+    model: Any, method: str, tutor: Any, vocab: Any, count: int, max_iter: int
+) -> Iterator[tuple[str, Any, Any]]:
+    """(instruction, scene, the method's result) for the first ``count`` tasks."""
+    from virf.planner.methods import get_method, run_method
+    from virf.world.scene import build_scene
+
+    for instruction, data in _kitchen_tasks(vocab, count):
+        result = run_method(
+            get_method(method),
+            instruction,
+            data,
+            model,
+            tutor.verifier,
+            lambda d: build_scene(d, vocab),
+            vocab,
+            max_iter=max_iter,
+        )
+        yield instruction, build_scene(data, vocab), result
+
+
 @needs_model
 def test_the_plan_grammars_compile_in_llama_cpp(vocab: Any) -> None:
     import llama_cpp
@@ -321,24 +342,11 @@ def test_constrained_plans_parse_and_name_only_scene_objects(
     tutor: Any, vocab: Any, method: str
 ) -> None:
     from virf.planner.focus import Focus
-    from virf.planner.methods import get_method, run_method
     from virf.planner.prompting import read_after_plan_marker
-    from virf.world.scene import build_scene
 
     with make_apprentice(f"local:{MODEL}") as model:
         assert model.constrained
-        for instruction, data in _kitchen_tasks(vocab, 2):
-            scene = build_scene(data, vocab)
-            result = run_method(
-                get_method(method),
-                instruction,
-                data,
-                model,
-                tutor.verifier,
-                lambda d: build_scene(d, vocab),
-                vocab,
-                max_iter=1,
-            )
+        for instruction, scene, result in _run_on_kitchen_tasks(model, method, tutor, vocab, 2, 1):
             replies = [t for t in result.transcript if t.speaker == "apprentice"]
             assert replies and all(t.kind in ("proposal", "refusal") for t in replies)
             for turn in replies:
@@ -403,26 +411,13 @@ def test_the_real_model_is_offered_only_checked_corrections(tutor: Any, vocab: A
     """The whole VIRF loop with SmolLM2, constrained: every correction the
     feedback offers verifies SAFE again, every proposal is verified, and an
     approval is only ever of a plan the tutor found SAFE."""
-    from virf.planner.methods import get_method, run_method
     from virf.verify.verifier import Verifier
     from virf.world.plan import parse_plan
-    from virf.world.scene import build_scene
 
     fresh = Verifier(tutor.tbox, tutor.engine)
     offered = 0
     with make_apprentice(f"local:{MODEL}") as model:
-        for instruction, data in _kitchen_tasks(vocab, 4):
-            scene = build_scene(data, vocab)
-            result = run_method(
-                get_method("virf"),
-                instruction,
-                data,
-                model,
-                tutor.verifier,
-                lambda d: build_scene(d, vocab),
-                vocab,
-                max_iter=3,
-            )
+        for _, scene, result in _run_on_kitchen_tasks(model, "virf", tutor, vocab, 4, 3):
             for turn in result.transcript:
                 if turn.kind == "corrections":
                     for c in (turn.data or {})["candidates"]:

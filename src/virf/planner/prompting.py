@@ -106,7 +106,7 @@ def read_plan(reply: str) -> ReadPlan:
             continue
         chose = _CHOICE.fullmatch(line.strip('"'))
         if chose is not None:
-            choice = choice or int(chose.group(1))
+            choice = int(chose.group(1)) if choice is None else choice  # the first one said
             continue
         if problem is not None:
             continue  # only a refusal still counts

@@ -66,6 +66,8 @@ class Simulator:
         # next attempt) starts from the same state, with its indexes and
         # closures already built.
         self._start: tuple[Scene, WorldState] | None = None
+        # The last state whose closures were all read, and those closures.
+        self._closures: tuple[WorldState, dict[Fact, Provenance]] | None = None
 
     # ------------------------------------------------------------------ setup
     def initial(self, scene: Scene) -> WorldState:
@@ -357,13 +359,13 @@ class Simulator:
         """
         touched = self._touched(since[0], state) if since is not None else None
         if since is None or touched is None:
-            # Read once per state (and simulator): the first state of every
-            # verification in a scene is the same one (see initial).
-            kept = state.__dict__.get("_closures")
-            if kept is not None and kept[0] is self:
+            # Read once per state: the first state of every verification in a
+            # scene is the same one (see initial).
+            kept = self._closures
+            if kept is not None and kept[0] is state:
                 return dict(kept[1])
             out = self._all_closures(state)
-            state.__dict__["_closures"] = (self, out)
+            self._closures = (state, out)
             return dict(out)
         out = self._hand_closure(state)
         done: set[str] = set()
