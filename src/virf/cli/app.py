@@ -272,8 +272,9 @@ ConstrainOpt = Annotated[
     bool | None,
     typer.Option(
         "--constrain/--no-constrain",
-        help="Hold the model's plans to the actions the scene allows (a grammar for local: "
-        "planners, on by default; a JSON schema for openai: servers, off by default).",
+        help="Hold the model's plans to the actions the scene allows on the objects the "
+        "instruction names (a grammar for local: planners, on by default; a JSON schema for "
+        "openai: servers, off by default).",
     ),
 ]
 
