@@ -337,15 +337,17 @@ def test_the_plan_grammars_compile_in_llama_cpp(vocab: Any) -> None:
 
 
 @needs_model
-@pytest.mark.parametrize("method", ["impulsive", "thinker"])
+@pytest.mark.parametrize("method", ["impulsive", "thinker", "virf"])
 def test_constrained_plans_parse_and_name_only_scene_objects(
     tutor: Any, vocab: Any, method: str
 ) -> None:
     from virf.planner.focus import Focus
     from virf.planner.prompting import read_after_plan_marker
+    from virf.world.simulate import simulate
+    from virf.world.simulator import Simulator
 
     with make_apprentice(f"local:{MODEL}") as model:
-        assert model.constrained
+        assert model.constrained and model.decoding.startswith("stepwise")
         for instruction, scene, result in _run_on_kitchen_tasks(model, method, tutor, vocab, 2, 1):
             replies = [t for t in result.transcript if t.speaker == "apprentice"]
             assert replies and all(t.kind in ("proposal", "refusal") for t in replies)
@@ -359,6 +361,11 @@ def test_constrained_plans_parse_and_name_only_scene_objects(
                 allowed = {name for _, names in focus.takes for name in names}
                 for step in got.steps:
                     assert set(step.args) - set(LIQUIDS) <= allowed, step.text
+                # Written a line at a time, each line one that runs next.
+                if got.steps:
+                    sim = Simulator(vocab)
+                    trace = simulate(sim, sim.initial(scene), got.steps)
+                    assert trace.complete, trace.stop_reason()
 
 
 @needs_model
@@ -429,3 +436,34 @@ def test_the_real_model_is_offered_only_checked_corrections(tutor: Any, vocab: A
                 assert fresh.verify(scene, parse_plan(list(result.plan))).status == "SAFE"
     # The recorded tasks' first plans are unsafe often enough that some are offered.
     assert offered > 0
+
+
+@needs_model
+def test_a_plan_written_a_line_at_a_time_is_the_same_twice(tutor: Any, vocab: Any) -> None:
+    from virf.planner.focus import Focus
+    from virf.planner.loop import line_judge
+    from virf.planner.prompting import apprentice_prompt
+    from virf.world.scene import build_scene
+
+    (instruction, data), (other, other_data) = _kitchen_tasks(vocab, 2)
+    scene, other_scene = build_scene(data, vocab), build_scene(other_data, vocab)
+
+    def ask(model: Any, text: str, where: Any) -> Any:
+        judge = line_judge(tutor.verifier, where)
+        return model.propose(
+            [{"role": "user", "content": apprentice_prompt(text, where)}],
+            task_id="t",
+            iteration=0,
+            method="virf",
+            purpose=PLAN,
+            constraint=Focus.of(text, where, vocab, judge).constraint(),
+        )
+
+    with make_apprentice(f"local:{MODEL}") as model:
+        first = ask(model, instruction, scene)
+        # Another task in between: the second answer resumes from stored states.
+        ask(model, other, other_scene)
+        second = ask(model, instruction, scene)
+    assert first.ok and first.text == second.text
+    assert first.turned_away == second.turned_away
+    assert first.completion_tokens and first.prompt_tokens

