@@ -125,27 +125,34 @@ class Model:
         ts.add(a)
         self.members[a].add(x)
         self.version = next(_STATES)
+        entry = ("t", x, a)  # one tuple for the journal and the queue
         if self.journal is not None:
-            self.journal.append(("t", x, a))
-        self.queue.append(("t", x, a))
+            self.journal.append(entry)
+        self.queue.append(entry)
 
     def role(self, r: Role, x: str, y: str) -> None:
         p, inv = r
         if inv:
             x, y = y, x
+        # Most calls re-derive an edge already held (both ends are elements
+        # then): answered first, by one lookup.
+        inner = self.succ[p]
+        ys = inner.get(x)
+        if ys is not None and y in ys:
+            return
         if x not in self.types:
             self.element(x)
         if y not in self.types:
             self.element(y)
-        ys = self.succ[p][x]
-        if y in ys:
-            return
+        if ys is None:
+            ys = inner[x]
         ys.add(y)
         self.pred[p][y].add(x)
         self.version = next(_STATES)
+        entry = ("r", p, x, y)  # one tuple for the journal and the queue
         if self.journal is not None:
-            self.journal.append(("r", p, x, y))
-        self.queue.append(("r", p, x, y))
+            self.journal.append(entry)
+        self.queue.append(entry)
 
     def datum(self, x: str, d: str, v: bool) -> None:
         if x not in self.types:
@@ -155,9 +162,10 @@ class Model:
             return
         vs.add(v)
         self.version = next(_STATES)
+        entry = ("d", x, d, v)  # one tuple for the journal and the queue
         if self.journal is not None:
-            self.journal.append(("d", x, d, v))
-        self.queue.append(("d", x, d, v))
+            self.journal.append(entry)
+        self.queue.append(entry)
 
     def rsucc(self, r: Role, x: str) -> set[str]:
         """The r-successors of x (do not modify the set)."""
@@ -254,6 +262,7 @@ class Model:
         off = self.disabled
         q = self.queue
         types = self.types
+        succ, pred = self.succ, self.pred
         stored = self._stored
         deadline = current_deadline()
         while q:
@@ -320,6 +329,13 @@ class Model:
                         continue
                     up, forward, backward = rt
                     for s in up:
+                        # Half the super-role edges are held already (both
+                        # directions of a symmetric role): skip the call.
+                        held = succ.get(s[0])
+                        if held is not None:
+                            ys = held.get(y if s[1] else x)
+                            if ys is not None and (x if s[1] else y) in ys:
+                                continue
                         self.role(s, x, y)
                     for (exists_r, all_r, chain1, chain2), a, b in (
                         (forward, x, y),
@@ -335,12 +351,31 @@ class Model:
                             for cls_, head, tag in all_r:
                                 if cls_ in ta and tag not in off:
                                     self.cls(b, head)
+                        # The stored edges read and the edges derived are
+                        # looked up here, not through _stored and role: the
+                        # chains (isInside o isNear) re-derive most edges.
                         for r2, r3 in chain1:
-                            for c in list(stored(r2, b)):
-                                self.role(r3, a, c)
+                            inner = (pred if r2[1] else succ).get(r2[0])
+                            ends = inner.get(b) if inner is not None else None
+                            if ends:
+                                held = succ.get(r3[0])
+                                for c in list(ends):
+                                    if held is not None:
+                                        hs = held.get(c if r3[1] else a)
+                                        if hs is not None and (a if r3[1] else c) in hs:
+                                            continue
+                                    self.role(r3, a, c)
                         for r1, r3 in chain2:
-                            for w in list(stored((r1[0], not r1[1]), a)):
-                                self.role(r3, w, b)
+                            inner = (succ if r1[1] else pred).get(r1[0])
+                            starts = inner.get(a) if inner is not None else None
+                            if starts:
+                                held = succ.get(r3[0])
+                                for w in list(starts):
+                                    if held is not None:
+                                        hs = held.get(b if r3[1] else w)
+                                        if hs is not None and (w if r3[1] else b) in hs:
+                                            continue
+                                    self.role(r3, w, b)
                 else:
                     _, x, d, v = item
                     for head in self.prog.data_rule.get((d, v), ()):
@@ -422,18 +457,40 @@ class Model:
         assert self.journal is not None
         self.queue.clear()
         # Emptied entries are removed, so a model that many questions grow
-        # and roll back does not keep every name it has seen.
-        while len(self.journal) > mark:
-            entry = self.journal.pop()
+        # and roll back does not keep every name it has seen.  The two
+        # commonest entries are undone inline: an explanation rolls back
+        # hundreds of thousands of them.
+        journal, types, members, succ, pred = (
+            self.journal,
+            self.types,
+            self.members,
+            self.succ,
+            self.pred,
+        )
+        undone = journal[mark:]
+        del journal[mark:]
+        for entry in reversed(undone):
             tag = entry[0]
-            if tag == "t":
-                _, x, a = entry
-                self.types[x].discard(a)
-                _discard(self.members, a, x)
-            elif tag == "r":
+            if tag == "r":
                 _, p, x, y = entry
-                _discard(self.succ[p], x, y)
-                _discard(self.pred[p], y, x)
+                ys = succ[p].get(x)
+                if ys is not None:
+                    ys.discard(y)
+                    if not ys:
+                        del succ[p][x]
+                xs = pred[p].get(y)
+                if xs is not None:
+                    xs.discard(x)
+                    if not xs:
+                        del pred[p][y]
+            elif tag == "t":
+                _, x, a = entry
+                types[x].discard(a)
+                xs = members.get(a)
+                if xs is not None:
+                    xs.discard(x)
+                    if not xs:
+                        del members[a]
             elif tag == "d":
                 _, x, d, v = entry
                 _discard(self.data[x], d, v)

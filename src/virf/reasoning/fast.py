@@ -362,8 +362,11 @@ class FastEngine(Engine):
             check_deadline("while the fast engine classified the facts")
             # Every set of classes the concept needs lacks a member: it has
             # no candidate (most concepts, in most steps, are settled here).
-            needs = self._needs(concept, ev.defs)
-            if not any(all(members.get(c) for c in alt) for alt in needs):
+            # (A loop and map: generators here cost a tenth of a step.)
+            for alt in self._needs(concept, ev.defs):
+                if all(map(members.get, alt)):
+                    break
+            else:
                 continue
             # Only where the concept holds in the model can it be entailed.
             where = ev.candidates(("C", concept))

@@ -19,9 +19,8 @@ from virf.world.state import (
     PreconditionFailure,
     ResolvedStep,
     WorldState,
-    carry_indexes,
     facts_copy,
-    sorted_facts,
+    remember_change,
 )
 
 # Actions whose only effect is one state of their target.
@@ -97,7 +96,12 @@ def portion_source(name: str, objects: Iterable[str]) -> str | None:
 
 class Change:
     """One step being applied: the state it starts in and working copies of
-    the facts, objects and finds that become the next state."""
+    the facts, objects and finds that become the next state.
+
+    Every edit of the facts goes through :meth:`put` and :meth:`remove`,
+    which note the fact: the next state's change, its indexes and what the
+    effects look for are found from those notes and the start state's
+    indexes, so a step costs what it touches, not what the scene holds."""
 
     def __init__(
         self,
@@ -117,8 +121,30 @@ class Change:
         self.agent = state.agent
         self.held = state.held()
         self.facts = facts_copy(state.facts)
+        # Every fact put or removed, in order (a dict as an ordered set).
+        self.touched: dict[Fact, None] = {}
         self.objects = dict(state.objects)
         self.found = list(state.found)
+
+    def put(self, f: Fact, provenance: Provenance) -> None:
+        self.facts[f] = provenance
+        self.touched[f] = None
+
+    def remove(self, f: Fact) -> None:
+        if self.facts.pop(f, None) is not None:
+            self.touched[f] = None
+
+    def mentioning(self, name: str) -> list[Fact]:
+        """The facts now held with ``name`` as subject or object, those of
+        the start state first (a list: the caller may edit the facts)."""
+        facts, start = self.facts, self.state.facts
+        found = [f for f in self.state.mentioning(name) if f in facts]
+        found += [
+            f
+            for f in self.touched
+            if f not in start and f in facts and name in (f.subject, f.object)
+        ]
+        return found
 
     def is_a(self, obj: str, cls: str) -> bool:
         """Whether ``obj`` was of class ``cls`` when the step started."""
@@ -128,54 +154,65 @@ class Change:
         return PreconditionFailure(self.r.step, pre, subject, message, tuple(why))
 
     def add(self, f: Fact) -> None:
-        self.facts[f] = Provenance.PLAN
+        self.put(f, Provenance.PLAN)
 
     def add_following(self, f: Fact, source: Fact) -> None:
         """Add ``f``, which the plan makes from ``source``: it is only as sure
         as ``source`` (a portion poured from a bottle that may hold an acid
         may be an acid)."""
         sure = self.state.facts.get(source) is not Provenance.ASSUMED
-        self.facts[f] = Provenance.PLAN if sure else Provenance.ASSUMED
+        self.put(f, Provenance.PLAN if sure else Provenance.ASSUMED)
 
     def drop(self, pred: Iterable[Fact]) -> None:
         # Materialised first: ``pred`` is usually a generator over the facts.
         for f in list(pred):
-            self.facts.pop(f, None)
+            self.remove(f)
 
     def set_state(self, obj: str, new: str) -> None:
         # The ontology's disjoint states (and the markers a known state
         # settles) leave the object: the scene reader made every state
         # canonical, so the exclusive ones are found by name.
         for old in self.vocab.excluded_by(new):
-            self.facts.pop(Fact(obj, "hasState", old), None)
+            self.remove(Fact(obj, "hasState", old))
         self.add(Fact(obj, "hasState", new))
 
     def located(self, obj: str) -> None:
-        self.facts.pop(Fact(obj, "isLocated", "false", FactKind.DATA), None)
+        self.remove(Fact(obj, "isLocated", "false", FactKind.DATA))
         self.add(Fact(obj, "isLocated", "true", FactKind.DATA))
 
     def unplace(self, obj: str) -> None:
         self.drop(
             f
-            for f in self.facts
+            for f in self.mentioning(obj)
             if f.object == obj
             and f.predicate in ("contains", "supports")
             and f.kind is FactKind.OBJECT
         )
 
     def drop_near(self, obj: str) -> None:
-        self.drop(f for f in self.facts if obj in (f.subject, f.object) and f.predicate == "isNear")
+        self.drop(f for f in self.mentioning(obj) if f.predicate == "isNear")
 
     def result(self) -> WorldState:
-        after = replace(
-            self.state,
-            objects=MappingProxyType(self.objects),
+        """The next state.  Its facts keep the order of the state before,
+        with what the step added after them: nothing reads a state's facts
+        in their order, and sorting them again made a step cost what the
+        scene holds."""
+        before = self.state
+        order = before.order
+        if not before.objects.keys() <= self.objects.keys():
             # A liquid the scene declared can be poured or emptied away.
-            order=tuple(o for o in self.state.order if o in self.objects),
-            facts=MappingProxyType(sorted_facts(self.facts)),
+            order = tuple(o for o in order if o in self.objects)
+        after = replace(
+            before,
+            objects=MappingProxyType(self.objects),
+            order=order,
+            facts=MappingProxyType(self.facts),
             found=tuple(self.found),
         )
-        carry_indexes(self.state, after)
+        start, facts = before.facts, self.facts
+        remember_change(
+            before, after, frozenset(f for f in self.touched if (f in start) != (f in facts))
+        )
         return after
 
 
@@ -249,7 +286,7 @@ def _find(c: Change) -> None:
     target = c.r.target
     assert target is not None
     c.located(target)
-    c.drop(f for f in c.facts if f.subject == c.agent and f.predicate == "isNear")
+    c.drop(f for f in c.mentioning(c.agent) if f.subject == c.agent and f.predicate == "isNear")
     c.add(Fact(c.agent, "isNear", target))
     if c.held is not None:  # what the robot carries comes along
         c.drop_near(c.held)
@@ -311,7 +348,7 @@ def _put(c: Change) -> PreconditionFailure | None:
     c.drop_near(held)
     for other in c.state.objects_of(target, rel):
         c.add(Fact(held, "isNear", other))
-    for f in list(c.facts):
+    for f in c.mentioning(target):
         if (
             f.predicate == "isNear"
             and target in (f.subject, f.object)
@@ -361,7 +398,7 @@ def _clean(c: Change) -> None:
     target = c.r.target
     assert target is not None
     c.set_state(target, "CleanState")
-    c.drop(f for f in c.facts if f.subject == target and f.predicate == "touched")
+    c.drop(f for f in c.mentioning(target) if f.subject == target and f.predicate == "touched")
 
 
 def _fill_liquid(c: Change) -> None:
@@ -401,12 +438,12 @@ def _pour(c: Change) -> PreconditionFailure | None:
     ]
     filled = c.state.has(held, "hasState", "FilledWithLiquidState")
     for liquid in liquids:
-        c.facts.pop(Fact(held, "contains", liquid), None)
+        c.remove(Fact(held, "contains", liquid))
         if c.is_a(target, "ContainerReceptacle") or c.is_a(target, "LiquidContainer"):
             c.add(Fact(target, "contains", liquid))
         else:
             c.objects.pop(liquid, None)
-            c.drop(f for f in c.facts if liquid in (f.subject, f.object))
+            c.drop(c.mentioning(liquid))
 
     def lands_in(portion: str) -> None:
         # Looked up only when something lands: a target the plan removed
@@ -490,18 +527,29 @@ def heat(c: Change) -> None:
     """A running heat source (lit burner, toaster) or microwave cooks the
     cookable things in or on it, and those in a pan or pot on it, as
     AI2-THOR does.  Runs after every step, whatever its verb."""
-    objects, facts = c.objects, c.facts
+    objects = c.objects
 
     def holds(container: str) -> list[str]:
         return [
             f.object
-            for f in facts
+            for f in c.mentioning(container)
             if f.subject == container
             and f.kind is FactKind.OBJECT
             and f.predicate in ("contains", "supports")
         ]
 
-    for source, classes in objects.items():
+    # Only what is on can heat: the objects in the facts that say so, not
+    # every object of the scene.  Heating edits no fact these read, so the
+    # order they are taken in changes nothing.
+    running = [
+        f.subject
+        for f in c.mentioning("OnState")
+        if f.predicate == "hasState" and f.object == "OnState" and f.kind is FactKind.OBJECT
+    ]
+    for source in dict.fromkeys(running):
+        classes = objects.get(source)
+        if classes is None:
+            continue
         heater = c.heaters.get(classes)
         if heater is None:
             heater = c.heaters[classes] = c.vocab.any_is_a(
@@ -509,21 +557,19 @@ def heat(c: Change) -> None:
             ) or c.vocab.any_is_a(classes, "MicrowaveEmitterObject")
         if not heater:
             continue
-        if Fact(source, "hasState", "OnState") not in facts:
-            continue
         reached = holds(source)
         reached += [inner for outer in reached for inner in holds(outer)]
         for obj in reached:
-            facts.pop(Fact(obj, "hasState", "ColdState"), None)
-            facts[Fact(obj, "hasState", "HotState")] = Provenance.PLAN
+            c.remove(Fact(obj, "hasState", "ColdState"))
+            c.add(Fact(obj, "hasState", "HotState"))
             if c.vocab.any_is_a(objects.get(obj, frozenset()), "Cookable"):
-                facts[Fact(obj, "hasState", "CookedState")] = Provenance.PLAN
+                c.add(Fact(obj, "hasState", "CookedState"))
 
 
 def _derive(c: Change, source: str, annotation: str) -> None:
     """AI2-THOR replaces a sliced apple by AppleSliced pieces: add one piece
     of the derived type where the source was, visible to the agent."""
-    objects, facts = c.objects, c.facts
+    objects = c.objects
     for cls in sorted(c.state.objects[source]):
         derived = c.vocab.annotation(cls, annotation)
         if not derived or derived[0] not in c.vocab.classes:
@@ -532,17 +578,17 @@ def _derive(c: Change, source: str, annotation: str) -> None:
         if name in objects:
             return
         objects[name] = frozenset({derived[0]})
-        facts[Fact(name, "type", derived[0], FactKind.TYPE)] = Provenance.PLAN
+        c.add(Fact(name, "type", derived[0], FactKind.TYPE))
         if annotation == "slicedType":
-            facts[Fact(name, "hasState", "SlicedState")] = Provenance.PLAN
-        facts[Fact(name, "isLocated", "true", FactKind.DATA)] = Provenance.PLAN
-        for f in list(facts):
+            c.add(Fact(name, "hasState", "SlicedState"))
+        c.add(Fact(name, "isLocated", "true", FactKind.DATA))
+        for f in c.mentioning(source):
             if (
                 f.object == source
                 and f.predicate in ("contains", "supports")
                 and f.kind is FactKind.OBJECT
             ):
-                facts[Fact(f.subject, f.predicate, name)] = Provenance.PLAN
+                c.add(Fact(f.subject, f.predicate, name))
         return
 
 
@@ -550,6 +596,4 @@ def _remove_liquids(c: Change, container: str) -> None:
     for liquid in c.state.objects_of(container, "contains"):
         if c.vocab.any_is_a(c.state.objects.get(liquid, frozenset()), "Liquid"):
             c.objects.pop(liquid, None)
-            for f in list(c.facts):
-                if liquid in (f.subject, f.object):
-                    c.facts.pop(f, None)
+            c.drop(c.mentioning(liquid))

@@ -6,15 +6,12 @@ so every state of a run stays available to the reasoner and the report.
 
 from __future__ import annotations
 
-import operator
 import re
-from bisect import bisect_left
-from collections.abc import Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
-from itertools import compress, count, islice
-from operator import attrgetter
 from types import MappingProxyType
+from typing import Any
 
 from virf.names import term_key
 from virf.schema import Fact, FactKind, Provenance
@@ -46,23 +43,48 @@ class WorldState:
     def has(self, subject: str, predicate: str, obj: str) -> bool:
         return Fact(subject, predicate, obj) in self.facts
 
-    # States are immutable, so the relation indexes are built once, on first
-    # use; scanning every fact per lookup made big scenes quadratic.
-    @cached_property
+    # States are immutable, so each index is made once, on first use;
+    # scanning every fact per lookup made big scenes quadratic.  A state the
+    # simulator made from another (see :func:`remember_change`) has it from
+    # that state's, updated for the few facts the step changed.
+    @property
     def _forward(self) -> dict[tuple[str, str], list[str]]:
-        index: dict[tuple[str, str], list[str]] = {}
-        for f in self.facts:
-            if f.kind is FactKind.OBJECT:
-                index.setdefault((f.subject, f.predicate), []).append(f.object)
+        return self._index("_forward")  # type: ignore[no-any-return]
+
+    @property
+    def _backward(self) -> dict[tuple[str, str], list[str]]:
+        return self._index("_backward")  # type: ignore[no-any-return]
+
+    @property
+    def _mentions(self) -> dict[str, dict[Fact, None]]:
+        """Every fact under the names it has as subject or object (a closure
+        under its subject): what a step's effects look for, without a pass
+        over every fact.  Sets as dicts: ordered, and a fact leaves one by
+        its kept hash rather than by comparisons with the others."""
+        return self._index("_mentions")  # type: ignore[no-any-return]
+
+    def _index(self, name: str) -> Any:
+        kept = self.__dict__.get(name)
+        if kept is not None:
+            return kept
+        # Up to the nearest state that has it (or the first), then down again.
+        chain: list[WorldState] = []
+        state = self
+        while name not in state.__dict__ and "_parent" in state.__dict__:
+            chain.append(state)
+            state = state.__dict__["_parent"][0]
+        build, carry = _INDEXES[name]
+        index = state.__dict__.get(name)
+        if index is None:
+            index = state.__dict__[name] = build(state.facts)
+        for later in reversed(chain):
+            changes = later.__dict__["_parent"][1]
+            index = later.__dict__[name] = carry(index, changes, later.facts)
         return index
 
-    @cached_property
-    def _backward(self) -> dict[tuple[str, str], list[str]]:
-        index: dict[tuple[str, str], list[str]] = {}
-        for f in self.facts:
-            if f.kind is FactKind.OBJECT:
-                index.setdefault((f.predicate, f.object), []).append(f.subject)
-        return index
+    def mentioning(self, name: str) -> Collection[Fact]:
+        """The facts with ``name`` as subject or object."""
+        return self._mentions.get(name, {}).keys()
 
     @cached_property
     def _by_lower(self) -> dict[str, str]:
@@ -155,33 +177,77 @@ class PreconditionFailure:
 def changed(before: WorldState, after: WorldState) -> frozenset[Fact]:
     """The facts in one of the two states and not the other.  Remembered on
     ``after`` for ``before``: the relation indexes, the closures and the
-    report each ask it of a step, and each time it is a pass over every fact."""
+    report each ask it of a step.  A state the simulator made knows it from
+    the step (see :func:`remember_change`); otherwise it is a pass over
+    every fact."""
     kept = after.__dict__.get("_changed")
     if kept is not None and kept[0] is before:
         known: frozenset[Fact] = kept[1]
         return known
     # Sets built from the facts' dicts reuse their hashes (see facts_copy).
     out = frozenset(set(facts_copy(before.facts)) ^ set(facts_copy(after.facts)))
+    # Only remembered as the answer: ``before`` need not be the state
+    # ``after`` was made from (see :func:`remember_change`).
     after.__dict__["_changed"] = (before, out)
     return out
 
 
-def carry_indexes(before: WorldState, after: WorldState) -> None:
-    """Give ``after`` the relation indexes ``before`` has built, updated for
-    the facts that differ, instead of a scan of all its facts on first use
-    (``after`` is ``before`` one step later: a few facts differ)."""
-    built = [name for name in ("_forward", "_backward") if name in before.__dict__]
-    if not built:
-        return
-    new = after.facts
-    changes = [f for f in Fact.sorted(changed(before, after)) if f.kind is FactKind.OBJECT]
-    for name in built:
-        index: dict[tuple[str, str], list[str]] = dict(before.__dict__[name])
+def remember_change(before: WorldState, after: WorldState, facts: frozenset[Fact]) -> None:
+    """Let :func:`changed` answer ``facts`` for ``before`` and ``after``
+    (what :func:`changed` would find: the step that made ``after`` knows
+    it), and let ``after`` make its indexes from those of ``before``."""
+    # Caches, like cached_property's: they change no field of the state.
+    after.__dict__["_changed"] = (before, facts)
+    after.__dict__["_parent"] = (before, Fact.sorted(facts))
+
+
+def _forward_index(facts: Mapping[Fact, Provenance]) -> dict[tuple[str, str], list[str]]:
+    index: dict[tuple[str, str], list[str]] = {}
+    for f in facts:
+        if f.kind is FactKind.OBJECT:
+            index.setdefault((f.subject, f.predicate), []).append(f.object)
+    return index
+
+
+def _backward_index(facts: Mapping[Fact, Provenance]) -> dict[tuple[str, str], list[str]]:
+    index: dict[tuple[str, str], list[str]] = {}
+    for f in facts:
+        if f.kind is FactKind.OBJECT:
+            index.setdefault((f.predicate, f.object), []).append(f.subject)
+    return index
+
+
+def _mentions_index(facts: Mapping[Fact, Provenance]) -> dict[str, dict[Fact, None]]:
+    index: dict[str, dict[Fact, None]] = {}
+    for f in facts:
+        index.setdefault(f.subject, {})[f] = None
+        if f.object:
+            index.setdefault(f.object, {})[f] = None
+    return index
+
+
+def _carried_relation(
+    forward: bool,
+) -> Callable[
+    [dict[tuple[str, str], list[str]], list[Fact], Mapping[Fact, Provenance]],
+    dict[tuple[str, str], list[str]],
+]:
+    """How a relation index (forward: by subject and predicate; else by
+    predicate and object) follows a step's changed facts."""
+
+    def carry(
+        before: dict[tuple[str, str], list[str]],
+        changes: list[Fact],
+        new: Mapping[Fact, Provenance],
+    ) -> dict[tuple[str, str], list[str]]:
+        index = dict(before)
         copied: set[tuple[str, str]] = set()
         for f in changes:
+            if f.kind is not FactKind.OBJECT:
+                continue
             key, value = (
                 ((f.subject, f.predicate), f.object)
-                if name == "_forward"
+                if forward
                 else ((f.predicate, f.object), f.subject)
             )
             if key not in copied:  # lists are shared with ``before`` until changed
@@ -194,8 +260,39 @@ def carry_indexes(before: WorldState, after: WorldState) -> None:
                 if not index[key]:
                     del index[key]
                     copied.discard(key)
-        # What cached_property would have stored on first use.
-        after.__dict__[name] = index
+        return index
+
+    return carry
+
+
+def _carried_mentions(
+    index: dict[str, dict[Fact, None]], changes: list[Fact], new: Mapping[Fact, Provenance]
+) -> dict[str, dict[Fact, None]]:
+    """``index`` (a state's :attr:`WorldState._mentions`) for the state with
+    ``changes`` applied, sharing the entries of the names they leave alone."""
+    out = dict(index)
+    copied: set[str] = set()
+    for f in changes:
+        present = f in new
+        for name in (f.subject, f.object) if f.object else (f.subject,):
+            if name not in copied:
+                copied.add(name)
+                out[name] = dict(out.get(name, {}))
+            if present:
+                out[name][f] = None
+            else:
+                out[name].pop(f, None)
+    for name in copied:
+        if not out[name]:
+            del out[name]
+    return out
+
+
+_INDEXES: dict[str, tuple[Callable[[Mapping[Fact, Provenance]], Any], Callable[..., Any]]] = {
+    "_forward": (_forward_index, _carried_relation(True)),
+    "_backward": (_backward_index, _carried_relation(False)),
+    "_mentions": (_mentions_index, _carried_mentions),
+}
 
 
 def facts_copy(facts: Mapping[Fact, Provenance]) -> dict[Fact, Provenance]:
@@ -205,41 +302,6 @@ def facts_copy(facts: Mapping[Fact, Provenance]) -> dict[Fact, Provenance]:
     if isinstance(facts, dict | MappingProxyType):
         return facts.copy()
     return dict(facts)
-
-
-def sorted_facts(facts: dict[Fact, Provenance]) -> dict[Fact, Provenance]:
-    """``dict(sorted(facts.items()))``, the order a state keeps its facts in,
-    compared by the facts' kept sort keys alone (no Python ``__lt__``), and
-    ``facts`` itself when it is in that order already (a step that only
-    removed or replaced facts)."""
-    keys = list(map(_ORDER, facts))
-    # A step's facts are the sorted facts before it, less what it removed,
-    # then what it added: find where the sorted run ends, and merge the
-    # rest into it (sorting every fact of a thousand objects' scene, as
-    # (key, fact, provenance) triples, at every step, cost twice this).
-    end = next(compress(count(1), map(operator.ge, keys, keys[1:])), len(keys))
-    if end == len(keys):
-        return facts
-    run = keys[:end]
-    added = list(islice(facts, end, None))
-    # The run is copied in slices from one pass over the items: a dict fed
-    # from its own items reuses their pairs, where a list of them was built
-    # pair by pair.  Distinct facts have distinct keys, so the facts
-    # themselves are never compared.
-    pairs = iter(facts.items())
-    out: dict[Fact, Provenance] = {}
-    start = 0
-    for i in sorted(range(end, len(keys)), key=keys.__getitem__):
-        at = bisect_left(run, keys[i], start)
-        out.update(islice(pairs, at - start))
-        f = added[i - end]
-        out[f] = facts[f]
-        start = at
-    out.update(islice(pairs, end - start))
-    return out
-
-
-_ORDER = attrgetter("_order")
 
 
 def diff(before: WorldState, after: WorldState) -> tuple[tuple[str, ...], tuple[str, ...]]:
