@@ -164,3 +164,19 @@ def test_the_next_line_grammar_ends_or_adds_one_line(vocab: Vocabulary) -> None:
     assert '"pick "' in text
     one = s.next_lines().gbnf(lines=1)
     assert "plan ::= line\n" in one
+
+
+def test_virf_plan_lists_the_lines_turned_away(capsys: pytest.CaptureFixture[str]) -> None:
+    from virf.cli.plan import _print_dialogue
+    from virf.planner.loop import LoopResult, Turn
+
+    proposal = Turn(
+        0,
+        "apprentice",
+        "proposal",
+        "find Pear_1\npick Pear_1",
+        data={"reply": "find Pear_1\npick Pear_1", "turned_away": ["pick Pear_1", "drop Pear_1"]},
+    )
+    _print_dialogue(LoopResult("TASK_REJECTED", None, 1, "gave up", (proposal,)))
+    out = capsys.readouterr().out
+    assert "(turned away as it was written: pick Pear_1; drop Pear_1)" in out

@@ -319,11 +319,15 @@ def _print_dialogue(result: Any) -> None:
         chose = (t.data or {}).get("chose") if t.kind == "proposal" else None
         if chose is not None:
             label += f" · took correction {chose}"
+        away = (t.data or {}).get("turned_away", []) if t.kind == "proposal" else []
         console.print(Rule(label, align="left"))
         if t.kind == "report" and t.data:
             console.print(render_report(Report.model_validate(t.data)).rstrip(), markup=False)
         else:
             console.print(t.text, markup=False)
+        if away:
+            # Written a line at a time, the tutor refused these on the way.
+            console.print(f"(turned away as it was written: {'; '.join(away)})", markup=False)
     console.print(Rule())
     console.print(
         f"{result.outcome} after {result.iterations} iteration(s): {result.reason}", markup=False
