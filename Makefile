@@ -141,7 +141,8 @@ bench-report: sab-files $(STAMP)
 # The agent table of the local model (docs/agents.md), re-rendered offline in
 # seconds from the recorded runs in examples/agents/smollm2 (every kitchen task
 # of the dev split; every 4th task of each other-rooms file; and the constrained
-# run with checked corrections, impulsive and virf on every 4th kitchen task).  No model and no
+# runs (whole replies, focused, a line at a time), impulsive and virf on every
+# 4th kitchen task).  No model and no
 # network, but the tasks themselves: the development split in $(SAB), from
 # ../shared or `make benchmarks` (sab-split checks it is that split: the
 # replies are looked up by file and line).  Recording them again needs
@@ -165,6 +166,10 @@ agents-report: sab-split $(STAMP)
 	  --planner replay:examples/agents/smollm2/kitchen-focused.replay.jsonl \
 	  --tasks $(SAB)/unsafe_detailed.jsonl $(SAB)/safe_detailed.jsonl $(SAB)/abstract.jsonl \
 	  $(SAB)/long_horizon.jsonl --out runs/agents-smollm2-kitchen-focused-replay
+	$(BIN)/virf bench agents --method impulsive,virf --every 4 \
+	  --planner replay:examples/agents/smollm2/kitchen-stepwise.replay.jsonl \
+	  --tasks $(SAB)/unsafe_detailed.jsonl $(SAB)/safe_detailed.jsonl $(SAB)/abstract.jsonl \
+	  $(SAB)/long_horizon.jsonl --out runs/agents-smollm2-kitchen-stepwise-replay
 
 # Latency of the paper's method, the reference engine and the fast engine
 # (creates .venv-paper with owlready2 0.49 for the paper's method).

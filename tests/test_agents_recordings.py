@@ -38,6 +38,7 @@ ROOMS = [
         CONSTRAINED,
     ),
     ("kitchen-focused", SAB, 4, "### Focused grammar and numbered corrections", CONSTRAINED),
+    ("kitchen-stepwise", SAB, 4, "### A line at a time: kitchens", CONSTRAINED),
 ]
 
 

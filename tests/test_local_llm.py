@@ -320,8 +320,10 @@ def test_the_plan_grammars_compile_in_llama_cpp(vocab: Any) -> None:
             # of a checked correction ('USE 2'), which has no lines at all.
             some = frozenset({constraint.takes[0][1][0]})
             for c in (constraint, constraint.narrowed(some).with_choices(3), PlanConstraint((), 2)):
-                for reasoning in (False, True):
-                    text = c.gbnf(reasoning)
+                # A whole reply, its first line alone, and the line after one
+                # (a plan written a line at a time).
+                texts = [c.gbnf(r, lines=n) for r in (False, True) for n in (15, 1)]
+                for text in [*texts, c.next_gbnf()]:
                     parsed = llama_cpp.llama_sampler_init_grammar(
                         model._llm._model.vocab, text.encode(), b"root"
                     )

@@ -448,7 +448,7 @@ class LocalApprentice(Apprentice):
             if first and (line == REFUSAL or line.startswith(CHOICE + " ")):
                 text += piece
                 break
-            if not stepper.accepts(line) and len(refused) < MAX_REFUSED:
+            if len(refused) < MAX_REFUSED and not stepper.accepts(line):
                 # Turned away: the same place again, without that line.
                 refused.add(line)
                 usage["turned_away"].append(line)

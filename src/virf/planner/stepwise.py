@@ -48,6 +48,9 @@ from virf.world.plan import PlanStep, parse_line
 from virf.world.scene import Scene
 from virf.world.simulator import PreconditionFailure, ResolvedStep, Simulator, WorldState
 
+# Where a plan is: the object the robot stands at, and the world's facts.
+Place = tuple[str | None, frozenset[Fact]]
+
 
 @dataclass(frozen=True, eq=False)
 class Sandbox:
@@ -75,7 +78,7 @@ class Stepper:
         self._worlds = {self._key[1]}
         # The place before the last line, which the next line may go back to
         # (undoing the last line) unless the last line was such an undo.
-        self._back: tuple[str | None, frozenset[Fact]] | None = None
+        self._back: Place | None = None
         self.lines: list[str] = []
 
     def next_lines(self, refused: Set[str] = frozenset()) -> PlanConstraint:
@@ -143,17 +146,13 @@ def _line(verb: str, name: str) -> str:
     return f"{verb} {name} {LIQUIDS[0]}" if verb == "fillLiquid" else f"{verb} {name}"
 
 
-def _returns(
-    key: tuple[str | None, frozenset[Fact]],
-    now: tuple[str | None, frozenset[Fact]],
-    back: tuple[str | None, frozenset[Fact]],
-) -> bool:
+def _returns(key: Place, now: Place, back: Place) -> bool:
     """Whether going from ``now`` to ``key`` returns to ``back``: the same
     world, or (when the world does not change) the same place."""
     return key[1] == back[1] if key[1] != now[1] else key == back
 
 
-def _key(state: WorldState) -> tuple[str | None, frozenset[Fact]]:
+def _key(state: WorldState) -> Place:
     """What makes two states the same place in a plan: the robot at the same
     object, and the same facts but for which objects it has found (a record
     of where it has been, like its place)."""
