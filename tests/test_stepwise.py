@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import pytest
 from conftest import inst, rel
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from virf.api import LogicTutor
 from virf.ontology.tbox import Vocabulary
@@ -17,7 +19,10 @@ from virf.planner.focus import Focus
 from virf.planner.loop import line_judge
 from virf.planner.prompting import read_plan
 from virf.planner.stepwise import Sandbox, Stepper
+from virf.schema import Fact
+from virf.world.plan import parse_line
 from virf.world.scene import Scene, build_scene
+from virf.world.simulator import PreconditionFailure, ResolvedStep, Simulator
 
 
 def pantry(vocab: Vocabulary, fridge: str) -> Scene:
@@ -180,3 +185,48 @@ def test_virf_plan_lists_the_lines_turned_away(capsys: pytest.CaptureFixture[str
     _print_dialogue(LoopResult("TASK_REJECTED", None, 1, "gave up", (proposal,)))
     out = capsys.readouterr().out
     assert "(turned away as it was written: pick Pear_1; drop Pear_1)" in out
+
+
+def _world(s: Stepper) -> frozenset[Fact]:
+    return frozenset(f for f in s._state.facts if f.predicate != "isLocated")
+
+
+def _naive_offered(
+    s: Stepper, worlds: list[frozenset[Fact]], back: frozenset[Fact] | None, vocab: Vocabulary
+) -> set[str]:
+    """The rule of :class:`Stepper` read off whole fact sets: a line is
+    offered when it runs, changes the world, and does not bring it back to
+    a world the plan has made (except to undo the line before, once)."""
+    sim = Simulator(vocab)
+    out = set()
+    for line in s._constraint.lines():
+        resolved = sim.resolve(s._state, parse_line(line, 1, 1, None))
+        if not isinstance(resolved, ResolvedStep):
+            continue
+        after = sim.apply(s._state, resolved)
+        if isinstance(after, PreconditionFailure):
+            continue
+        world = frozenset(f for f in after.facts if f.predicate != "isLocated")
+        if world != worlds[-1] and (world == back or world not in worlds):
+            out.add(line)
+    return out
+
+
+@settings(
+    max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(data=st.data(), fridge=st.sampled_from(["OpenState", "ClosedState"]))
+def test_the_offered_lines_follow_the_rule_read_off_whole_fact_sets(
+    vocab: Vocabulary, data: st.DataObject, fridge: str
+) -> None:
+    s = stepper(pantry(vocab, fridge), vocab)
+    worlds, back = [_world(s)], None
+    for _ in range(8):
+        offered_now = s.next_lines().lines()
+        assert set(offered_now) == _naive_offered(s, worlds, back, vocab)
+        if not offered_now:
+            break
+        s.take(data.draw(st.sampled_from(sorted(offered_now))))
+        now = _world(s)
+        back = None if now == back else worlds[-1]
+        worlds.append(now)

@@ -19,8 +19,9 @@ A line that would bring the world back to what the plan has already made
 of it is not offered either: the plan would only have gone round a loop
 (``pick``, ``put``, ``pick``, ``put`` ...).  One exception: a line may undo
 the line just before it, once (``open`` the fridge, then ``close`` it), as
-a hazard the plan's end would show is often settled that way.  Where the
-robot stands counts only for a line that changes nothing else (a ``find``).
+a hazard the plan's end would show is often settled that way.  The world
+includes where the robot stands (``Robot_1 isNear Pot_1``), but not the
+record of which objects it has found so far.
 
 When the loop has a tutor, the sandbox carries its judgement of a plan's
 lines so far (:attr:`Sandbox.judge`): the line the model writes is checked
@@ -36,7 +37,7 @@ whole plan is verified as any other.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Set
+from collections.abc import Callable, Iterable, Set
 from dataclasses import dataclass
 
 from virf.errors import InputError
@@ -47,9 +48,7 @@ from virf.world.language import LIQUIDS
 from virf.world.plan import PlanStep, parse_line
 from virf.world.scene import Scene
 from virf.world.simulator import PreconditionFailure, ResolvedStep, Simulator, WorldState
-
-# Where a plan is: the object the robot stands at, and the world's facts.
-Place = tuple[str | None, frozenset[Fact]]
+from virf.world.state import changed
 
 
 @dataclass(frozen=True, eq=False)
@@ -73,12 +72,16 @@ class Stepper:
         self._state = self._sim.initial(sandbox.scene)
         self._judge = sandbox.judge
         self._previous: PlanStep | None = None
-        self._key = _key(self._state)
-        self._visited = {self._key}
-        self._worlds = {self._key[1]}
-        # The place before the last line, which the next line may go back to
-        # (undoing the last line) unless the last line was such an undo.
-        self._back: Place | None = None
+        # Each candidate line's state is told apart from where the plan has
+        # been by a hash of its world, updated by the facts the line changes
+        # (a pass over every fact per candidate made a line cost the square
+        # of a big scene); equal hashes are confirmed on the facts.
+        world = (f for f in self._state.facts if f.predicate != "isLocated")
+        self._place = _Place(_fold(world), self._state)
+        self._been = [self._place]
+        # Where the plan was before its last line, which the next line may go
+        # back to (undoing the last line) unless the last line was such an undo.
+        self._back: _Place | None = None
         self.lines: list[str] = []
 
     def next_lines(self, refused: Set[str] = frozenset()) -> PlanConstraint:
@@ -101,18 +104,16 @@ class Stepper:
 
     def take(self, line: str) -> None:
         """Run the line the model wrote (one :meth:`next_lines` offered)."""
-        after = self._run(line)
-        if after is None:
+        ran = self._run(line)
+        if ran is None:
             # The grammar offered only lines that run: a line that does not is
             # a fault of this module, not of the model.
             raise RuntimeError(f"the plan line {line!r} was offered but does not run")
-        self._state, self._previous = after
-        key = _key(self._state)
-        undo = self._back is not None and _returns(key, self._key, self._back)
-        self._back = None if undo else self._key
-        self._key = key
-        self._visited.add(key)
-        self._worlds.add(key[1])
+        place, self._previous = ran
+        undo = self._back is not None and place.same(self._back)
+        self._back = None if undo else self._place
+        self._state, self._place = place.state, place
+        self._been.append(place)
         self.lines.append(line)
 
     def accepts(self, line: str) -> bool:
@@ -120,7 +121,7 @@ class Stepper:
         without a tutor)."""
         return self._judge is None or self._judge((*self.lines, line))
 
-    def _run(self, line: str) -> tuple[WorldState, PlanStep] | None:
+    def _run(self, line: str) -> tuple[_Place, PlanStep] | None:
         n = len(self.lines) + 1
         try:
             step = parse_line(line, n, n, self._previous)
@@ -132,28 +133,45 @@ class Stepper:
         after = self._sim.apply(self._state, resolved)
         if isinstance(after, PreconditionFailure):
             return None
-        key = _key(after)
-        if key == self._key:
+        now = self._place
+        delta = [f for f in changed(self._state, after) if f.predicate != "isLocated"]
+        if not delta:
             return None  # nothing changed
-        if self._back is not None and _returns(key, self._key, self._back):
-            return after, step  # undoing the last line, once
-        seen = key[1] in self._worlds if key[1] != self._key[1] else key in self._visited
-        return None if seen else (after, step)
+        place = _Place(now.world ^ _fold(delta), after)
+        if self._back is not None and place.same(self._back):
+            return place, step  # undoing the last line, once
+        if any(place.same(been) for been in self._been):
+            return None  # back where the plan has been
+        return place, step
+
+
+@dataclass(frozen=True)
+class _Place:
+    """Where a plan is: its world (the facts but for which objects the robot
+    has found, a record of where it has been) as a hash, with the state to
+    confirm it.  Where the robot stands is a fact of the world (``isNear``)."""
+
+    world: int
+    state: WorldState
+
+    def same(self, other: _Place) -> bool:
+        return self.world == other.world and (
+            self.state is other.state or _world(self.state) == _world(other.state)
+        )
+
+
+def _world(state: WorldState) -> frozenset[Fact]:
+    return frozenset(f for f in state.facts if f.predicate != "isLocated")
+
+
+def _fold(facts: Iterable[Fact]) -> int:
+    """A hash of a set of facts that a change updates: the XOR of theirs."""
+    out = 0
+    for f in facts:
+        out ^= hash(f)
+    return out
 
 
 def _line(verb: str, name: str) -> str:
     # A fill runs or not whatever the liquid (the grammar then offers each).
     return f"{verb} {name} {LIQUIDS[0]}" if verb == "fillLiquid" else f"{verb} {name}"
-
-
-def _returns(key: Place, now: Place, back: Place) -> bool:
-    """Whether going from ``now`` to ``key`` returns to ``back``: the same
-    world, or (when the world does not change) the same place."""
-    return key[1] == back[1] if key[1] != now[1] else key == back
-
-
-def _key(state: WorldState) -> Place:
-    """What makes two states the same place in a plan: the robot at the same
-    object, and the same facts but for which objects it has found (a record
-    of where it has been, like its place)."""
-    return state.last_found, frozenset(f for f in state.facts if f.predicate != "isLocated")
