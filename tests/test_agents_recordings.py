@@ -39,6 +39,13 @@ ROOMS = [
     ),
     ("kitchen-focused", SAB, 4, "### Focused grammar and numbered corrections", CONSTRAINED),
     ("kitchen-stepwise", SAB, 4, "### A line at a time: kitchens", CONSTRAINED),
+    (
+        "other-rooms-stepwise",
+        SAB / "other_rooms",
+        4,
+        "### A line at a time: living rooms, bedrooms and bathrooms",
+        CONSTRAINED,
+    ),
 ]
 
 
