@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from virf.api import LogicTutor
 from virf.ontology.tbox import Vocabulary
 from virf.schema import Fact
-from virf.world.actions import HANDLERS, Change, heat, lacking_affordance
+from virf.world.actions import Change
 from virf.world.language import LIQUIDS, VERBS
 from virf.world.plan import parse_line
 from virf.world.scene import Scene
@@ -90,14 +90,9 @@ def step(sim: Simulator, state: WorldState, line: str, i: int) -> tuple[Change, 
     r = sim.resolve(state, parse_line(line, i, i))
     if isinstance(r, MissingObject):
         return None
-    change = Change(sim.vocab, state, r, {})
-    failure = lacking_affordance(change)
-    if failure is None:
-        handler = HANDLERS.get(r.step.verb)
-        failure = handler(change) if handler is not None else None
-    if failure is not None:
+    change = sim.change(state, r)
+    if isinstance(change, PreconditionFailure):
         return None
-    heat(change)
     # What the effects found through the indexes is what a pass over every
     # fact of the working copy finds.
     names = {n for f in change.facts for n in (f.subject, f.object) if n} | {"OnState"}

@@ -445,6 +445,12 @@ class Simulator:
 
     # ------------------------------------------------------------------ effects
     def apply(self, state: WorldState, r: ResolvedStep) -> WorldState | PreconditionFailure:
+        change = self.change(state, r)
+        return change if isinstance(change, PreconditionFailure) else change.result()
+
+    def change(self, state: WorldState, r: ResolvedStep) -> Change | PreconditionFailure:
+        """What the step does to ``state``, as the working copy of its facts
+        before it becomes the next state (a test reads what its effects found)."""
         change = Change(self.vocab, state, r, self._heaters)
         failure = lacking_affordance(change)
         if failure is None:
@@ -455,7 +461,7 @@ class Simulator:
         if failure is not None:
             return failure
         heat(change)
-        return change.result()
+        return change
 
 
 # How near in meaning a scene's name must be to a plan's word to be offered
