@@ -273,8 +273,8 @@ ConstrainOpt = Annotated[
     typer.Option(
         "--constrain/--no-constrain",
         help="Hold the model's plans to the actions the scene allows on the objects the "
-        "instruction names (a grammar for local: planners, on by default; a JSON schema for "
-        "openai: servers, off by default).",
+        "instruction names (local: planners, on by default, write a line at a time, each "
+        "one that runs next; a JSON schema for openai: servers, off by default).",
     ),
 ]
 
