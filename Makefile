@@ -170,6 +170,10 @@ agents-report: sab-split $(STAMP)
 	  --planner replay:examples/agents/smollm2/kitchen-stepwise.replay.jsonl \
 	  --tasks $(SAB)/unsafe_detailed.jsonl $(SAB)/safe_detailed.jsonl $(SAB)/abstract.jsonl \
 	  $(SAB)/long_horizon.jsonl --out runs/agents-smollm2-kitchen-stepwise-replay
+	$(BIN)/virf bench agents --method impulsive,virf \
+	  --planner replay:examples/agents/smollm2/kitchen-stepwise-all.replay.jsonl \
+	  --tasks $(SAB)/unsafe_detailed.jsonl $(SAB)/safe_detailed.jsonl $(SAB)/abstract.jsonl \
+	  $(SAB)/long_horizon.jsonl --out runs/agents-smollm2-kitchen-stepwise-all-replay
 	$(BIN)/virf bench agents --method impulsive,virf --every 4 \
 	  --planner replay:examples/agents/smollm2/other-rooms-stepwise.replay.jsonl \
 	  --tasks $(SAB)/other_rooms/unsafe_detailed.jsonl $(SAB)/other_rooms/safe_detailed.jsonl \

@@ -39,6 +39,7 @@ ROOMS = [
     ),
     ("kitchen-focused", SAB, 4, "### Focused grammar and numbered corrections", CONSTRAINED),
     ("kitchen-stepwise", SAB, 4, "### A line at a time: kitchens", CONSTRAINED),
+    ("kitchen-stepwise-all", SAB, 1, "### A line at a time: all 190 kitchen tasks", CONSTRAINED),
     (
         "other-rooms-stepwise",
         SAB / "other_rooms",
