@@ -104,7 +104,10 @@ class Stepper:
 
     def take(self, line: str) -> None:
         """Run the line the model wrote (one :meth:`next_lines` offered)."""
-        ran = self._run(line)
+        # Whether it goes where the plan has been is not asked again: the
+        # grammar offers a vessel's fills together, decided by the first
+        # liquid, so 'fillLiquid Mug_1 coffee' may repeat a fill of coffee.
+        ran = self._run(line, places=False)
         if ran is None:
             # The grammar offered only lines that run: a line that does not is
             # a fault of this module, not of the model.
@@ -121,7 +124,7 @@ class Stepper:
         without a tutor)."""
         return self._judge is None or self._judge((*self.lines, line))
 
-    def _run(self, line: str) -> tuple[_Place, PlanStep] | None:
+    def _run(self, line: str, places: bool = True) -> tuple[_Place, PlanStep] | None:
         n = len(self.lines) + 1
         try:
             step = parse_line(line, n, n, self._previous)
@@ -135,9 +138,11 @@ class Stepper:
             return None
         now = self._place
         delta = [f for f in changed(self._state, after) if f.predicate != "isLocated"]
+        place = _Place(now.world ^ _fold(delta), after)
+        if not places:
+            return place, step
         if not delta:
             return None  # nothing changed
-        place = _Place(now.world ^ _fold(delta), after)
         if self._back is not None and place.same(self._back):
             return place, step  # undoing the last line, once
         if any(place.same(been) for been in self._been):
