@@ -48,7 +48,7 @@ from virf.reasoning.batch import halving
 from virf.reasoning.chase import ChaseLimit, Model
 from virf.reasoning.evaluate import Evaluator, Fallback, required
 from virf.reasoning.kept import Core, Kept, individuals
-from virf.reasoning.prior import Atoms, Prior, Values, atoms
+from virf.reasoning.prior import Atoms, Prior, Tables, Values, atoms, tables
 from virf.reasoning.program import Program, compile_program
 from virf.reasoning.proof import NoProof, Prover, atom_of
 from virf.schema import Fact, FactKind
@@ -61,6 +61,8 @@ _INTERNAL = ("owl:", "aux:", "{", "undefined:", "_:")
 # model), which a handful of questions do not repay.
 BATCH_FROM = 6
 
+
+_NONE: frozenset[str] = frozenset()
 
 # Atoms a step may add to the shared model and still have its answers kept
 # for the next step (see classify_shared).
@@ -88,8 +90,10 @@ class FastEngine(Engine):
         self._core: Core | None = None  # see sharing()
         self._kept = Kept()  # the model sharing() grows, kept between blocks
         self._required: dict[str, list[frozenset[str]]] = {}  # see _needs
-        # The last step classify_shared grew the core by: its atoms and answers.
-        self._last: tuple[Core, Atoms, Values] | None = None
+        self._read: dict[str, Tables] = {}  # see _tables
+        # The last step classify_shared grew the core by: its atoms, answers
+        # and each concept's candidates.
+        self._last: tuple[Core, Atoms, Values, dict[str, frozenset[str] | None]] | None = None
         self._query_ids = frozenset(
             a.id for a in self.fragment.query_axiom.values() if a.id is not None
         )
@@ -333,8 +337,16 @@ class FastEngine(Engine):
                 if small and last is not None and last[0] is core:
                     prior = Prior(last[2], defs, sinks, last[1] ^ grown)
                 ev = Evaluator(m, defs, sinks, prior)
-                found = self._instances(m, ev, core.individuals | individuals(added), concepts)
-                self._last = (core, grown, ev.values) if small else None
+                wheres: dict[str, frozenset[str] | None] = {}
+                found = self._instances(
+                    m,
+                    ev,
+                    core.individuals | individuals(added),
+                    concepts,
+                    before=(last[3], prior) if prior is not None and last is not None else None,
+                    wheres=wheres,
+                )
+                self._last = (core, grown, ev.values, wheres) if small else None
                 return found
             finally:
                 m.rollback(token)
@@ -348,9 +360,22 @@ class FastEngine(Engine):
         return result
 
     def _instances(
-        self, m: Model, ev: Evaluator, abox: frozenset[str], concepts: Sequence[str]
+        self,
+        m: Model,
+        ev: Evaluator,
+        abox: frozenset[str],
+        concepts: Sequence[str],
+        *,
+        before: tuple[dict[str, frozenset[str] | None], Prior] | None = None,
+        wheres: dict[str, frozenset[str] | None] | None = None,
     ) -> Classification:
-        """The instances among ``abox`` of each concept, in the grown model."""
+        """The instances among ``abox`` of each concept, in the grown model.
+
+        ``before`` is the previous step's candidates of each concept and
+        what changed since: a concept none of whose tables changed keeps
+        its candidates (a step moves one or two objects; reading every
+        concept's candidates again was half of a step's classification).
+        This step's candidates go into ``wheres``, for the next."""
         if m.clash is not None:
             return Classification(False, {})
         bad = ev.violations(self._checks(m))
@@ -358,23 +383,47 @@ class FastEngine(Engine):
             raise Fallback(f"candidate model violates: {bad}")
         found: dict[str, tuple[str, ...]] = {}
         members = m.members
+        kept, prior = before if before is not None else ({}, None)
         for concept in concepts:
-            check_deadline("while the fast engine classified the facts")
-            # Every set of classes the concept needs lacks a member: it has
-            # no candidate (most concepts, in most steps, are settled here).
-            # (A loop and map: generators here cost a tenth of a step.)
-            for alt in self._needs(concept, ev.defs):
-                if all(map(members.get, alt)):
-                    break
+            where: frozenset[str] | None
+            if concept in kept and prior is not None and prior.unchanged(self._tables(concept)):
+                where = kept[concept]
             else:
+                # Every set of classes the concept needs lacks a member: it has
+                # no candidate (most concepts, in most steps, are settled here).
+                # (A loop and map: generators here cost a tenth of a step.)
+                for alt in self._needs(concept, ev.defs):
+                    if all(map(members.get, alt)):
+                        break
+                else:
+                    if wheres is not None:
+                        wheres[concept] = _NONE
+                    continue
+                # (Checked only here: a concept settled above costs a microsecond.)
+                check_deadline("while the fast engine classified the facts")
+                # Only where the concept holds in the model can it be entailed.
+                read = ev.candidates(("C", concept))
+                # Frozen: a class's members are a live table of the model.
+                where = None if read is None else frozenset(read) if read else _NONE
+            if wheres is not None:
+                wheres[concept] = where
+            if where is not None and not where:
                 continue
-            # Only where the concept holds in the model can it be entailed.
-            where = ev.candidates(("C", concept))
+            check_deadline("while the fast engine classified the facts")
             pool = abox if where is None else abox & where
             names = tuple(x for x in sorted(pool) if self._decide(ev, concept, x))
             if names:
                 found[concept] = names
         return Classification(True, found)
+
+    def _tables(self, concept: str) -> Tables:
+        """The model tables the concept's candidates read (evaluate.tables)."""
+        read = self._read.get(concept)
+        if read is None:
+            lazy = self.program(frozenset())[0].lazy
+            read = tables(("C", concept), self.fragment.query_defs, self.fragment.sinks, lazy)
+            self._read[concept] = read
+        return read
 
     def _needs(self, concept: str, defs: dict[str, Expr]) -> list[frozenset[str]]:
         """The knowledge-base classes the concept's candidates require."""

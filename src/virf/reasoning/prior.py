@@ -20,14 +20,21 @@ role that is searched rather than stored):
   by a changed edge, so it is in the first set already;
 * ``r value i``: the individuals with a changed ``r`` edge;
 * a data value: the individuals whose data changed.
+
+A query class's candidates (:meth:`Evaluator.candidates`) are read from
+whole tables of the model: the members of a class, the edges of a role, the
+values of a data property.  Where no atom of those tables changed, the
+previous step's candidates are this step's (:meth:`Prior.unchanged`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Collection, Iterable
+from collections.abc import Set as AbstractSet
 from typing import Any
 
 from virf.ontology.fragment import Expr
+from virf.ontology.iri import THING
 from virf.reasoning.chase import Model
 
 # Journal entries that are atoms of the model: an element, a type, an edge, a datum.
@@ -35,12 +42,39 @@ _ATOMS = frozenset({"e", "t", "r", "d"})
 
 Atoms = frozenset[tuple[Any, ...]]
 Values = dict[tuple[Expr, str], bool]
+Tables = frozenset[tuple[str, str]]
 
 
 def atoms(m: Model, since: int) -> Atoms:
     """The atoms the model's journal recorded from position ``since`` on."""
     assert m.journal is not None
     return frozenset(e for e in m.journal[since:] if e[0] in _ATOMS)
+
+
+def tables(
+    e: Expr, defs: dict[str, Expr], sinks: AbstractSet[str], lazy: Collection[str]
+) -> Tables:
+    """The model's tables :meth:`Evaluator.candidates` reads for ``e``, as
+    (journal tag, name): ``("t", class)``, ``("r", property)``, ``("d",
+    data property)``.  Where no atom of them changed between two models,
+    ``e``'s candidates are the same in both."""
+    tag = e[0]
+    if tag == "C":
+        if e[1] in defs:
+            return tables(defs[e[1]], defs, sinks, lazy)
+        return frozenset() if e[1] == THING or e[1] in sinks else frozenset({("t", e[1])})
+    if tag in ("and", "or"):
+        return frozenset().union(*(tables(c, defs, sinks, lazy) for c in e[1]))
+    if tag == "some" or (tag == "min" and int(e[1]) >= 1):
+        role, filler = (e[1], e[2]) if tag == "some" else (e[2], e[3])
+        if role[0] in lazy:
+            return frozenset()
+        return tables(filler, defs, sinks, lazy) | {("r", role[0])}
+    if tag == "value":
+        return frozenset() if e[1][0] in lazy else frozenset({("r", e[1][0])})
+    if tag == "dvalue":
+        return frozenset({("d", e[1])})
+    return frozenset()  # the candidates are None or fixed by the expression
 
 
 class Prior:
@@ -56,14 +90,19 @@ class Prior:
         self.types: set[str] = set()
         self.data: set[str] = set()
         self.edges: dict[str, set[str]] = {}
+        self.tables: set[tuple[str, str]] = set()  # the tables the atoms are in
         for entry in diff:
             tag = entry[0]
             if tag in ("e", "t"):
                 self.types.add(entry[1])
+                if tag == "t":
+                    self.tables.add(("t", entry[2]))
             elif tag == "d":
                 self.data.add(entry[1])
+                self.tables.add(("d", entry[2]))
             else:
                 self.edges.setdefault(entry[1], set()).update(entry[2:])
+                self.tables.add(("r", entry[1]))
         self._affected: dict[Expr, set[str] | None] = {}
 
     def affected(self, m: Model, e: Expr) -> set[str] | None:
@@ -112,6 +151,10 @@ class Prior:
         if tag == "dvalue":
             return self.data
         return None
+
+    def unchanged(self, read: Tables) -> bool:
+        """Whether no atom of the tables ``read`` differs between the models."""
+        return self.tables.isdisjoint(read)
 
     def holds(self, m: Model, e: Expr, x: str) -> bool | None:
         """The previous model's answer to ``e(x)`` when it is this one's too;
