@@ -118,8 +118,10 @@ def _candidates_follow_tables(tutor: LogicTutor, snapshots: Sequence[Sequence[Fa
     for facts in snapshots:
         with engine._model(Fact.sorted(set(facts)), frozenset()) as (m, ev):
             contents = [_tables_content(m, reads[name]) for name in sorted(defs)]
-            found = [ev.candidates(("C", name)) for name in sorted(defs)]
-            found = [None if c is None else frozenset(c) for c in found]
+            found: list[object] = []
+            for name in sorted(defs):
+                read = ev.candidates(("C", name))
+                found.append(None if read is None else frozenset(read))
         for before, was in seen[-1:]:
             for k, name in enumerate(sorted(defs)):
                 if contents[k] == before[k]:
