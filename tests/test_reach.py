@@ -96,11 +96,14 @@ def test_example_plans_steps_classified_as_from_nothing(tutor: LogicTutor) -> No
 def _tables_content(m: Model, read: Tables) -> list[object]:
     """What the model holds in the tables ``read``."""
     out: list[object] = []
-    for tag, name in sorted(read):
+    for tag, name, *end in sorted(read):
         if tag == "t":
             out.append(frozenset(m.members.get(name, ())))
         elif tag == "r":
             out.append(frozenset((x, y) for x, ys in m.succ.get(name, {}).items() for y in ys))
+        elif tag in ("r>", "r<"):  # the edges into, or out of, one individual
+            table = m.pred if tag == "r>" else m.succ
+            out.append(frozenset(table.get(name, {}).get(end[0], ())))
         else:
             out.append(frozenset((x, v) for x, t in m.data.items() for v in t.get(name, ())))
     return out

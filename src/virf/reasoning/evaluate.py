@@ -277,19 +277,17 @@ class Evaluator:
                 return None
             return m.members.get(name, _NONE)
         if tag == "and":
-            # Named conjuncts first: an action class absent from the state
-            # settles the question before any role is read.
+            # Named conjuncts first, then a role's value, then the rest: an
+            # action class absent from the state, or a property no object
+            # has, settles the question before a filler is read.
             both: set[str] | None = None
-            for named in (True, False):
-                for c in e[1]:
-                    if (c[0] == "C") is not named:
-                        continue
-                    part = self.candidates(c)
-                    if part is None:
-                        continue
-                    both = set(part) if both is None else both & part
-                    if not both:
-                        return both
+            for c in _by_cost(e):
+                part = self.candidates(c)
+                if part is None:
+                    continue
+                both = set(part) if both is None else both & part
+                if not both:
+                    return both
             return both
         if tag == "or":
             parts = [self.candidates(c) for c in e[1]]
@@ -485,6 +483,23 @@ class Evaluator:
         if k == "ddomain":
             return sub(("or", (("dvalue", a[0], True), ("dvalue", a[0], False))), a[1])
         raise Fallback(f"no model check for {k}")
+
+
+# Conjunctions' parts in the order candidates() reads them, by the
+# conjunction's id (the conjunction is kept beside it, so the id stays its own).
+_ORDERED: dict[int, tuple[Expr, tuple[Expr, ...]]] = {}
+_COST = {"C": 0, "value": 1, "dvalue": 1, "oneof": 1}
+
+
+def _by_cost(e: Expr) -> tuple[Expr, ...]:
+    hit = _ORDERED.get(id(e))
+    if hit is not None and hit[0] is e:
+        return hit[1]
+    parts = tuple(sorted(e[1], key=lambda c: _COST.get(c[0], 2)))  # stable: ties keep order
+    if len(_ORDERED) > 100_000:  # definitions rebuilt without axioms, again and again
+        _ORDERED.clear()
+    _ORDERED[id(e)] = (e, parts)
+    return parts
 
 
 def required(

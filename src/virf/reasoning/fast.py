@@ -28,6 +28,7 @@ from __future__ import annotations
 import threading
 from collections import Counter
 from collections.abc import Callable, Collection, Iterable, Iterator, Sequence
+from collections.abc import Set as AbstractSet
 from contextlib import contextmanager
 from typing import Any
 
@@ -48,7 +49,7 @@ from virf.reasoning.batch import halving
 from virf.reasoning.chase import ChaseLimit, Model
 from virf.reasoning.evaluate import Evaluator, Fallback, required
 from virf.reasoning.kept import Core, Kept, individuals
-from virf.reasoning.prior import Atoms, Prior, Tables, Values, atoms, tables
+from virf.reasoning.prior import Atoms, Prior, Values, atoms, tables
 from virf.reasoning.program import Program, compile_program
 from virf.reasoning.proof import NoProof, Prover, atom_of
 from virf.schema import Fact, FactKind
@@ -90,7 +91,7 @@ class FastEngine(Engine):
         self._core: Core | None = None  # see sharing()
         self._kept = Kept()  # the model sharing() grows, kept between blocks
         self._required: dict[str, list[frozenset[str]]] = {}  # see _needs
-        self._read: dict[str, Tables] = {}  # see _tables
+        self._readers: dict[tuple[str, ...], frozenset[str]] | None = None  # see _touched
         # The last step classify_shared grew the core by: its atoms, answers
         # and each concept's candidates.
         self._last: tuple[Core, Atoms, Values, dict[str, frozenset[str] | None]] | None = None
@@ -383,10 +384,14 @@ class FastEngine(Engine):
             raise Fallback(f"candidate model violates: {bad}")
         found: dict[str, tuple[str, ...]] = {}
         members = m.members
-        kept, prior = before if before is not None else ({}, None)
+        kept: dict[str, frozenset[str] | None] = {}
+        touched: AbstractSet[str] = frozenset()
+        if before is not None:
+            kept, prior = before
+            touched = self._touched(prior)
         for concept in concepts:
             where: frozenset[str] | None
-            if concept in kept and prior is not None and prior.unchanged(self._tables(concept)):
+            if concept in kept and concept not in touched:
                 where = kept[concept]
             else:
                 # Every set of classes the concept needs lacks a member: it has
@@ -416,14 +421,27 @@ class FastEngine(Engine):
                 found[concept] = names
         return Classification(True, found)
 
-    def _tables(self, concept: str) -> Tables:
-        """The model tables the concept's candidates read (evaluate.tables)."""
-        read = self._read.get(concept)
-        if read is None:
+    def _touched(self, prior: Prior) -> AbstractSet[str]:
+        """The concepts whose candidates read a table that changed (see
+        :func:`~virf.reasoning.prior.tables`); any other concept's are the
+        previous step's.  Looked up from the tables, not concept by concept:
+        a step changes a few tables, and a knowledge base has hundreds of
+        concepts."""
+        if self._readers is None:
+            frag = self.fragment
             lazy = self.program(frozenset())[0].lazy
-            read = tables(("C", concept), self.fragment.query_defs, self.fragment.sinks, lazy)
-            self._read[concept] = read
-        return read
+            readers: dict[tuple[str, ...], set[str]] = {}
+            for name in frag.query_defs:
+                for table in tables(("C", name), frag.query_defs, frag.sinks, lazy):
+                    readers.setdefault(table, set()).add(name)
+            self._readers = {t: frozenset(names) for t, names in readers.items()}
+        found: set[str] = set()
+        for table in prior.tables:
+            # A class outside the query definitions reads its own members.
+            found.update(self._readers.get(table, ()))
+            if table[0] == "t":
+                found.add(table[1])
+        return found
 
     def _needs(self, concept: str, defs: dict[str, Expr]) -> list[frozenset[str]]:
         """The knowledge-base classes the concept's candidates require."""

@@ -24,7 +24,8 @@ role that is searched rather than stored):
 A query class's candidates (:meth:`Evaluator.candidates`) are read from
 whole tables of the model: the members of a class, the edges of a role, the
 values of a data property.  Where no atom of those tables changed, the
-previous step's candidates are this step's (:meth:`Prior.unchanged`).
+previous step's candidates are this step's (:attr:`Prior.tables` lists the
+tables that changed).
 """
 
 from __future__ import annotations
@@ -42,7 +43,7 @@ _ATOMS = frozenset({"e", "t", "r", "d"})
 
 Atoms = frozenset[tuple[Any, ...]]
 Values = dict[tuple[Expr, str], bool]
-Tables = frozenset[tuple[str, str]]
+Tables = frozenset[tuple[str, ...]]
 
 
 def atoms(m: Model, since: int) -> Atoms:
@@ -56,7 +57,8 @@ def tables(
 ) -> Tables:
     """The model's tables :meth:`Evaluator.candidates` reads for ``e``, as
     (journal tag, name): ``("t", class)``, ``("r", property)``, ``("d",
-    data property)``.  Where no atom of them changed between two models,
+    data property)``, and the edges of a property into an individual
+    ``("r>", property, i)`` or out of it ``("r<", property, i)``.  Where no atom of them changed between two models,
     ``e``'s candidates are the same in both."""
     tag = e[0]
     if tag == "C":
@@ -71,7 +73,12 @@ def tables(
             return frozenset()
         return tables(filler, defs, sinks, lazy) | {("r", role[0])}
     if tag == "value":
-        return frozenset() if e[1][0] in lazy else frozenset({("r", e[1][0])})
+        # Only the edges that end at the value: a step that switches a
+        # device on changes no edge into any other state.
+        role = e[1]
+        if role[0] in lazy:
+            return frozenset()
+        return frozenset({("r<" if role[1] else "r>", role[0], e[2])})
     if tag == "dvalue":
         return frozenset({("d", e[1])})
     return frozenset()  # the candidates are None or fixed by the expression
@@ -90,7 +97,7 @@ class Prior:
         self.types: set[str] = set()
         self.data: set[str] = set()
         self.edges: dict[str, set[str]] = {}
-        self.tables: set[tuple[str, str]] = set()  # the tables the atoms are in
+        self.tables: set[tuple[str, ...]] = set()  # the tables the atoms are in
         for entry in diff:
             tag = entry[0]
             if tag in ("e", "t"):
@@ -102,7 +109,9 @@ class Prior:
                 self.tables.add(("d", entry[2]))
             else:
                 self.edges.setdefault(entry[1], set()).update(entry[2:])
-                self.tables.add(("r", entry[1]))
+                self.tables.update(
+                    (("r", entry[1]), ("r<", entry[1], entry[2]), ("r>", entry[1], entry[3]))
+                )
         self._affected: dict[Expr, set[str] | None] = {}
 
     def affected(self, m: Model, e: Expr) -> set[str] | None:
@@ -151,10 +160,6 @@ class Prior:
         if tag == "dvalue":
             return self.data
         return None
-
-    def unchanged(self, read: Tables) -> bool:
-        """Whether no atom of the tables ``read`` differs between the models."""
-        return self.tables.isdisjoint(read)
 
     def holds(self, m: Model, e: Expr, x: str) -> bool | None:
         """The previous model's answer to ``e(x)`` when it is this one's too;
