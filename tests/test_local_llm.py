@@ -469,3 +469,46 @@ def test_a_plan_written_a_line_at_a_time_is_the_same_twice(tutor: Any, vocab: An
     assert first.ok and first.text == second.text
     assert first.turned_away == second.turned_away
     assert first.completion_tokens and first.prompt_tokens
+
+
+@needs_model
+def test_a_prompt_too_long_and_a_passed_deadline_fail_alike_written_whole_or_by_line(
+    tutor: Any, vocab: Any
+) -> None:
+    # Both ways of writing share one call to llama.cpp, with one deadline
+    # check and one reading of its errors.
+    from virf.planner.deadline import Deadline
+    from virf.planner.focus import Focus
+    from virf.planner.local import LocalApprentice, LocalSettings
+    from virf.planner.prompting import apprentice_prompt
+    from virf.world.scene import build_scene
+
+    (instruction, data), *_ = _kitchen_tasks(vocab, 1)
+    scene = build_scene(data, vocab)
+    messages = [{"role": "user", "content": apprentice_prompt(instruction, scene)}]
+    constraint = Focus.of(instruction, scene, vocab).constraint()
+    passed = Deadline(0.001)
+    time.sleep(0.01)
+    for stepwise in (False, True):
+        settings = LocalSettings(MODEL, context=256, stepwise=stepwise)
+        with LocalApprentice(settings) as model:
+            short = model.propose(
+                messages,
+                task_id="t",
+                iteration=0,
+                method="virf",
+                purpose=PLAN,
+                constraint=constraint,
+            )
+            late = model.propose(
+                messages,
+                task_id="t",
+                iteration=0,
+                method="virf",
+                purpose=PLAN,
+                constraint=constraint,
+                deadline=passed,
+            )
+        assert not short.ok and "the prompt is too long for the model" in short.reason, stepwise
+        assert not late.ok and "no generation was started" in late.reason, stepwise
+        assert late.completion_tokens == 0

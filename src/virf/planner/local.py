@@ -36,7 +36,7 @@ import json
 import os
 import time
 from collections import OrderedDict
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from functools import cache, cached_property
 from pathlib import Path
@@ -341,37 +341,50 @@ class LocalApprentice(Apprentice):
         pairs[at:at] = few_shot(_asks_reasoning(request))
         return dataclasses.replace(request, messages=tuple(pairs))
 
+    def _call(
+        self, request: ProposalRequest, generate: Callable[[], Any]
+    ) -> tuple[Any, str | None, float]:
+        """One llama.cpp generation under the run's deadline: (body, or None
+        with the problem; latency in ms).  The call cannot be interrupted; a
+        generation is bounded by max_tokens instead (seconds for this model),
+        and none starts once the run's deadline has passed."""
+        stop_at = request.deadline
+        if stop_at is not None and stop_at.remaining() <= 0:
+            return None, f"{stop_at.reason()}; no generation was started", 0.0
+        started = time.perf_counter()
+        try:
+            body = generate()
+        except Exception as exc:
+            # llama.cpp says "Requested tokens (N) exceed context window of M";
+            # a GGUF's own chat template may raise anything (a jinja2 error).
+            latency = (time.perf_counter() - started) * 1000
+            if isinstance(exc, ValueError) and "context window" in str(exc):
+                return None, f"the prompt is too long for the model: {clip(str(exc), 160)}", latency
+            return None, f"llama.cpp failed: {type(exc).__name__}: {clip(str(exc), 160)}", latency
+        return body, None, (time.perf_counter() - started) * 1000
+
     def _ask(
         self, request: ProposalRequest, grammar: Any = None
     ) -> tuple[str | None, str | None, dict[str, Any]]:
         """One generation, within ``grammar`` when given: (text, problem, usage)."""
-        stop_at = request.deadline
-        # The chat call cannot be interrupted; a generation is bounded by
-        # max_tokens instead (seconds for this model), and none starts once
-        # the run's deadline has passed.
-        if stop_at is not None and stop_at.remaining() <= 0:
-            # Nothing generated: 0 tokens written, a known count.
-            none = {"latency_ms": 0.0, "prompt_tokens": None, "completion_tokens": 0}
-            return None, f"{stop_at.reason()}; no generation was started", none
-        started = time.perf_counter()
-        try:
-            body = self._llm.create_chat_completion(
+        body, problem, latency = self._call(
+            request,
+            lambda: self._llm.create_chat_completion(
                 messages=request.as_messages(),
                 temperature=self.settings.temperature,
                 seed=self.settings.seed,
                 max_tokens=self.settings.max_tokens,
                 repeat_penalty=self.settings.repeat_penalty,
                 grammar=grammar,
+            ),
+        )
+        if body is None:
+            # Nothing generated: 0 tokens written, a known count.
+            return (
+                None,
+                problem,
+                {"latency_ms": latency, "prompt_tokens": None, "completion_tokens": 0},
             )
-        except Exception as exc:
-            # llama.cpp says "Requested tokens (N) exceed context window of M";
-            # a GGUF's own chat template may raise anything (a jinja2 error).
-            latency = (time.perf_counter() - started) * 1000
-            usage = {"latency_ms": latency, "prompt_tokens": None, "completion_tokens": 0}
-            if isinstance(exc, ValueError) and "context window" in str(exc):
-                return None, f"the prompt is too long for the model: {clip(str(exc), 160)}", usage
-            return None, f"llama.cpp failed: {type(exc).__name__}: {clip(str(exc), 160)}", usage
-        latency = (time.perf_counter() - started) * 1000
         content = read_reply(json.dumps(body))
         usage = {
             "latency_ms": latency,
@@ -467,12 +480,9 @@ class LocalApprentice(Apprentice):
         bias: dict[int, float] | None = None,
     ) -> tuple[dict[str, Any] | None, str | None, float]:
         """One plain completion of ``tokens``: (body, problem, latency in ms)."""
-        stop_at = request.deadline
-        if stop_at is not None and stop_at.remaining() <= 0:
-            return None, f"{stop_at.reason()}; no generation was started", 0.0
-        started = time.perf_counter()
-        try:
-            body = self._llm.create_completion(
+        body, problem, latency = self._call(
+            request,
+            lambda: self._llm.create_completion(
                 tokens,
                 temperature=self.settings.temperature,
                 seed=self.settings.seed,
@@ -480,13 +490,9 @@ class LocalApprentice(Apprentice):
                 repeat_penalty=self.settings.repeat_penalty,
                 grammar=grammar,
                 logit_bias=bias,
-            )
-        except Exception as exc:
-            latency = (time.perf_counter() - started) * 1000
-            if isinstance(exc, ValueError) and "context window" in str(exc):
-                return None, f"the prompt is too long for the model: {clip(str(exc), 160)}", latency
-            return None, f"llama.cpp failed: {type(exc).__name__}: {clip(str(exc), 160)}", latency
-        return dict(body), None, (time.perf_counter() - started) * 1000
+            ),
+        )
+        return (dict(body) if body is not None else None), problem, latency
 
     def _propose(self, request: ProposalRequest) -> Proposal:
         if request.images:
