@@ -92,6 +92,7 @@ class FastEngine(Engine):
         self._kept = Kept()  # the model sharing() grows, kept between blocks
         self._required: dict[str, list[frozenset[str]]] = {}  # see _needs
         self._readers: dict[tuple[str, ...], frozenset[str]] | None = None  # see _touched
+        self._wanted: dict[tuple[str, str], frozenset[str]] = {}  # see _touched
         # The last step classify_shared grew the core by: its atoms, answers
         # and each concept's candidates.
         self._last: tuple[Core, Atoms, Values, dict[str, frozenset[str] | None]] | None = None
@@ -388,7 +389,7 @@ class FastEngine(Engine):
         touched: AbstractSet[str] = frozenset()
         if before is not None:
             kept, prior = before
-            touched = self._touched(prior)
+            touched = self._touched(prior, m)
         for concept in concepts:
             where: frozenset[str] | None
             if concept in kept and concept not in touched:
@@ -421,7 +422,7 @@ class FastEngine(Engine):
                 found[concept] = names
         return Classification(True, found)
 
-    def _touched(self, prior: Prior) -> AbstractSet[str]:
+    def _touched(self, prior: Prior, m: Model) -> AbstractSet[str]:
         """The concepts whose candidates read a table that changed (see
         :func:`~virf.reasoning.prior.tables`); any other concept's are the
         previous step's.  Looked up from the tables, not concept by concept:
@@ -435,8 +436,13 @@ class FastEngine(Engine):
                 for table in tables(("C", name), frag.query_defs, frag.sinks, lazy):
                     readers.setdefault(table, set()).add(name)
             self._readers = {t: frozenset(names) for t, names in readers.items()}
+            wanted: dict[tuple[str, str], set[str]] = {}
+            for table in readers:
+                if table[0] in ("r>C", "r<C"):
+                    wanted.setdefault((table[0][1], table[1]), set()).add(table[2])
+            self._wanted = {k: frozenset(v) for k, v in wanted.items()}
         found: set[str] = set()
-        for table in prior.tables:
+        for table in (*prior.tables, *prior.class_edges(m, self._wanted)):
             # A class outside the query definitions reads its own members.
             found.update(self._readers.get(table, ()))
             if table[0] == "t":

@@ -30,7 +30,7 @@ tables that changed).
 
 from __future__ import annotations
 
-from collections.abc import Collection, Iterable
+from collections.abc import Collection, Iterable, Iterator, Mapping
 from collections.abc import Set as AbstractSet
 from typing import Any
 
@@ -55,11 +55,18 @@ def atoms(m: Model, since: int) -> Atoms:
 def tables(
     e: Expr, defs: dict[str, Expr], sinks: AbstractSet[str], lazy: Collection[str]
 ) -> Tables:
-    """The model's tables :meth:`Evaluator.candidates` reads for ``e``, as
-    (journal tag, name): ``("t", class)``, ``("r", property)``, ``("d",
-    data property)``, and the edges of a property into an individual
-    ``("r>", property, i)`` or out of it ``("r<", property, i)``.  Where no atom of them changed between two models,
-    ``e``'s candidates are the same in both."""
+    """The model's tables :meth:`Evaluator.candidates` reads for ``e``:
+
+    * ``("t", class)``: the class's members;
+    * ``("r", property)``: every edge of the property;
+    * ``("r>", property, i)`` / ``("r<", property, i)``: its edges into
+      ``i`` / out of ``i``;
+    * ``("r>C", property, class)`` / ``("r<C", property, class)``: its edges
+      into / out of members of the class;
+    * ``("d", data property)``: its values.
+
+    Where no atom of them changed between two models, ``e``'s candidates
+    are the same in both."""
     tag = e[0]
     if tag == "C":
         if e[1] in defs:
@@ -71,7 +78,17 @@ def tables(
         role, filler = (e[1], e[2]) if tag == "some" else (e[2], e[3])
         if role[0] in lazy:
             return frozenset()
-        return tables(filler, defs, sinks, lazy) | {("r", role[0])}
+        # The edges read are those from (or to) the filler's candidates, all
+        # members of the classes that bound them (which the filler's own
+        # tables include): a robot moving beside a loaf changes no edge to
+        # an ignition source.
+        bound = bounding_classes(filler, defs, sinks)
+        edges: Tables = (
+            frozenset({("r", role[0])})
+            if bound is None
+            else frozenset(("r<C" if role[1] else "r>C", role[0], c) for c in bound)
+        )
+        return tables(filler, defs, sinks, lazy) | edges
     if tag == "value":
         # Only the edges that end at the value: a step that switches a
         # device on changes no edge into any other state.
@@ -82,6 +99,28 @@ def tables(
     if tag == "dvalue":
         return frozenset({("d", e[1])})
     return frozenset()  # the candidates are None or fixed by the expression
+
+
+def bounding_classes(
+    e: Expr, defs: dict[str, Expr], sinks: AbstractSet[str]
+) -> frozenset[str] | None:
+    """Classes whose members include all of ``e``'s candidates (None: none
+    found that do)."""
+    tag = e[0]
+    if tag == "C":
+        if e[1] in defs:
+            return bounding_classes(defs[e[1]], defs, sinks)
+        return None if e[1] == THING or e[1] in sinks else frozenset({e[1]})
+    if tag == "and":
+        for c in e[1]:
+            found = bounding_classes(c, defs, sinks)
+            if found is not None:
+                return found
+        return None
+    if tag == "or":
+        parts = [bounding_classes(c, defs, sinks) for c in e[1]]
+        return None if any(p is None for p in parts) else frozenset().union(*parts)  # type: ignore[arg-type]
+    return None
 
 
 class Prior:
@@ -98,6 +137,7 @@ class Prior:
         self.data: set[str] = set()
         self.edges: dict[str, set[str]] = {}
         self.tables: set[tuple[str, ...]] = set()  # the tables the atoms are in
+        self.changed_edges: list[tuple[str, str, str, str]] = []
         for entry in diff:
             tag = entry[0]
             if tag in ("e", "t"):
@@ -112,7 +152,27 @@ class Prior:
                 self.tables.update(
                     (("r", entry[1]), ("r<", entry[1], entry[2]), ("r>", entry[1], entry[3]))
                 )
+                self.changed_edges.append(entry)
         self._affected: dict[Expr, set[str] | None] = {}
+
+    def class_edges(
+        self, m: Model, wanted: Mapping[tuple[str, str], frozenset[str]]
+    ) -> Iterator[tuple[str, ...]]:
+        """The ``("r>C", p, c)`` and ``("r<C", p, c)`` tables (see
+        :func:`tables`) of the changed edges, for the classes ``wanted`` by
+        direction and property.  An end's classes are read in ``m``: an end
+        whose membership of a class differs between the models has that
+        change among the atoms, and the class's own table changed."""
+        types = m.types
+        for _, p, x, y in self.changed_edges:
+            into = wanted.get((">", p))
+            if into:
+                for c in into.intersection(types.get(y, ())):
+                    yield ("r>C", p, c)
+            out = wanted.get(("<", p))
+            if out:
+                for c in out.intersection(types.get(x, ())):
+                    yield ("r<C", p, c)
 
     def affected(self, m: Model, e: Expr) -> set[str] | None:
         """Where ``e``'s classical truth may differ from the previous model's
