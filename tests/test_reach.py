@@ -33,7 +33,7 @@ from virf.reasoning import make_engine
 from virf.reasoning.chase import Model
 from virf.reasoning.evaluate import required
 from virf.reasoning.fast import FastEngine
-from virf.reasoning.prior import Tables, bounding_classes, tables
+from virf.reasoning.prior import Tables, bears, bounding_marks, tables
 from virf.schema import Fact, Report
 from virf.world.plan import PlanStep, parse_plan, parse_plan_text
 from virf.world.scene import Scene, build_scene, load_scene_file
@@ -104,10 +104,10 @@ def _tables_content(m: Model, read: Tables) -> list[object]:
         elif tag in ("r>", "r<"):  # the edges into, or out of, one individual
             table = m.pred if tag == "r>" else m.succ
             out.append(frozenset(table.get(name, {}).get(end[0], ())))
-        elif tag in ("r>C", "r<C"):  # the edges into, or out of, a class's members
-            within = m.members.get(end[0], set())
+        elif tag in ("r>M", "r<M"):  # the edges into, or out of, what bears a mark
             edges = {(x, y) for x, ys in m.succ.get(name, {}).items() for y in ys}
-            out.append(frozenset(e for e in edges if e[1 if tag == "r>C" else 0] in within))
+            at = 1 if tag == "r>M" else 0
+            out.append(frozenset(e for e in edges if bears(m, e[at], end[0])))
         else:
             out.append(frozenset((x, v) for x, t in m.data.items() for v in t.get(name, ())))
     return out
@@ -131,10 +131,10 @@ def _candidates_follow_tables(tutor: LogicTutor, snapshots: Sequence[Sequence[Fa
                 found.append(None if read is None else frozenset(read))
                 # The classes that bound a filler's candidates (whose edges
                 # alone a role over it reads) hold every one of them.
-                bound = bounding_classes(("C", name), defs, sinks)
+                bound = bounding_marks(("C", name), defs, sinks)
                 if bound is not None:
                     assert read is not None, name
-                    assert set(read) <= set().union(*(m.members.get(c, ()) for c in bound)), name
+                    assert all(any(bears(m, x, b) for b in bound) for x in read), name
         for before, was in seen[-1:]:
             for k, name in enumerate(sorted(defs)):
                 if contents[k] == before[k]:

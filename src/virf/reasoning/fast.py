@@ -49,7 +49,7 @@ from virf.reasoning.batch import halving
 from virf.reasoning.chase import ChaseLimit, Model
 from virf.reasoning.evaluate import Evaluator, Fallback, required
 from virf.reasoning.kept import Core, Kept, individuals
-from virf.reasoning.prior import Atoms, Prior, Values, atoms, tables
+from virf.reasoning.prior import Atoms, Mark, Prior, Table, Values, atoms, tables
 from virf.reasoning.program import Program, compile_program
 from virf.reasoning.proof import NoProof, Prover, atom_of
 from virf.schema import Fact, FactKind
@@ -91,8 +91,8 @@ class FastEngine(Engine):
         self._core: Core | None = None  # see sharing()
         self._kept = Kept()  # the model sharing() grows, kept between blocks
         self._required: dict[str, list[frozenset[str]]] = {}  # see _needs
-        self._readers: dict[tuple[str, ...], frozenset[str]] | None = None  # see _touched
-        self._wanted: dict[tuple[str, str], frozenset[str]] = {}  # see _touched
+        self._readers: dict[Table, frozenset[str]] | None = None  # see _touched
+        self._wanted: dict[tuple[str, str], tuple[frozenset[str], list[Mark]]] = {}  # _touched
         # The last step classify_shared grew the core by: its atoms, answers
         # and each concept's candidates.
         self._last: tuple[Core, Atoms, Values, dict[str, frozenset[str] | None]] | None = None
@@ -431,18 +431,23 @@ class FastEngine(Engine):
         if self._readers is None:
             frag = self.fragment
             lazy = self.program(frozenset())[0].lazy
-            readers: dict[tuple[str, ...], set[str]] = {}
+            readers: dict[Table, set[str]] = {}
             for name in frag.query_defs:
                 for table in tables(("C", name), frag.query_defs, frag.sinks, lazy):
                     readers.setdefault(table, set()).add(name)
             self._readers = {t: frozenset(names) for t, names in readers.items()}
-            wanted: dict[tuple[str, str], set[str]] = {}
-            for table in readers:
-                if table[0] in ("r>C", "r<C"):
-                    wanted.setdefault((table[0][1], table[1]), set()).add(table[2])
-            self._wanted = {k: frozenset(v) for k, v in wanted.items()}
+            wanted: dict[tuple[str, str], tuple[set[str], list[Mark]]] = {}
+            for table in sorted(readers):
+                if table[0] in ("r>M", "r<M"):
+                    classes, others = wanted.setdefault((table[0][1], table[1]), (set(), []))
+                    mark: Mark = table[2]
+                    if mark[0] == "C":
+                        classes.add(mark[1])
+                    else:
+                        others.append(mark)
+            self._wanted = {k: (frozenset(c), o) for k, (c, o) in wanted.items()}
         found: set[str] = set()
-        for table in (*prior.tables, *prior.class_edges(m, self._wanted)):
+        for table in (*prior.tables, *prior.marked_edges(m, self._wanted)):
             # A class outside the query definitions reads its own members.
             found.update(self._readers.get(table, ()))
             if table[0] == "t":

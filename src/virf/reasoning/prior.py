@@ -24,8 +24,8 @@ role that is searched rather than stored):
 A query class's candidates (:meth:`Evaluator.candidates`) are read from
 whole tables of the model: the members of a class, the edges of a role, the
 values of a data property.  Where no atom of those tables changed, the
-previous step's candidates are this step's (:attr:`Prior.tables` lists the
-tables that changed).
+previous step's candidates are this step's (:attr:`Prior.tables` and
+:meth:`Prior.marked_edges` list the tables that changed).
 """
 
 from __future__ import annotations
@@ -43,7 +43,8 @@ _ATOMS = frozenset({"e", "t", "r", "d"})
 
 Atoms = frozenset[tuple[Any, ...]]
 Values = dict[tuple[Expr, str], bool]
-Tables = frozenset[tuple[str, ...]]
+Table = tuple[Any, ...]  # see tables()
+Tables = frozenset[Table]
 
 
 def atoms(m: Model, since: int) -> Atoms:
@@ -61,8 +62,8 @@ def tables(
     * ``("r", property)``: every edge of the property;
     * ``("r>", property, i)`` / ``("r<", property, i)``: its edges into
       ``i`` / out of ``i``;
-    * ``("r>C", property, class)`` / ``("r<C", property, class)``: its edges
-      into / out of members of the class;
+    * ``("r>M", property, mark)`` / ``("r<M", property, mark)``: its edges
+      into / out of individuals that bear the mark (:func:`bounding_marks`);
     * ``("d", data property)``: its values.
 
     Where no atom of them changed between two models, ``e``'s candidates
@@ -79,14 +80,14 @@ def tables(
         if role[0] in lazy:
             return frozenset()
         # The edges read are those from (or to) the filler's candidates, all
-        # members of the classes that bound them (which the filler's own
-        # tables include): a robot moving beside a loaf changes no edge to
-        # an ignition source.
-        bound = bounding_classes(filler, defs, sinks)
+        # of which bear one of the marks that bound them (a class, or an edge
+        # to a value; the filler's own tables include theirs): a robot
+        # moving beside a loaf changes no edge to an ignition source.
+        bound = bounding_marks(filler, defs, sinks)
         edges: Tables = (
             frozenset({("r", role[0])})
             if bound is None
-            else frozenset(("r<C" if role[1] else "r>C", role[0], c) for c in bound)
+            else frozenset(("r<M" if role[1] else "r>M", role[0], mark) for mark in bound)
         )
         return tables(filler, defs, sinks, lazy) | edges
     if tag == "value":
@@ -101,26 +102,42 @@ def tables(
     return frozenset()  # the candidates are None or fixed by the expression
 
 
-def bounding_classes(
+# What an individual bears: ("C", class) a class; ("V", property, inverse,
+# i) an edge of the property to i (from i, when inverse).
+Mark = tuple[str, ...]
+
+
+def bounding_marks(
     e: Expr, defs: dict[str, Expr], sinks: AbstractSet[str]
-) -> frozenset[str] | None:
-    """Classes whose members include all of ``e``'s candidates (None: none
-    found that do)."""
+) -> frozenset[Mark] | None:
+    """Marks one of which every candidate of ``e`` bears (None: none found
+    that do).  Of a conjunction's parts, a value bounds more closely than a
+    class (PhysicalObject bounds little)."""
     tag = e[0]
     if tag == "C":
         if e[1] in defs:
-            return bounding_classes(defs[e[1]], defs, sinks)
-        return None if e[1] == THING or e[1] in sinks else frozenset({e[1]})
+            return bounding_marks(defs[e[1]], defs, sinks)
+        return None if e[1] == THING or e[1] in sinks else frozenset({("C", e[1])})
+    if tag == "value":
+        return frozenset({("V", e[1][0], "<" if e[1][1] else ">", e[2])})
     if tag == "and":
-        for c in e[1]:
-            found = bounding_classes(c, defs, sinks)
-            if found is not None:
-                return found
-        return None
+        found = [b for c in e[1] if (b := bounding_marks(c, defs, sinks)) is not None]
+        if not found:
+            return None
+        return next((b for b in found if all(m[0] == "V" for m in b)), found[0])
     if tag == "or":
-        parts = [bounding_classes(c, defs, sinks) for c in e[1]]
+        parts = [bounding_marks(c, defs, sinks) for c in e[1]]
         return None if any(p is None for p in parts) else frozenset().union(*parts)  # type: ignore[arg-type]
     return None
+
+
+def bears(m: Model, x: str, mark: Mark) -> bool:
+    """Whether ``x`` bears ``mark`` in ``m``."""
+    if mark[0] == "C":
+        return mark[1] in m.types.get(x, ())
+    _, q, way, i = mark
+    # An edge x q i (way ">"), or i q x (way "<").
+    return i in (m.succ if way == ">" else m.pred).get(q, {}).get(x, ())
 
 
 class Prior:
@@ -136,7 +153,7 @@ class Prior:
         self.types: set[str] = set()
         self.data: set[str] = set()
         self.edges: dict[str, set[str]] = {}
-        self.tables: set[tuple[str, ...]] = set()  # the tables the atoms are in
+        self.tables: set[Table] = set()  # the tables the atoms are in
         self.changed_edges: list[tuple[str, str, str, str]] = []
         for entry in diff:
             tag = entry[0]
@@ -155,24 +172,27 @@ class Prior:
                 self.changed_edges.append(entry)
         self._affected: dict[Expr, set[str] | None] = {}
 
-    def class_edges(
-        self, m: Model, wanted: Mapping[tuple[str, str], frozenset[str]]
-    ) -> Iterator[tuple[str, ...]]:
-        """The ``("r>C", p, c)`` and ``("r<C", p, c)`` tables (see
-        :func:`tables`) of the changed edges, for the classes ``wanted`` by
-        direction and property.  An end's classes are read in ``m``: an end
-        whose membership of a class differs between the models has that
-        change among the atoms, and the class's own table changed."""
+    def marked_edges(
+        self, m: Model, wanted: Mapping[tuple[str, str], tuple[frozenset[str], list[Mark]]]
+    ) -> Iterator[Table]:
+        """The ``("r>M", p, mark)`` and ``("r<M", p, mark)`` tables (see
+        :func:`tables`) of the changed edges, for the marks ``wanted`` by
+        direction and property (its classes, and its other marks).  An end's
+        marks are read in ``m``: an end whose marks differ between the
+        models has that change among the atoms, in the mark's own table."""
         types = m.types
         for _, p, x, y in self.changed_edges:
-            into = wanted.get((">", p))
-            if into:
-                for c in into.intersection(types.get(y, ())):
-                    yield ("r>C", p, c)
-            out = wanted.get(("<", p))
-            if out:
-                for c in out.intersection(types.get(x, ())):
-                    yield ("r<C", p, c)
+            for way, end in ((">", y), ("<", x)):
+                hit = wanted.get((way, p))
+                if hit is None:
+                    continue
+                table = "r" + way + "M"
+                classes, others = hit
+                for c in classes.intersection(types.get(end, ())):
+                    yield (table, p, ("C", c))
+                for mark in others:
+                    if bears(m, end, mark):
+                        yield (table, p, mark)
 
     def affected(self, m: Model, e: Expr) -> set[str] | None:
         """Where ``e``'s classical truth may differ from the previous model's
