@@ -124,6 +124,12 @@ def test_a_step_carried_from_the_state_before_equals_one_from_scratch(
         _, after = taken
         assert changed(state, after) == set(state.facts) ^ set(after.facts)
         assert changed(fresh(state), fresh(after)) == changed(state, after)
+        # The indexes of names, kept from the state before when the step
+        # made no object (slicing makes some).
+        scratch = fresh(after)
+        assert after._by_lower == scratch._by_lower
+        assert after._by_key == scratch._by_key
+        assert after._by_stem == scratch._by_stem
         if data.draw(st.booleans()):
             # Asked at once, or left for a later state to carry further.
             new = fresh(after)

@@ -199,6 +199,19 @@ def remember_change(before: WorldState, after: WorldState, facts: frozenset[Fact
     # Caches, like cached_property's: they change no field of the state.
     after.__dict__["_changed"] = (before, facts)
     after.__dict__["_parent"] = (before, Fact.sorted(facts))
+    # The indexes of names read only the names, their order and the words
+    # open-world objects were written with; most steps make no object.
+    if (
+        after.order == before.order
+        and after.objects.keys() == before.objects.keys()
+        and after.open_world == before.open_world
+    ):
+        for name in _NAME_INDEXES:
+            if name in before.__dict__:
+                after.__dict__[name] = before.__dict__[name]
+
+
+_NAME_INDEXES = ("_by_lower", "_by_key", "_by_stem")
 
 
 def _forward_index(facts: Mapping[Fact, Provenance]) -> dict[tuple[str, str], list[str]]:
