@@ -26,6 +26,12 @@ class Fallback(Exception):
     """The bounds did not meet: ask the reference engine."""
 
 
+def checks(m: Model) -> list[Axiom]:
+    """The axioms the rules do not capture, to check a candidate model
+    against (those switched off in ``m`` left out)."""
+    return [a for a in m.prog.checks if a.id is None or a.id not in m.disabled]
+
+
 class Evaluator:
     """Query evaluation over one model: classical truth, certain truth, and
     the search for a falsifying extension."""
@@ -317,6 +323,42 @@ class Evaluator:
         if tag == "dvalue":
             return {x for x, table in m.data.items() if e[2] in table.get(e[1], _NONE)}
         return None
+
+    # ------------------------------------------------------------------ decision
+    def decide(self, concept: str, x: str) -> bool:
+        """Is ``concept(x)`` entailed?  The model must already be verified
+        (:func:`checks`): the bounds meet, or :class:`Fallback`."""
+        if concept in self.sinks:
+            raise Fallback(f"{concept} is a sink class")
+        e = self.defs.get(concept)
+        if e is None:  # a knowledge-base class: the verified least model decides
+            return concept in self.m.types[x]
+        if not self.holds(e, x):
+            return False
+        if self.certain(e, x):
+            return True
+        if self._refuted(e, x):
+            return False
+        raise Fallback(f"{concept}({x}) is neither proved nor refuted")
+
+    def _refuted(self, e: Expr, x: str) -> bool:
+        """A model of the axioms where ``e(x)`` is false, grown from this one
+        by a few falsifying assertions (rolled back after)."""
+        m = self.m
+        token = m.begin()
+        try:
+            for _ in range(4):
+                ops = self.falsifiers(e, x)
+                if not ops:
+                    return False
+                self.apply(ops)
+                if m.clash is not None:
+                    return False
+                if not self.holds(e, x):
+                    return self.violations(checks(m)) is None
+            return False
+        finally:
+            m.rollback(token)
 
     def certain_not(self, e: Expr, x: str) -> bool:
         """Sound: True only if ``not e(x)`` is entailed, i.e. asserting ``e(x)``

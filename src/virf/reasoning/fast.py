@@ -33,7 +33,7 @@ from contextlib import contextmanager
 from typing import Any
 
 from virf.errors import VirfError
-from virf.ontology.fragment import Axiom, Expr, Fragment
+from virf.ontology.fragment import Expr, Fragment
 from virf.ontology.tbox import TBox
 from virf.reasoning import (
     Classification,
@@ -47,9 +47,9 @@ from virf.reasoning import (
 )
 from virf.reasoning.batch import halving
 from virf.reasoning.chase import ChaseLimit, Model
-from virf.reasoning.evaluate import Evaluator, Fallback, required
+from virf.reasoning.evaluate import Evaluator, Fallback, checks, required
 from virf.reasoning.kept import Core, Kept, individuals
-from virf.reasoning.prior import Atoms, Mark, Prior, Table, Values, atoms, tables
+from virf.reasoning.prior import Atoms, Prior, Readers, Values, atoms
 from virf.reasoning.program import Program, compile_program
 from virf.reasoning.proof import NoProof, Prover, atom_of
 from virf.schema import Fact, FactKind
@@ -91,8 +91,7 @@ class FastEngine(Engine):
         self._core: Core | None = None  # see sharing()
         self._kept = Kept()  # the model sharing() grows, kept between blocks
         self._required: dict[str, list[frozenset[str]]] = {}  # see _needs
-        self._readers: dict[Table, frozenset[str]] | None = None  # see _touched
-        self._wanted: dict[tuple[str, str], tuple[frozenset[str], list[Mark]]] = {}  # _touched
+        self._readers: Readers | None = None  # see _touched
         # The last step classify_shared grew the core by: its atoms, answers
         # and each concept's candidates.
         self._last: tuple[Core, Atoms, Values, dict[str, frozenset[str] | None]] | None = None
@@ -232,10 +231,6 @@ class FastEngine(Engine):
                 if kept is not None and kept.held:
                     kept.release()
 
-    @staticmethod
-    def _checks(m: Model) -> list[Axiom]:
-        return [a for a in m.prog.checks if a.id is None or a.id not in m.disabled]
-
     def _definitions(self, without: frozenset[str]) -> dict[str, Expr]:
         """Query definitions minus the removed ones.  A query class whose
         definition is removed is a class no axiom constrains: it gets a name
@@ -248,38 +243,6 @@ class FastEngine(Engine):
             q: (e if frag.query_axiom[q].id not in removed else ("C", f"undefined:{q}"))
             for q, e in frag.query_defs.items()
         }
-
-    def _decide(self, ev: Evaluator, concept: str, x: str) -> bool:
-        """Is ``concept(x)`` entailed?  The model must already be verified."""
-        if concept in self.fragment.sinks:
-            raise Fallback(f"{concept} is a sink class")
-        e = ev.defs.get(concept)
-        if e is None:  # a knowledge-base class: the verified least model decides
-            return concept in ev.m.types[x]
-        if not ev.holds(e, x):
-            return False
-        if ev.certain(e, x):
-            return True
-        if self._refuted(ev, e, x):
-            return False
-        raise Fallback(f"{concept}({x}) is neither proved nor refuted")
-
-    def _refuted(self, ev: Evaluator, e: Expr, x: str) -> bool:
-        m = ev.m
-        token = m.begin()
-        try:
-            for _ in range(4):
-                ops = ev.falsifiers(e, x)
-                if not ops:
-                    return False
-                ev.apply(ops)
-                if m.clash is not None:
-                    return False
-                if not ev.holds(e, x):
-                    return ev.violations(self._checks(m)) is None
-            return False
-        finally:
-            m.rollback(token)
 
     def _answer(self, exact: Callable[[], Any], fallback: Callable[[], Any]) -> Any:
         with self._lock:
@@ -380,7 +343,7 @@ class FastEngine(Engine):
         This step's candidates go into ``wheres``, for the next."""
         if m.clash is not None:
             return Classification(False, {})
-        bad = ev.violations(self._checks(m))
+        bad = ev.violations(checks(m))
         if bad is not None:
             raise Fallback(f"candidate model violates: {bad}")
         found: dict[str, tuple[str, ...]] = {}
@@ -417,42 +380,17 @@ class FastEngine(Engine):
                 continue
             check_deadline("while the fast engine classified the facts")
             pool = abox if where is None else abox & where
-            names = tuple(x for x in sorted(pool) if self._decide(ev, concept, x))
+            names = tuple(x for x in sorted(pool) if ev.decide(concept, x))
             if names:
                 found[concept] = names
         return Classification(True, found)
 
     def _touched(self, prior: Prior, m: Model) -> AbstractSet[str]:
-        """The concepts whose candidates read a table that changed (see
-        :func:`~virf.reasoning.prior.tables`); any other concept's are the
-        previous step's.  Looked up from the tables, not concept by concept:
-        a step changes a few tables, and a knowledge base has hundreds of
-        concepts."""
         if self._readers is None:
             frag = self.fragment
             lazy = self.program(frozenset())[0].lazy
-            readers: dict[Table, set[str]] = {}
-            for name in frag.query_defs:
-                for table in tables(("C", name), frag.query_defs, frag.sinks, lazy):
-                    readers.setdefault(table, set()).add(name)
-            self._readers = {t: frozenset(names) for t, names in readers.items()}
-            wanted: dict[tuple[str, str], tuple[set[str], list[Mark]]] = {}
-            for table in sorted(readers):
-                if table[0] in ("r>M", "r<M"):
-                    classes, others = wanted.setdefault((table[0][1], table[1]), (set(), []))
-                    mark: Mark = table[2]
-                    if mark[0] == "C":
-                        classes.add(mark[1])
-                    else:
-                        others.append(mark)
-            self._wanted = {k: (frozenset(c), o) for k, (c, o) in wanted.items()}
-        found: set[str] = set()
-        for table in (*prior.tables, *prior.marked_edges(m, self._wanted)):
-            # A class outside the query definitions reads its own members.
-            found.update(self._readers.get(table, ()))
-            if table[0] == "t":
-                found.add(table[1])
-        return found
+            self._readers = Readers(frag.query_defs, frag.sinks, lazy)
+        return self._readers.touched(prior, m)
 
     def _needs(self, concept: str, defs: dict[str, Expr]) -> list[frozenset[str]]:
         """The knowledge-base classes the concept's candidates require."""
@@ -477,10 +415,10 @@ class FastEngine(Engine):
                     m.run()
                 if m.clash is not None:
                     return True
-                bad = ev.violations(self._checks(m))
+                bad = ev.violations(checks(m))
                 if bad is not None:
                     raise Fallback(f"candidate model violates: {bad}")
-                return self._decide(ev, concept, individual)
+                return ev.decide(concept, individual)
 
         result: bool = self._answer(
             exact,
@@ -576,10 +514,10 @@ class FastEngine(Engine):
             if m.clash is not None:
                 return True
             ev = Evaluator(m, self._definitions(m.disabled), self.fragment.sinks)
-            bad = ev.violations(self._checks(m))
+            bad = ev.violations(checks(m))
             if bad is not None:
                 raise Fallback(f"candidate model violates: {bad}")
-            return self._decide(ev, concept, individual)
+            return ev.decide(concept, individual)
         finally:
             m.rollback(token)
 
@@ -588,7 +526,7 @@ class FastEngine(Engine):
             with self._model(facts, without) as (m, ev):
                 if m.clash is not None:
                     return False
-                bad = ev.violations(self._checks(m))
+                bad = ev.violations(checks(m))
                 if bad is not None:
                     raise Fallback(f"candidate model violates: {bad}")
                 return True

@@ -251,3 +251,41 @@ class Prior:
         if where is None or x in where:
             return None
         return known
+
+
+class Readers:
+    """The query classes by the tables their candidates read (see
+    :func:`tables`), to find those a step's change touches from the tables
+    it changed, not concept by concept: a step changes a few tables, and a
+    knowledge base has hundreds of concepts."""
+
+    def __init__(
+        self, defs: dict[str, Expr], sinks: AbstractSet[str], lazy: Collection[str]
+    ) -> None:
+        readers: dict[Table, set[str]] = {}
+        for name in defs:
+            for table in tables(("C", name), defs, sinks, lazy):
+                readers.setdefault(table, set()).add(name)
+        self.readers = {t: frozenset(names) for t, names in readers.items()}
+        # The marks asked of a changed edge's end, by direction and property.
+        wanted: dict[tuple[str, str], tuple[set[str], list[Mark]]] = {}
+        for table in sorted(readers):
+            if table[0] in ("r>M", "r<M"):
+                classes, others = wanted.setdefault((table[0][1], table[1]), (set(), []))
+                mark: Mark = table[2]
+                if mark[0] == "C":
+                    classes.add(mark[1])
+                else:
+                    others.append(mark)
+        self.wanted = {k: (frozenset(c), o) for k, (c, o) in wanted.items()}
+
+    def touched(self, prior: Prior, m: Model) -> set[str]:
+        """The classes whose candidates may differ between ``prior``'s model
+        and ``m``; any other keeps the previous step's."""
+        found: set[str] = set()
+        for table in (*prior.tables, *prior.marked_edges(m, self.wanted)):
+            found.update(self.readers.get(table, ()))
+            # A class outside the query definitions reads its own members.
+            if table[0] == "t":
+                found.add(table[1])
+        return found
