@@ -25,7 +25,7 @@ A query class's candidates (:meth:`Evaluator.candidates`) are read from
 whole tables of the model: the members of a class, the edges of a role, the
 values of a data property.  Where no atom of those tables changed, the
 previous step's candidates are this step's (:attr:`Prior.tables` and
-:meth:`Prior.marked_edges` list the tables that changed).
+:meth:`Prior.edge_tables` list the tables that changed).
 """
 
 from __future__ import annotations
@@ -154,7 +154,8 @@ class Prior:
         self.data: set[str] = set()
         self.edges: dict[str, set[str]] = {}
         self.tables: set[Table] = set()  # the tables the atoms are in
-        self.changed_edges: list[tuple[str, str, str, str]] = []
+        # The ends of the changed edges, by direction and property.
+        self.ends: dict[tuple[str, str], set[str]] = {}
         for entry in diff:
             tag = entry[0]
             if tag in ("e", "t"):
@@ -166,33 +167,44 @@ class Prior:
                 self.tables.add(("d", entry[2]))
             else:
                 self.edges.setdefault(entry[1], set()).update(entry[2:])
-                self.tables.update(
-                    (("r", entry[1]), ("r<", entry[1], entry[2]), ("r>", entry[1], entry[3]))
-                )
-                self.changed_edges.append(entry)
+                self.tables.add(("r", entry[1]))
+                self.ends.setdefault((">", entry[1]), set()).add(entry[3])
+                self.ends.setdefault(("<", entry[1]), set()).add(entry[2])
         self._affected: dict[Expr, set[str] | None] = {}
 
-    def marked_edges(
-        self, m: Model, wanted: Mapping[tuple[str, str], tuple[frozenset[str], list[Mark]]]
+    def edge_tables(
+        self,
+        m: Model,
+        values: Mapping[tuple[str, str], frozenset[str]],
+        wanted: Mapping[tuple[str, str], tuple[frozenset[str], list[Mark]]],
     ) -> Iterator[Table]:
-        """The ``("r>M", p, mark)`` and ``("r<M", p, mark)`` tables (see
-        :func:`tables`) of the changed edges, for the marks ``wanted`` by
-        direction and property (its classes, and its other marks).  An end's
-        marks are read in ``m``: an end whose marks differ between the
+        """The tables (see :func:`tables`) of the changed edges that end at
+        one individual, ``("r>", p, i)`` and ``("r<", p, i)``, for the
+        individuals ``values`` by direction and property; and those that end
+        at what bears a mark, ``("r>M", p, mark)`` and ``("r<M", p, mark)``,
+        for the marks ``wanted`` (its classes, and its other marks).  An
+        end's marks are read in ``m``: an end whose marks differ between the
         models has that change among the atoms, in the mark's own table."""
-        types = m.types
-        for _, p, x, y in self.changed_edges:
-            for way, end in ((">", y), ("<", x)):
-                hit = wanted.get((way, p))
-                if hit is None:
-                    continue
-                table = "r" + way + "M"
-                classes, others = hit
-                for c in classes.intersection(types.get(end, ())):
+        for (way, p), ends in self.ends.items():
+            for i in values.get((way, p), ()):
+                if i in ends:
+                    yield ("r" + way, p, i)
+        # By property, with set operations: a box moved with a thousand in
+        # it changes thousands of edges, and a check per edge cost more than
+        # the candidates it kept.
+        for (way, p), ends in self.ends.items():
+            hit = wanted.get((way, p))
+            if hit is None:
+                continue
+            table = "r" + way + "M"
+            classes, others = hit
+            for c in classes:
+                if not ends.isdisjoint(m.members.get(c, ())):
                     yield (table, p, ("C", c))
-                for mark in others:
-                    if bears(m, end, mark):
-                        yield (table, p, mark)
+            for mark in others:
+                _, q, w, i = mark
+                if not ends.isdisjoint((m.pred if w == ">" else m.succ).get(q, {}).get(i, ())):
+                    yield (table, p, mark)
 
     def affected(self, m: Model, e: Expr) -> set[str] | None:
         """Where ``e``'s classical truth may differ from the previous model's
@@ -267,23 +279,28 @@ class Readers:
             for table in tables(("C", name), defs, sinks, lazy):
                 readers.setdefault(table, set()).add(name)
         self.readers = {t: frozenset(names) for t, names in readers.items()}
-        # The marks asked of a changed edge's end, by direction and property.
+        # The individuals and marks asked of a changed edge's end, by
+        # direction and property.
+        values: dict[tuple[str, str], set[str]] = {}
         wanted: dict[tuple[str, str], tuple[set[str], list[Mark]]] = {}
         for table in sorted(readers):
-            if table[0] in ("r>M", "r<M"):
+            if table[0] in ("r>", "r<"):
+                values.setdefault((table[0][1], table[1]), set()).add(table[2])
+            elif table[0] in ("r>M", "r<M"):
                 classes, others = wanted.setdefault((table[0][1], table[1]), (set(), []))
                 mark: Mark = table[2]
                 if mark[0] == "C":
                     classes.add(mark[1])
                 else:
                     others.append(mark)
+        self.values = {k: frozenset(v) for k, v in values.items()}
         self.wanted = {k: (frozenset(c), o) for k, (c, o) in wanted.items()}
 
     def touched(self, prior: Prior, m: Model) -> set[str]:
         """The classes whose candidates may differ between ``prior``'s model
         and ``m``; any other keeps the previous step's."""
         found: set[str] = set()
-        for table in (*prior.tables, *prior.marked_edges(m, self.wanted)):
+        for table in (*prior.tables, *prior.edge_tables(m, self.values, self.wanted)):
             found.update(self.readers.get(table, ()))
             # A class outside the query definitions reads its own members.
             if table[0] == "t":
