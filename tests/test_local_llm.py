@@ -492,22 +492,17 @@ def test_a_prompt_too_long_and_a_passed_deadline_fail_alike_written_whole_or_by_
     for stepwise in (False, True):
         settings = LocalSettings(MODEL, context=256, stepwise=stepwise)
         with LocalApprentice(settings) as model:
-            short = model.propose(
-                messages,
-                task_id="t",
-                iteration=0,
-                method="virf",
-                purpose=PLAN,
-                constraint=constraint,
-            )
-            late = model.propose(
-                messages,
-                task_id="t",
-                iteration=0,
-                method="virf",
-                purpose=PLAN,
-                constraint=constraint,
-                deadline=passed,
+            short, late = (
+                model.propose(
+                    messages,
+                    task_id="t",
+                    iteration=0,
+                    method="virf",
+                    purpose=PLAN,
+                    constraint=constraint,
+                    deadline=deadline,
+                )
+                for deadline in (None, passed)
             )
         assert not short.ok and "the prompt is too long for the model" in short.reason, stepwise
         assert not late.ok and "no generation was started" in late.reason, stepwise
