@@ -33,7 +33,7 @@ from virf.reasoning import make_engine
 from virf.reasoning.chase import Model
 from virf.reasoning.evaluate import required
 from virf.reasoning.fast import FastEngine
-from virf.reasoning.prior import Tables, bears, bounding_marks, tables
+from virf.reasoning.prior import Tables, bounding_marks, holders, tables
 from virf.schema import Fact, Report
 from virf.world.plan import PlanStep, parse_plan, parse_plan_text
 from virf.world.scene import Scene, build_scene, load_scene_file
@@ -107,7 +107,7 @@ def _tables_content(m: Model, read: Tables) -> list[object]:
         elif tag in ("r>M", "r<M"):  # the edges into, or out of, what bears a mark
             edges = {(x, y) for x, ys in m.succ.get(name, {}).items() for y in ys}
             at = 1 if tag == "r>M" else 0
-            out.append(frozenset(e for e in edges if bears(m, e[at], end[0])))
+            out.append(frozenset(e for e in edges if e[at] in holders(m, end[0])))
         else:
             out.append(frozenset((x, v) for x, t in m.data.items() for v in t.get(name, ())))
     return out
@@ -134,7 +134,7 @@ def _candidates_follow_tables(tutor: LogicTutor, snapshots: Sequence[Sequence[Fa
                 bound = bounding_marks(("C", name), defs, sinks)
                 if bound is not None:
                     assert read is not None, name
-                    assert all(any(bears(m, x, b) for b in bound) for x in read), name
+                    assert all(any(x in holders(m, b) for b in bound) for x in read), name
         for before, was in seen[-1:]:
             for k, name in enumerate(sorted(defs)):
                 if contents[k] == before[k]:

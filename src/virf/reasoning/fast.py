@@ -49,7 +49,7 @@ from virf.reasoning.batch import halving
 from virf.reasoning.chase import ChaseLimit, Model
 from virf.reasoning.evaluate import Evaluator, Fallback, checks, required
 from virf.reasoning.kept import Core, Kept, individuals
-from virf.reasoning.prior import Atoms, Prior, Readers, Values, atoms
+from virf.reasoning.prior import Atoms, Prior, Readers, Values, Wheres, atoms
 from virf.reasoning.program import Program, compile_program
 from virf.reasoning.proof import NoProof, Prover, atom_of
 from virf.schema import Fact, FactKind
@@ -94,7 +94,7 @@ class FastEngine(Engine):
         self._readers: Readers | None = None  # see _touched
         # The last step classify_shared grew the core by: its atoms, answers
         # and each concept's candidates.
-        self._last: tuple[Core, Atoms, Values, dict[str, frozenset[str] | None]] | None = None
+        self._last: tuple[Core, Atoms, Values, Wheres] | None = None
         self._query_ids = frozenset(
             a.id for a in self.fragment.query_axiom.values() if a.id is not None
         )
@@ -299,17 +299,14 @@ class FastEngine(Engine):
                 # atoms differ is all that can change an answer.
                 last = self._last
                 prior = None
+                before = None
                 if small and last is not None and last[0] is core:
                     prior = Prior(last[2], defs, sinks, last[1] ^ grown)
+                    before = (last[3], prior)
                 ev = Evaluator(m, defs, sinks, prior)
-                wheres: dict[str, frozenset[str] | None] = {}
+                wheres: Wheres = {}
                 found = self._instances(
-                    m,
-                    ev,
-                    core.individuals | individuals(added),
-                    concepts,
-                    before=(last[3], prior) if prior is not None and last is not None else None,
-                    wheres=wheres,
+                    m, ev, core.individuals | individuals(added), concepts, before, wheres
                 )
                 self._last = (core, grown, ev.values, wheres) if small else None
                 return found
@@ -330,9 +327,8 @@ class FastEngine(Engine):
         ev: Evaluator,
         abox: frozenset[str],
         concepts: Sequence[str],
-        *,
-        before: tuple[dict[str, frozenset[str] | None], Prior] | None = None,
-        wheres: dict[str, frozenset[str] | None] | None = None,
+        before: tuple[Wheres, Prior] | None = None,
+        wheres: Wheres | None = None,
     ) -> Classification:
         """The instances among ``abox`` of each concept, in the grown model.
 
@@ -348,7 +344,7 @@ class FastEngine(Engine):
             raise Fallback(f"candidate model violates: {bad}")
         found: dict[str, tuple[str, ...]] = {}
         members = m.members
-        kept: dict[str, frozenset[str] | None] = {}
+        kept: Wheres = {}
         touched: AbstractSet[str] = frozenset()
         if before is not None:
             kept, prior = before

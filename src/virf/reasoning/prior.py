@@ -43,6 +43,8 @@ _ATOMS = frozenset({"e", "t", "r", "d"})
 
 Atoms = frozenset[tuple[Any, ...]]
 Values = dict[tuple[Expr, str], bool]
+# Each concept's candidates in a step's model (None: possibly any individual).
+Wheres = dict[str, frozenset[str] | None]
 Table = tuple[Any, ...]  # see tables()
 Tables = frozenset[Table]
 
@@ -131,13 +133,17 @@ def bounding_marks(
     return None
 
 
-def bears(m: Model, x: str, mark: Mark) -> bool:
-    """Whether ``x`` bears ``mark`` in ``m``."""
+def holders(m: Model, mark: Mark) -> AbstractSet[str]:
+    """The individuals that bear ``mark`` in ``m`` (a live table: do not
+    modify it)."""
     if mark[0] == "C":
-        return mark[1] in m.types.get(x, ())
+        return m.members.get(mark[1], _NO_ONE)
     _, q, way, i = mark
-    # An edge x q i (way ">"), or i q x (way "<").
-    return i in (m.succ if way == ">" else m.pred).get(q, {}).get(x, ())
+    # Those with an edge x q i (way ">"), or i q x (way "<").
+    return (m.pred if way == ">" else m.succ).get(q, {}).get(i, _NO_ONE)
+
+
+_NO_ONE: frozenset[str] = frozenset()
 
 
 class Prior:
@@ -176,35 +182,24 @@ class Prior:
         self,
         m: Model,
         values: Mapping[tuple[str, str], frozenset[str]],
-        wanted: Mapping[tuple[str, str], tuple[frozenset[str], list[Mark]]],
+        marks: Mapping[tuple[str, str], tuple[Mark, ...]],
     ) -> Iterator[Table]:
         """The tables (see :func:`tables`) of the changed edges that end at
-        one individual, ``("r>", p, i)`` and ``("r<", p, i)``, for the
-        individuals ``values`` by direction and property; and those that end
-        at what bears a mark, ``("r>M", p, mark)`` and ``("r<M", p, mark)``,
-        for the marks ``wanted`` (its classes, and its other marks).  An
-        end's marks are read in ``m``: an end whose marks differ between the
+        one of the individuals ``values``, ``("r>", p, i)`` and ``("r<", p,
+        i)``, or at what bears one of the ``marks``, ``("r>M", p, mark)``
+        and ``("r<M", p, mark)`` (both by direction and property).  An end's
+        marks are read in ``m``: an end whose marks differ between the
         models has that change among the atoms, in the mark's own table."""
-        for (way, p), ends in self.ends.items():
-            for i in values.get((way, p), ()):
-                if i in ends:
-                    yield ("r" + way, p, i)
         # By property, with set operations: a box moved with a thousand in
         # it changes thousands of edges, and a check per edge cost more than
         # the candidates it kept.
         for (way, p), ends in self.ends.items():
-            hit = wanted.get((way, p))
-            if hit is None:
-                continue
-            table = "r" + way + "M"
-            classes, others = hit
-            for c in classes:
-                if not ends.isdisjoint(m.members.get(c, ())):
-                    yield (table, p, ("C", c))
-            for mark in others:
-                _, q, w, i = mark
-                if not ends.isdisjoint((m.pred if w == ">" else m.succ).get(q, {}).get(i, ())):
-                    yield (table, p, mark)
+            for i in values.get((way, p), ()):
+                if i in ends:
+                    yield ("r" + way, p, i)
+            for mark in marks.get((way, p), ()):
+                if not ends.isdisjoint(holders(m, mark)):
+                    yield ("r" + way + "M", p, mark)
 
     def affected(self, m: Model, e: Expr) -> set[str] | None:
         """Where ``e``'s classical truth may differ from the previous model's
@@ -282,25 +277,20 @@ class Readers:
         # The individuals and marks asked of a changed edge's end, by
         # direction and property.
         values: dict[tuple[str, str], set[str]] = {}
-        wanted: dict[tuple[str, str], tuple[set[str], list[Mark]]] = {}
+        marks: dict[tuple[str, str], list[Mark]] = {}
         for table in sorted(readers):
             if table[0] in ("r>", "r<"):
                 values.setdefault((table[0][1], table[1]), set()).add(table[2])
             elif table[0] in ("r>M", "r<M"):
-                classes, others = wanted.setdefault((table[0][1], table[1]), (set(), []))
-                mark: Mark = table[2]
-                if mark[0] == "C":
-                    classes.add(mark[1])
-                else:
-                    others.append(mark)
+                marks.setdefault((table[0][1], table[1]), []).append(table[2])
         self.values = {k: frozenset(v) for k, v in values.items()}
-        self.wanted = {k: (frozenset(c), o) for k, (c, o) in wanted.items()}
+        self.marks = {k: tuple(v) for k, v in marks.items()}
 
     def touched(self, prior: Prior, m: Model) -> set[str]:
         """The classes whose candidates may differ between ``prior``'s model
         and ``m``; any other keeps the previous step's."""
         found: set[str] = set()
-        for table in (*prior.tables, *prior.edge_tables(m, self.values, self.wanted)):
+        for table in (*prior.tables, *prior.edge_tables(m, self.values, self.marks)):
             found.update(self.readers.get(table, ()))
             # A class outside the query definitions reads its own members.
             if table[0] == "t":
