@@ -8,7 +8,7 @@ from collections.abc import Callable
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from virf.verify.explain import drop_greedily
+from virf.verify.explain import Hint, drop_greedily
 
 
 def one_at_a_time(items: list[int], holds: Callable[[list[int]], bool]) -> list[int]:
@@ -94,9 +94,10 @@ def test_proofs_as_hints_change_nothing_but_the_calls(
     )
     asked: list[list[int]] = []
 
-    def prove(kept: list[int]) -> frozenset[int] | None:
+    def prove(kept: list[int]) -> Hint[int] | None:
         asked.append(list(kept))
-        return answers[len(asked) - 1] if len(asked) <= len(answers) else None
+        answer = answers[len(asked) - 1] if len(asked) <= len(answers) else None
+        return None if answer is None else Hint(answer)
 
     assert drop_greedily(items, holds, prove) == one_at_a_time(items, holds)
 
@@ -129,5 +130,52 @@ def test_a_proof_of_the_result_costs_one_call_per_item_plus_one(
     calls: list[int] = []
     counted = counting(holds, calls)
 
-    assert drop_greedily(items, counted, lambda kept: frozenset(result)) == result
+    assert drop_greedily(items, counted, lambda kept: Hint(frozenset(result))) == result
     assert len(calls) <= len(result) + 1
+
+
+@settings(max_examples=300, deadline=None, derandomize=True)
+@given(monotone_tests(), st.data())
+def test_items_a_proof_needs_are_kept_without_asking(
+    case: tuple[list[int], list[frozenset[int]]], data: st.DataObject
+) -> None:
+    """A proof may name items without which what it was asked of fails:
+    some of the truly needed ones, never one that is not.  The search keeps
+    them without a call, and finds what deleting one at a time finds."""
+    items, needs = case
+
+    holds = needing(needs)
+
+    if not holds(items):
+        return
+    result = one_at_a_time(items, holds)
+
+    def prove(kept: list[int]) -> Hint[int] | None:
+        proof = one_at_a_time(kept, holds)
+        needed = [x for x in kept if not holds([y for y in kept if y != x])]
+        return Hint(
+            frozenset(proof),
+            frozenset(data.draw(st.sets(st.sampled_from(needed))) if needed else ()),
+        )
+
+    calls: list[int] = []
+    assert drop_greedily(items, counting(holds, calls), prove) == result
+    without: list[int] = []
+    assert (
+        drop_greedily(
+            items,
+            counting(holds, without),
+            lambda kept: Hint(frozenset(one_at_a_time(kept, holds))),
+        )
+        == result
+    )
+    assert len(calls) <= len(without)
+
+    def proves_all(kept: list[int]) -> Hint[int] | None:
+        needed = [x for x in kept if not holds([y for y in kept if y != x])]
+        return Hint(frozenset(one_at_a_time(kept, holds)), frozenset(needed))
+
+    calls.clear()
+    assert drop_greedily(items, counting(holds, calls), proves_all) == result
+    if all(not holds([y for y in items if y != x]) for x in result):
+        assert len(calls) <= 1  # the proof is tested once, if it leaves anything out

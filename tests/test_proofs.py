@@ -45,9 +45,11 @@ class SearchOnly(FastEngine):
 class Recording(FastEngine):
     """The fast engine, checking each proof it gives as it gives it."""
 
-    def __init__(self, *args: object, **kwargs: object) -> None:
+    def __init__(self, *args: object, needs: bool = True, **kwargs: object) -> None:
         super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        self.needs = needs  # False: proofs name nothing as needed, so batches are asked
         self.proofs = 0
+        self.claims = 0  # facts and axioms named as needed, each checked
         self.batches = 0  # questions answered together, each checked one by one
 
     def proof(
@@ -72,6 +74,16 @@ class Recording(FastEngine):
             # it, of those the explanation could leave out.
             others = frozenset(self.tbox.vocabulary.background) - found.axioms
             assert self.entails(found.facts, concept, individual, without=others | set(without))
+            # What it names as needed is: the finding fails without each.
+            off = frozenset(without)
+            for f in found.needed_facts:
+                rest = [g for g in facts if g != f]
+                assert not self.entails(rest, concept, individual, without=off), f.render()
+            for a in found.needed_axioms:
+                assert not self.entails(facts, concept, individual, without=off | {a}), a
+            self.claims += len(found.needed_facts) + len(found.needed_axioms)
+            if not self.needs:
+                return Proof(found.facts, found.axioms)
         return found
 
     def entails_each(
@@ -147,6 +159,7 @@ def test_reports_with_proofs_equal_the_deletion_search(
     with_proofs, search_only, recording = engines
     same_on_random_worlds(with_proofs, search_only, 60)
     assert recording.proofs > 20  # the proofs were there to be wrong
+    assert recording.claims > 50
     assert recording.batches > 20
 
 
@@ -159,7 +172,7 @@ def test_questions_answered_together_equal_one_by_one(
     from virf.bench.latency_cases import hazard_chain_case
 
     monkeypatch.setattr("virf.reasoning.fast.BATCH_FROM", 1)
-    recording = Recording(tutor.tbox)
+    recording = Recording(tutor.tbox, needs=False)
     together = LogicTutor.over(tutor.tbox, recording).verifier
     search_only = LogicTutor.over(tutor.tbox, SearchOnly(tutor.tbox)).verifier
     chain = hazard_chain_case(12, tutor.tbox)

@@ -45,10 +45,14 @@ __all__ = [
 
 @dataclass(frozen=True)
 class Proof:
-    """The input facts and the axiom ids one derivation uses."""
+    """The input facts and the axiom ids one derivation uses, and those of
+    the question's facts and axioms that every derivation needs (without
+    one, the query is not entailed; an engine may name fewer, or none)."""
 
     facts: frozenset[Fact]
     axioms: frozenset[str]
+    needed_facts: frozenset[Fact] = frozenset()
+    needed_axioms: frozenset[str] = frozenset()
 
 
 @dataclass(frozen=True)

@@ -251,8 +251,10 @@ class Model:
                             via[(y, nxt)] = (node, state, r)
         return seen[1]
 
-    def run(self) -> None:
-        """Apply the rules to everything queued, until nothing new follows.
+    def run(self, *, through: bool = False) -> None:
+        """Apply the rules to everything queued, until nothing new follows
+        (or a clash: ``through`` goes on past it, so the model holds every
+        way the rules reach a clash, see :mod:`virf.reasoning.necessity`).
 
         Raises :class:`DeadlineExceeded` when the deadline of the engine call
         passes; the model is then unfinished and must be dropped (or rolled
@@ -271,7 +273,7 @@ class Model:
                     "the deadline passed while the fast engine applied its rules"
                 )
             for _ in range(min(len(q), _BATCH)):
-                if self.clash is not None:
+                if self.clash is not None and not through:
                     q.clear()
                     return
                 item = q.popleft()

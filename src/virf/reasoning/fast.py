@@ -47,11 +47,13 @@ from virf.reasoning import (
 )
 from virf.reasoning.batch import halving
 from virf.reasoning.chase import ChaseLimit, Model
+from virf.reasoning.derive import atom_of
 from virf.reasoning.evaluate import Evaluator, Fallback, checks, required
 from virf.reasoning.kept import Core, Kept, individuals
+from virf.reasoning.necessity import needed
 from virf.reasoning.prior import Atoms, Prior, Readers, Values, Wheres, atoms
 from virf.reasoning.program import Program, compile_program
-from virf.reasoning.proof import NoProof, Prover, atom_of
+from virf.reasoning.proof import NoProof, Prover
 from virf.schema import Fact, FactKind
 
 # Names the engine uses for itself; an input name starting like one of these
@@ -548,7 +550,7 @@ class FastEngine(Engine):
         if frag.problems:
             return None
         given = Fact.sorted(set(facts))
-        inputs = {a: f for f in given if (a := atom_of(f)) is not None}
+        inputs = {atom_of(f): f for f in given}
         rank = {item: i for i, item in enumerate(order)}
         with until(deadline), self._lock:
             prog, disabled = self.program(frozenset(without))
@@ -564,7 +566,20 @@ class FastEngine(Engine):
                     if not ev.certain(("C", concept), individual):
                         return None
                     prover = Prover(m, frag, ev.defs, inputs, rank, ev.certain, ev.impose)
-                    return prover.proof(concept, individual)
+                    found = prover.proof(concept, individual)
+                    used = [
+                        r for i in (*found.facts, *found.axioms) if (r := rank.get(i)) is not None
+                    ]
+                    wanted = sum(1 << r for r in set(used))
+                    bits = needed(m, frag, ev.defs, inputs, rank, concept, individual, wanted)
+                    chosen = (order[i] for i in range(bits.bit_length()) if bits >> i & 1)
+                    items = list(chosen)
+                    return Proof(
+                        found.facts,
+                        found.axioms,
+                        frozenset(f for f in items if isinstance(f, Fact)),
+                        frozenset(a for a in items if isinstance(a, str)),
+                    )
             except (Fallback, ChaseLimit, NoProof, RecursionError):
                 return None
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Collection, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TypeVar
+from typing import Generic, TypeVar
 
 from virf.ontology.tbox import UnsafeStateConcept, Vocabulary
 from virf.reasoning import Engine, Proof
@@ -79,7 +79,7 @@ def minimize(
     holds: Callable[[list[Fact]], bool],
     start: set[str],
     vocab: Vocabulary,
-    prove: Callable[[list[Fact], list[Fact]], Collection[Fact] | None] | None = None,
+    prove: Callable[[list[Fact], list[Fact]], Hint[Fact] | None] | None = None,
     each: Callable[[list[Fact], list[Fact], list[bool]], Iterable[bool]] | None = None,
 ) -> list[Fact]:
     """A minimal subset of ``facts`` for which ``holds`` is still true.
@@ -92,7 +92,7 @@ def minimize(
 
     ordered = by_order(_component(facts, start, vocab.individuals))
 
-    def hint(kept: list[Fact]) -> Collection[Fact] | None:
+    def hint(kept: list[Fact]) -> Hint[Fact] | None:
         return prove(kept, ordered) if prove else None
 
     # The component suffices when a proof inside it does (entailment is
@@ -107,26 +107,42 @@ def minimize(
     return sorted(drop_greedily(ordered, holds, hint if prove else None, each, first, asked))
 
 
+@dataclass(frozen=True)
+class Hint(Generic[T]):
+    """A proof's items that suffice, and those it names as needed: without
+    one of them, what the proof was asked of does not hold (an engine's
+    claim, see :attr:`virf.reasoning.Proof.needed`)."""
+
+    suffices: Collection[T]
+    needed: Collection[T] = ()
+
+
 def _tested(
     items: list[T],
-    prove: Callable[[list[T]], Collection[T] | None],
+    prove: Callable[[list[T]], Hint[T] | None],
     holds: Callable[[list[T]], bool],
-) -> set[T] | None:
-    """The items of a proof of ``items`` that hold on their own, when the
-    proof leaves some out (None when there is none, or it does not hold)."""
+    *,
+    holding: bool = False,
+) -> tuple[set[T], set[T]] | None:
+    """The items of a proof of ``items`` that hold on their own, and those
+    of them it needs (None when there is no proof, or it does not hold).
+    With ``holding``, ``items`` are known to hold: a proof of them all is
+    not asked about again."""
     found = prove(items)
     if found is None:
         return None
-    kept = [x for x in items if x in found]
-    return set(kept) if len(kept) < len(items) and holds(kept) else None
+    kept = [x for x in items if x in found.suffices]
+    if (holding and len(kept) == len(items)) or holds(kept):
+        return set(kept), {x for x in kept if x in found.needed}
+    return None
 
 
 def drop_greedily(
     items: list[T],
     holds: Callable[[list[T]], bool],
-    prove: Callable[[list[T]], Collection[T] | None] | None = None,
+    prove: Callable[[list[T]], Hint[T] | None] | None = None,
     each: Callable[[list[T], list[T], list[bool]], Iterable[bool]] | None = None,
-    first: set[T] | None = None,
+    first: tuple[set[T], set[T]] | None = None,
     asked: bool = False,
 ) -> list[T]:
     """What is left of ``items`` after trying to drop each in turn, keeping
@@ -155,8 +171,8 @@ def drop_greedily(
     :func:`_tested` made of it."""
     current = list(items)
 
-    def proved() -> set[T] | None:
-        return _tested(current, prove, holds) if prove is not None else None
+    def proved() -> tuple[set[T], set[T]] | None:
+        return _tested(current, prove, holds, holding=True) if prove is not None else None
 
     def one_by_one(kept: list[T], rest: list[T], tested: list[bool]) -> Iterator[bool]:
         before: list[T] = []
@@ -170,16 +186,22 @@ def drop_greedily(
     i, run = 0, 1
     while i < len(current):
         if known is not None:
+            proof, needed = known
             rest = current[i:]
-            tested = [x in known for x in rest]
-            answers = iter(
-                each(current[:i], rest, tested) if each else one_by_one(current[:i], rest, tested)
-            )
+            # What the proof needs stays without asking; the others' tests
+            # are asked with it in place, as one at a time would.
+            sure = [x for x in rest if x in needed]
+            open_ = [x for x in rest if x not in needed]
+            tested = [x in proof for x in open_]
+            answers: Iterator[bool] = iter(())
+            if any(tested):
+                ask = each or one_by_one
+                answers = iter(ask(current[:i] + sure, open_, tested))
             kept = current[:i]
             for k, x in enumerate(rest):
-                if not tested[k]:
+                if x not in proof:
                     continue  # the proof is kept whole: this goes without asking
-                if next(answers):  # x can go too: another proof does without it
+                if x not in needed and next(answers):  # another proof does without x
                     current = kept + rest[k + 1 :]
                     i = len(kept)
                     known = proved()
@@ -210,7 +232,7 @@ def needed_background(
     vocab: Vocabulary,
     *,
     deadline: float | None = None,
-    hint: Collection[str] | None = None,
+    hint: Hint[str] | None = None,
 ) -> list[str]:
     """Background axiom ids the entailment needs, given the minimal facts.
     Each engine call stops at ``deadline`` (see :mod:`virf.reasoning`).
@@ -246,11 +268,11 @@ def needed_background(
 
     order = sorted(candidates)
 
-    def prove(kept: list[str]) -> Collection[str] | None:
+    def prove(kept: list[str]) -> Hint[str] | None:
         found = engine.proof(
             facts, concept, individual, without=every - set(kept), order=order, deadline=deadline
         )
-        return found.axioms if found else None
+        return Hint(found.axioms, found.needed_axioms) if found else None
 
     def each(kept: list[str], rest: list[str], tested: list[bool]) -> Iterator[bool]:
         dropped = every - set(kept) - set(rest)
@@ -258,7 +280,7 @@ def needed_background(
             facts, dropped, rest, tested, concept, individual, deadline=deadline
         )
 
-    first = _tested(order, lambda _: hint, holds) if hint is not None else None
+    first = _tested(order, lambda _: hint, holds, holding=True) if hint is not None else None
     return drop_greedily(order, holds, prove, each, first, asked=first is not None)
 
 
@@ -393,13 +415,13 @@ class Explainer:
         # between facts is made as before.
         axioms = sorted(self.vocab.background) if self.background else []
 
-        def prove(kept: list[Fact], order: list[Fact]) -> Collection[Fact] | None:
+        def prove(kept: list[Fact], order: list[Fact]) -> Hint[Fact] | None:
             self.tick()
             found = self.engine.proof(
                 kept, usc.name, ind, order=[*order, *axioms], deadline=self.deadline
             )
             last[0] = found
-            return found.facts if found else None
+            return Hint(found.facts, found.needed_facts) if found else None
 
         def each(kept: list[Fact], rest: list[Fact], tested: list[bool]) -> Iterator[bool]:
             self.tick()
@@ -417,7 +439,11 @@ class Explainer:
                 ind,
                 self.vocab,
                 deadline=self.deadline,
-                hint=proof.axioms if proof is not None and proof.facts == set(facts) else None,
+                hint=(
+                    Hint(proof.axioms, proof.needed_axioms)
+                    if proof is not None and proof.facts == set(facts)
+                    else None
+                ),
             )
             if self.background
             else []

@@ -1,0 +1,96 @@
+"""What a finding needs, read off the fast engine's model
+(:mod:`virf.reasoning.necessity`): each claim is checked by asking the
+engine without the item, and twin worlds that add a second way to the
+finding take the claim away."""
+
+from __future__ import annotations
+
+import pytest
+
+from virf.api import LogicTutor
+from virf.reasoning.fast import FastEngine
+from virf.schema import Fact, FactKind
+
+
+def t(x: str, cls: str) -> Fact:
+    return Fact(x, "type", cls, FactKind.TYPE)
+
+
+def r(x: str, p: str, y: str) -> Fact:
+    return Fact(x, p, y, FactKind.OBJECT)
+
+
+@pytest.fixture(scope="module")
+def engine(tutor: LogicTutor) -> FastEngine:
+    return FastEngine(tutor.tbox)
+
+
+def needs(engine: FastEngine, facts: list[Fact], concept: str, x: str) -> set[str]:
+    """The facts (rendered) and axiom ids the proof names as needed, each
+    checked: without it the finding is not entailed."""
+    order = [*sorted(facts), *sorted(engine.tbox.vocabulary.background)]
+    found = engine.proof(facts, concept, x, order=order)
+    assert found is not None
+    for f in found.needed_facts:
+        assert not engine.entails([g for g in facts if g != f], concept, x)
+    for a in found.needed_axioms:
+        assert not engine.entails(facts, concept, x, without={a})
+    return {f.render() for f in found.needed_facts} | set(found.needed_axioms)
+
+
+def test_a_stated_material_and_the_catalogue_are_two_ways(engine: FastEngine) -> None:
+    knife = [t("Knife_1", "Knife")]
+    stated = r("Knife_1", "hasMaterial", "Metal")
+    alone = needs(engine, knife, "ConductiveObject", "Knife_1")
+    assert {"Knife_1 is a Knife", "KIT-Knife-material-Metal", "MAT-Metal-Conductive"} <= alone
+    both = needs(engine, [*knife, stated], "ConductiveObject", "Knife_1")
+    assert "MAT-Metal-Conductive" in both  # every way goes through it
+    assert not {"KIT-Knife-material-Metal", stated.render(), "Knife_1 is a Knife"} & both
+
+
+def test_a_path_of_containment_is_needed_unless_there_is_another(engine: FastEngine) -> None:
+    nested = [
+        t("Microwave_1", "Microwave"),
+        r("Microwave_1", "hasState", "OnState"),
+        r("Microwave_1", "contains", "Bowl_1"),
+        t("Bowl_1", "Bowl"),
+        r("Bowl_1", "contains", "Spoon_1"),
+        t("Spoon_1", "Spoon"),
+    ]
+    hazard = "MetalInRunningMicrowaveDanger"
+    one = needs(engine, nested, hazard, "Microwave_1")
+    assert {"Microwave_1 contains Bowl_1", "Bowl_1 contains Spoon_1"} <= one
+    direct = r("Microwave_1", "contains", "Spoon_1")
+    two = needs(engine, [*nested, direct], hazard, "Microwave_1")
+    assert "Spoon_1 is a Spoon" in two
+    assert not {"Microwave_1 contains Bowl_1", "Bowl_1 contains Spoon_1", direct.render()} & two
+
+
+def test_a_negation_needs_what_refutes_it_unless_another_successor_does(
+    engine: FastEngine,
+) -> None:
+    """'supports some (PhysicalObject and not Cookware)': a knife is not
+    cookware because cutlery and cookware are disjoint kinds."""
+    burner = [t("StoveBurner_1", "StoveBurner")]
+    knife = [r("StoveBurner_1", "supports", "Knife_1"), t("Knife_1", "Knife")]
+    hazard = "ObjectLeftOnHeatingSurfaceDanger"
+    one = needs(engine, burner + knife, hazard, "StoveBurner_1")
+    assert {"KIT-KitchenwareKinds", "Knife_1 is a Knife", "StoveBurner_1 supports Knife_1"} <= one
+    apple = [r("StoveBurner_1", "supports", "Apple_1"), t("Apple_1", "Apple")]
+    two = needs(engine, burner + knife + apple, hazard, "StoveBurner_1")
+    assert "StoveBurner_1 is a StoveBurner" in two
+    assert not {"KIT-KitchenwareKinds", "Knife_1 is a Knife", "Apple_1 is a Apple"} & two
+
+
+def test_a_closure_bounds_an_empty_surface(engine: FastEngine) -> None:
+    """'max 0 supports PhysicalObject' is proved from the closure fact that
+    nothing stands on the burner: the proof names it (the search then tests
+    it), and what it names as needed is."""
+    empty = Fact.closure("StoveBurner_1", "supports", [])
+    lit = [t("StoveBurner_1", "StoveBurner"), r("StoveBurner_1", "hasState", "OnState"), empty]
+    hazard = "HeatingSurfaceLeftOnEmptyDanger"
+    order = [*sorted(lit), *sorted(engine.tbox.vocabulary.background)]
+    found = engine.proof(lit, hazard, "StoveBurner_1", order=order)
+    assert found is not None
+    assert empty in found.facts
+    assert "StoveBurner_1 hasState OnState" in needs(engine, lit, hazard, "StoveBurner_1")
