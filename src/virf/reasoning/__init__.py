@@ -14,8 +14,9 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Collection, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import import_module
+from typing import Protocol
 
 from virf.deadlines import (
     DeadlineExceeded,
@@ -32,6 +33,7 @@ __all__ = [
     "Classification",
     "DeadlineExceeded",
     "Engine",
+    "Oracle",
     "Proof",
     "ReasonerFailure",
     "check_deadline",
@@ -53,6 +55,20 @@ class Proof:
     axioms: frozenset[str]
     needed_facts: frozenset[Fact] = frozenset()
     needed_axioms: frozenset[str] = frozenset()
+    # Answers whether the query is still entailed once some of the
+    # question's facts and axioms are left out (see Oracle).
+    oracle: Oracle | None = field(default=None, compare=False)
+
+
+class Oracle(Protocol):
+    """Questions about a proof's facts and axioms with some left out: the
+    items as a bit mask (None: some cannot be left out here), and whether
+    the query is still entailed without a mask's items (True, False, or
+    None: ask the engine)."""
+
+    def mask(self, facts: Collection[Fact], axioms: Collection[str]) -> int | None: ...
+
+    def decide(self, removed: int) -> bool | None: ...
 
 
 @dataclass(frozen=True)

@@ -571,7 +571,10 @@ class FastEngine(Engine):
                         r for i in (*found.facts, *found.axioms) if (r := rank.get(i)) is not None
                     ]
                     wanted = sum(1 << r for r in set(used))
-                    bits = needed(m, frag, ev.defs, inputs, rank, concept, individual, wanted)
+                    off = frozenset(without)
+                    bits, oracle = needed(
+                        m, frag, ev.defs, inputs, rank, concept, individual, off, wanted
+                    )
                     chosen = (order[i] for i in range(bits.bit_length()) if bits >> i & 1)
                     items = list(chosen)
                     return Proof(
@@ -579,6 +582,7 @@ class FastEngine(Engine):
                         found.axioms,
                         frozenset(f for f in items if isinstance(f, Fact)),
                         frozenset(a for a in items if isinstance(a, str)),
+                        oracle,
                     )
             except (Fallback, ChaseLimit, NoProof, RecursionError):
                 return None

@@ -1,15 +1,18 @@
-"""What every derivation of a finding needs, read off one least model: the
-input facts and axioms without which the finding is no longer entailed.
+"""What a finding needs, and what it can do without, read off one least
+model: the answers to an explanation's deletion search, found from the
+derivations instead of a model per question.
 
-An explanation's deletion search asks, for each fact or axiom of a proof,
-whether the finding survives without it.  Nearly always it does not, and
-each such answer cost a model without that item.  Here the answers "it does
-not" come from the model the proof was read from.
+The search asks, for facts and axioms left out, whether the finding is still
+entailed.  Here the model a proof was read from answers most of those
+questions (:class:`Oracle`); the rest go to the engine as before.
 
 **Atoms.**  Every atom of the least model has its derivations: the rules that
 conclude it from atoms of the model (:func:`virf.reasoning.derive.derivations`),
-and its being an input fact or a fact of the TBox.  What an atom *needs* is
-the greatest solution of
+and its being an input fact or a fact of the TBox.  The query is read into
+the same graph: a node per sub-expression and individual where it holds,
+with one derivation per way it holds (a disjunct, a successor).
+
+**Needed.**  What an atom *needs* is the greatest solution of
 
     need(a) = ⋂ over derivations d of a: own(d) ∪ ⋃ over premises p of d: need(p)
 
@@ -17,43 +20,59 @@ the greatest solution of
 the set of items without which the least model lacks ``a``: an atom derived
 without item x is derived from atoms derived without x, so by induction x is
 in no such solution's need of it; and the items every derivation needs are a
-solution.  The greatest solution is found by iterating down from "every
-item".  An atom left at "every item" has no derivation grounded in the
-inputs: the enumeration missed a rule, and nothing is claimed at all.
+solution.  It is found by iterating down from "every item".  An atom left
+at "every item" has no derivation grounded in the inputs: the enumeration
+missed a rule, and nothing is claimed at all.
 
-**The query.**  Entailment is decided by the engine's own reading of the
-query (negation by refutation, closures for ``only``).  A claim is made only
-for the query's positive skeleton, where each negation, universal, number
-restriction, lazy role or sink is replaced by Thing: the skeleton is implied
-by the query, and it is false in the least model without x whenever x is in
-its need.  With no axioms left to check (:func:`~virf.reasoning.evaluate.checks`),
-that least model is a model of the knowledge base (it is consistent: the one
-with x is).  So the query is false in a model of what is left, hence not
-entailed: the deletion search's answer, found without the model.
+The query is read through its positive skeleton: each negation, universal,
+number restriction or sink counts as Thing.  The skeleton is implied by the
+query, and with no axioms left to check (:func:`~virf.reasoning.evaluate.checks`)
+the least model without x is a model of the knowledge base (consistent: the
+one with x is).  So an x in the skeleton's need is one without which the
+finding is false in a model, hence not entailed.  A negation ``not N`` (at
+the individual, or in ``r some (... and not N)``) is also read from a second
+model: N, or one of its disjuncts, asserted where the conjunct would hold,
+grown past the first clash (``Model.run(through=True)``).  An item every
+clash needs is one without which the assertions are consistent: the least
+model of the rest with them is a model where the conjunct, hence the
+query, fails.
 
-Under-claiming is always safe (the search then asks the reasoner as
-before), so whatever this reading cannot vouch for counts as needing
-nothing: an element's existence, the role hierarchy and role chains (they
-are compiled into the program, see :attr:`Program.structural`).
+**Still entailed.**  Over the same graph, a set of items left out leaves the
+finding entailed when the query's node is still derived: each derivation is
+a rule application of the model, and the engine's certain reading (a
+negation holds where asserting it derives a clash) is sound.  For this every
+derivation carries every item it rests on (the role hierarchy, chains, the
+TBox's facts), and an element exists through the facts that name it.
+
+Under-claiming is always safe: a question the graph cannot answer goes to
+the engine.  So whatever this reading cannot vouch for counts as needing
+nothing, and as not derived: an element's existence (for the needs), the
+role hierarchy and chains (for the needs), a universal or number
+restriction, a negation refuted at more than one successor (for what
+remains entailed).
 """
 
 from __future__ import annotations
 
+import time
 from collections import deque
-from collections.abc import Callable, Mapping
+from collections.abc import Collection, Mapping
 from contextlib import suppress
 
+from virf.deadlines import DeadlineExceeded, current_deadline
 from virf.ontology.fragment import Expr, Fragment, Role
 from virf.ontology.iri import NOTHING, THING
 from virf.reasoning.chase import ChaseLimit, Model
 from virf.reasoning.derive import Atom, derivations, edge, rules_of
-from virf.schema import Fact
+from virf.schema import Fact, FactKind
 
 # The need of an atom not yet bounded: every item (an infinite bit set).
 _TOP = -1
-# One derivation: its own item's bit, and its premises.
-_Option = tuple[int, tuple[Atom, ...]]
-_Memo = dict[tuple[Expr, str], int | None]
+# One derivation: the item it needs of its own (an axiom the search can
+# leave out, or an input fact), every item it rests on, and its premises.
+_Option = tuple[int, int, tuple[Atom, ...]]
+# Query nodes that count as Thing for the needs.
+_WEAK = ("not", "all", "max", "min", "sink")
 
 
 def needed(
@@ -64,22 +83,32 @@ def needed(
     rank: Mapping[object, int],
     concept: str,
     x: str,
+    without: frozenset[str] = frozenset(),
     wanted: int = _TOP,
-) -> int:
+) -> tuple[int, Oracle | None]:
     """The ranks (as bits) of the ranked items without which ``concept(x)``
     is not entailed, given that it is entailed by the facts and rules of
-    ``m`` (its least model, grown).  The search for them stops once those
-    of ``wanted`` (a proof's) are all found."""
+    ``m`` (its least model, grown, with the axioms ``without`` left out),
+    and an oracle for the questions about what is left out.  The search for refutations stops once those of
+    ``wanted`` (a proof's) are all found, unless the oracle needs them."""
     if m.prog.checks or m.clash is not None:
-        return 0
+        return 0, None
     needs = _Needs(m, frag, defs, inputs, rank)
-    found = needs.query(concept, x)
+    needs._add(("e", x), 0, 0, ())  # the engine adds the individual asked about
+    root = needs.node(("C", concept), x)
+    if root is None or not needs.settle([root]):
+        return 0, None
+    found = max(needs.need[root], 0)
     for part in _conjuncts(("C", concept), defs):
-        if not wanted & ~found:
-            break
         with suppress(ChaseLimit):  # too many witnesses: claim nothing more
-            found |= needs.refuted(part, x)
-    return found
+            found |= needs.refuted(part, x, bool(wanted & ~found))
+    return found, Oracle(needs, root, found, without)
+
+
+def _weak(a: Atom) -> bool:
+    """Is the query node ``a`` Thing in the positive skeleton?"""
+    e = a[1]
+    return isinstance(e, tuple) and e[0] in _WEAK
 
 
 def _conjuncts(e: Expr, defs: Mapping[str, Expr]) -> list[Expr]:
@@ -101,8 +130,24 @@ def _other_clash(m: Model) -> bool:
     return any(len(table.get(d, ())) > 1 for table in m.data.values() for d in functional)
 
 
+def _elements(inputs: Mapping[Atom, Fact]) -> dict[str, list[Fact]]:
+    """The input facts that make each element (a class is not one)."""
+    out: dict[str, list[Fact]] = {}
+    for f in inputs.values():
+        if f.kind is FactKind.OBJECT:
+            names: tuple[str, ...] = (f.subject, f.object)
+        elif f.kind is FactKind.CLOSURE:
+            names = (f.subject, *f.members)
+        else:
+            names = (f.subject,)
+        for n in dict.fromkeys(names):
+            out.setdefault(n, []).append(f)
+    return out
+
+
 class _Needs:
-    """The needs of the atoms of one state of a model (see the module's docstring)."""
+    """The derivations of one state of a model, and their needs (see the
+    module's docstring)."""
 
     def __init__(
         self,
@@ -112,16 +157,21 @@ class _Needs:
         inputs: Mapping[Atom, Fact],
         rank: Mapping[object, int],
         free: frozenset[Atom] = frozenset(),
+        elements: dict[str, list[Fact]] | None = None,
     ) -> None:
         self.m, self.frag, self.defs = m, frag, defs
         self.inputs, self.rank, self.free = inputs, rank, free
+        self.elements = _elements(inputs) if elements is None else elements
         self.rules = rules_of(m.prog)
         self.structural = m.prog.structural
         self.witness_of = {y: key for key, y in m.witness.items()}
         self.options: dict[Atom, list[_Option]] = {}
+        # Derivations of other models' atoms (refutations), for the oracle only.
+        self.extra: dict[Atom, list[_Option]] = {}
         self.users: dict[Atom, list[Atom]] = {}
         self.need: dict[Atom, int] = {}
-        self.pending: list[Atom] = []  # premises of paths, still to explore
+        self.pending: list[Atom] = []  # premises still to explore
+        self._nodes: dict[tuple[Expr, str], Atom | None] = {}
         self._paths_from: dict[tuple[str, bool, str], dict[str, Atom]] = {}
 
     def _bit(self, item: object) -> int:
@@ -131,161 +181,81 @@ class _Needs:
     def _own(self, tag: str | None) -> int:
         return 0 if tag is None or tag in self.structural else self._bit(tag)
 
-    def query(self, concept: str, x: str) -> int:
-        """The need of the query's positive skeleton at ``x``."""
-        roots: list[Atom] = []
-        e: Expr = ("C", concept)
+    def _bits(self, tags: Collection[str]) -> int:
+        out = 0
+        for tag in tags:
+            out |= self._bit(tag)
+        return out
 
-        def collect(a: Atom) -> int:
-            roots.append(a)
-            return 0
+    def _add(self, a: Atom, own: int, rests: int, premises: tuple[Atom, ...]) -> None:
+        self.options.setdefault(a, []).append((own, rests, premises))
+        for p in premises:
+            self.users.setdefault(p, []).append(a)
+            if p not in self.options:
+                self.pending.append(p)
 
-        if self._expr(e, x, collect, {}) is None:
-            return 0  # the skeleton is false: the caller's premise does not hold
-        if not self._settle(roots):
-            return 0
-        found = self._expr(e, x, self.need.__getitem__, {})
-        return 0 if found is None or found < 0 else found
-
-    def _settle(self, roots: list[Atom]) -> bool:
+    def settle(self, roots: list[Atom]) -> bool:
         self._explore(roots + self.pending)
         self.pending = []
         return self._solve()
 
-    # ------------------------------------------------------------------ negation
-    def refuted(self, part: Expr, x: str) -> int:
-        """What a negation in the conjunct ``part`` of the query at ``x``
-        needs: ``not N``, or ``r some (... and not N)``.
-
-        A class that falsifies ``not N`` (N, or one of its disjuncts) is
-        asserted where the conjunct would otherwise hold (at ``x``, or at
-        each r-successor where the rest of the filler holds), and the model
-        grown past its first clash.  An item every clash needs is one
-        without which the assertions are consistent: the least model of the
-        rest with them is a model where the conjunct, hence the query, is
-        false (when no new successor satisfies the rest of the filler there)."""
-        defs = self.defs
-        role: Role | None = None
-        filler: Expr | None = None
-        if part[0] == "not":
-            negated, targets = [part[1]], [x]
-        elif part[0] == "some" or (part[0] == "min" and part[1] == 1):
-            role, filler = (part[1], part[2]) if part[0] == "some" else (part[2], part[3])
-            negated = [c[1] for c in _conjuncts(filler, defs) if c[0] == "not"]
-            targets = [z for z in sorted(self._ends(role, x)) if self._holds(filler, z)]
-            if not targets or any(z in self.witness_of for z in targets):
-                return 0
-        else:
-            return 0
-        found = 0
-        for e in negated:
-            for name in self._falsifiers(e):
-                found |= self._trial(name, targets, role, filler, x)
-        return found
-
-    def _falsifiers(self, e: Expr) -> list[str]:
-        """Named classes whose assertion at an element makes ``e`` true there."""
-        if e[0] == "C":
-            if e[1] in self.defs:
-                return self._falsifiers(self.defs[e[1]])
-            return [] if e[1] == THING or e[1] in self.frag.sinks else [e[1]]
-        if e[0] == "or":
-            return [n for c in e[1] for n in self._falsifiers(c)]
-        return []
-
-    def _trial(
-        self, name: str, targets: list[str], role: Role | None, filler: Expr | None, x: str
-    ) -> int:
-        """What every clash needs once ``name`` is asserted at the targets
-        (see :meth:`refuted`)."""
-        m = self.m
-        assert m.journal is not None
-        token = m.begin()
-        try:
-            start = len(m.journal)
-            for z in targets:
-                m.cls(z, name)
-            asserted = frozenset(a for a in m.journal[start:] if a[0] in ("t", "r", "d"))
-            m.run(through=True)
-            clashes = sorted(m.members.get(NOTHING, ()))
-            if not clashes or _other_clash(m):
-                return 0
-            grown = _Needs(m, self.frag, self.defs, self.inputs, self.rank, asserted)
-            if role is not None and filler is not None:
-                ends = grown._ends(role, x)
-                if any(z not in targets and grown._holds(filler, z) for z in ends):
-                    return 0  # a successor the assertions made
-            roots: list[Atom] = [("t", w, NOTHING) for w in clashes]
-            if not grown._settle(roots):
-                return 0
-            found = _TOP
-            for a in roots:
-                found &= grown.need[a]
-            return max(found, 0)
-        finally:
-            m.rollback(token)
-
-    def _holds(self, e: Expr, y: str) -> bool:
-        """Is the positive skeleton of ``e`` true at ``y``?"""
-        return self._expr(e, y, lambda a: 0, {}) is not None
-
-    # ------------------------------------------------------------------ the skeleton
-    def _expr(self, e: Expr, y: str, atom: Callable[[Atom], int], memo: _Memo) -> int | None:
-        """The need of the positive skeleton of ``e`` at ``y`` (None: false
-        in the model).  ``atom`` gives an atom's need."""
+    # ------------------------------------------------------------------ the query
+    def node(self, e: Expr, y: str) -> Atom | None:
+        """The atom or query node of ``e`` at ``y`` (None: its positive
+        skeleton is false in the model), with its derivations."""
         key = (e, y)
-        if key in memo:
-            return memo[key]
-        memo[key] = None  # a definition cannot reach itself; guard anyway
+        if key in self._nodes:
+            return self._nodes[key]
+        self._nodes[key] = None  # a definition cannot reach itself; guard anyway
         m, tag = self.m, e[0]
-        found: int | None = 0
+        here: Atom = ("q", e, y)
+        found: Atom | None = here
         if tag == "C":
             name = e[1]
             if name in self.defs:
-                inner = self._expr(self.defs[name], y, atom, memo)
-                found = None if inner is None else inner | self._definition(name)
-            elif name == THING or name in self.frag.sinks:
-                found = 0
+                inner = self.node(self.defs[name], y)
+                found = None if inner is None else here
+                if inner is not None:
+                    own = self._own(self.frag.query_axiom[name].id)
+                    self._add(here, own, own, (inner,))
+            elif name in self.frag.sinks:
+                found = ("q", ("sink", name), y)
+                self.options.setdefault(found, [])
             else:
-                found = atom(("t", y, name)) if name in m.types.get(y, ()) else None
+                found = ("t", y, name) if name in m.types.get(y, ()) else None
         elif tag == "and":
-            for c in e[1]:
-                part = self._expr(c, y, atom, memo)
-                if part is None:
-                    found = None
-                    break
-                assert found is not None
-                found |= part
+            parts = [self.node(c, y) for c in e[1]]
+            if any(p is None for p in parts):
+                found = None
+            else:
+                self._add(here, 0, 0, tuple(p for p in parts if p is not None))
         elif tag == "or":
-            found = None
-            for c in e[1]:
-                part = self._expr(c, y, atom, memo)
-                if part is not None:
-                    found = part if found is None else found & part
+            held = [p for p in (self.node(c, y) for c in e[1]) if p is not None]
+            found = here if held else None
+            for p in held:
+                self._add(here, 0, 0, (p,))
         elif tag == "some" or (tag == "min" and e[1] == 1):
             role, filler = (e[1], e[2]) if tag == "some" else (e[2], e[3])
             ends = self._ends(role, y)
             found = None
             for z in sorted(ends):
-                part = self._expr(filler, z, atom, memo)
+                part = self.node(filler, z)
                 if part is not None:
-                    both = part | atom(ends[z])
-                    found = both if found is None else found & both
+                    found = here
+                    self._add(here, 0, 0, (ends[z], part))
         elif tag == "value":
-            ends = self._ends(e[1], y)
-            found = atom(ends[e[2]]) if e[2] in ends else None
+            found = self._ends(e[1], y).get(e[2])
         elif tag == "dvalue":
             present = e[2] in m.data.get(y, {}).get(e[1], ())
-            found = atom(("d", y, e[1], e[2])) if present else None
+            found = ("d", y, e[1], e[2]) if present else None
         elif tag == "oneof":
-            found = 0 if y in e[1] else None
-        # not, all, max, min > 1: Thing in the skeleton
-        memo[key] = found
+            found = here if y in e[1] else None
+            if found is not None:
+                self._add(here, 0, 0, ())
+        else:  # not, all, max, min > 1: Thing in the skeleton
+            self.options.setdefault(here, [])
+        self._nodes[key] = found
         return found
-
-    def _definition(self, name: str) -> int:
-        """The query class's own definition: without it the class is empty."""
-        return self._own(self.frag.query_axiom[name].id)
 
     def _ends(self, role: Role, y: str) -> dict[str, Atom]:
         """The r-successors of ``y``, each with the atom of the edge to it
@@ -302,11 +272,12 @@ class _Needs:
         found = self._paths_from.get(key)
         if found is not None:
             return found
-        m, options, users = self.m, self.options, self.users
+        m = self.m
         spec = m.lazy[p]
         base = (m.pred if backward else m.succ).get(p, {})
         before = spec.right if backward else spec.left
         after = spec.left if backward else spec.right
+        rests = self._bits(self.rules.lazy.get(p, m.prog.structural))
 
         def node(n: str, state: int) -> Atom:
             return ("p", p, backward, start, n, state)
@@ -318,7 +289,7 @@ class _Needs:
                 out += [(z, edge(r, n, z)) for z in sorted(m._stored(r, n))]
             return out
 
-        options.setdefault(node(start, 0), []).append((0, ()))
+        self._add(node(start, 0), 0, 0, ())
         seen = {(start, 0)}
         todo = [(start, 0)]
         while todo:
@@ -331,17 +302,125 @@ class _Needs:
             if state == 1:
                 moves += [(z, 1, a) for z, a in steps(after, n)]
             for z, nxt, a in moves:
-                there = node(z, nxt)
-                options.setdefault(there, []).append((0, (here, a)))
-                users.setdefault(here, []).append(there)
-                users.setdefault(a, []).append(there)
-                self.pending.append(a)
+                self._add(node(z, nxt), 0, rests, (here, a))
                 if (z, nxt) not in seen:
                     seen.add((z, nxt))
                     todo.append((z, nxt))
         found = {n: node(n, 1) for n, state in sorted(seen) if state == 1}
         self._paths_from[key] = found
         return found
+
+    # ------------------------------------------------------------------ negation
+    def refuted(self, part: Expr, x: str, claims: bool) -> int:
+        """What a negation in the conjunct ``part`` of the query at ``x``
+        needs (``not N``, or ``r some (... and not N)``; only when
+        ``claims``), and its refutation as derivations for the oracle.
+
+        A class that falsifies ``not N`` (N, or one of its disjuncts) is
+        asserted where the conjunct would otherwise hold (at ``x``, or at
+        each r-successor where the rest of the filler holds), and the model
+        grown past its first clash.  An item every clash needs is one
+        without which the assertions are consistent: the least model of the
+        rest with them is a model where the conjunct, hence the query, is
+        false (when no new successor satisfies the rest of the filler
+        there).  At a single target, the clashes also derive the negation."""
+        role: Role | None = None
+        filler: Expr | None = None
+        if part[0] == "not":
+            negated, targets = [part[1]], [x]
+        elif part[0] == "some" or (part[0] == "min" and part[1] == 1):
+            role, filler = (part[1], part[2]) if part[0] == "some" else (part[2], part[3])
+            negated = [c[1] for c in _conjuncts(filler, self.defs) if c[0] == "not"]
+            targets = [z for z in sorted(self._ends(role, x)) if self._holds(filler, z)]
+            if not targets or any(z in self.witness_of for z in targets):
+                return 0
+        else:
+            return 0
+        found = 0
+        for e in negated:
+            names, complete, rests = self._falsifiers(e)
+            derives = (
+                complete and len(targets) == 1 and ("q", ("not", e), targets[0]) in self.options
+            )
+            if not (claims or derives):
+                continue
+            clashes: list[Atom] = []
+            for name in names:
+                kill, clash = self._trial(name, targets, role, filler, x)
+                found |= kill
+                if clash is not None:
+                    clashes.append(clash)
+            if derives and len(clashes) == len(names):
+                self._add(("q", ("not", e), targets[0]), 0, rests, tuple(clashes))
+        return found
+
+    def _holds(self, e: Expr, y: str) -> bool:
+        """Is the positive skeleton of ``e`` true at ``y``?"""
+        return self.node(e, y) is not None
+
+    def _falsifiers(self, e: Expr) -> tuple[list[str], bool, int]:
+        """Named classes whose assertion at an element makes ``e`` true
+        there, whether ``not e`` holds exactly where each of them clashes
+        (the engine's certain reading), and the definitions that reading
+        rests on (as bits)."""
+        if e[0] == "C":
+            if e[1] in self.defs:
+                names, complete, rests = self._falsifiers(self.defs[e[1]])
+                ident = self.frag.query_axiom[e[1]].id
+                return names, complete, rests | self._bits(() if ident is None else (ident,))
+            if e[1] in (THING, NOTHING) or e[1] in self.frag.sinks:
+                return [], False, 0
+            return [e[1]], True, 0
+        if e[0] == "or":
+            names = []
+            complete, rests = True, 0
+            for c in e[1]:
+                more, whole, bits = self._falsifiers(c)
+                names += more
+                complete, rests = complete and whole, rests | bits
+            return names, complete, rests
+        return [], False, 0
+
+    def _trial(
+        self, name: str, targets: list[str], role: Role | None, filler: Expr | None, x: str
+    ) -> tuple[int, Atom | None]:
+        """What every clash needs once ``name`` is asserted at the targets
+        (see :meth:`refuted`), and a node any of the clashes derives."""
+        m = self.m
+        assert m.journal is not None
+        token = m.begin()
+        try:
+            start = len(m.journal)
+            for z in targets:
+                m.cls(z, name)
+            asserted = frozenset(a for a in m.journal[start:] if a[0] in ("t", "r", "d"))
+            m.run(through=True)
+            clashes = sorted(m.members.get(NOTHING, ()))
+            if not clashes or _other_clash(m):
+                return 0, None
+            grown = _Needs(m, self.frag, self.defs, self.inputs, self.rank, asserted, self.elements)
+            roots: list[Atom] = [("t", w, NOTHING) for w in clashes]
+            if not grown.settle(roots):
+                return 0, None
+            # The trial's atoms, kept apart from this model's.
+            space = ("E", name, tuple(targets))
+            for a, options in grown.options.items():
+                self.extra[(*space, a)] = [
+                    (own, rests, tuple((*space, p) for p in premises))
+                    for own, rests, premises in options
+                ]
+            clash: Atom = ("X", name, tuple(targets))
+            self.extra[clash] = [(0, 0, ((*space, a),)) for a in roots]
+            if role is not None and filler is not None:
+                ends = grown._ends(role, x)
+                if any(z not in targets and grown._holds(filler, z) for z in ends):
+                    return 0, clash  # a successor the assertions made: no claim
+            found = _TOP
+            for a in roots:
+                found &= grown.need[a]
+            return max(found, 0), clash
+        finally:
+            m.rollback(token)
 
     # ------------------------------------------------------------------ atoms
     def _present(self, a: Atom) -> bool:
@@ -356,50 +435,65 @@ class _Needs:
 
     def _explore(self, roots: list[Atom]) -> None:
         """The derivations of the roots, and of their premises, down to the inputs."""
-        options, users, rules = self.options, self.users, self.rules
+        options, rules = self.options, self.rules
         disabled = self.m.disabled
         todo = list(roots)
         while todo:
             a = todo.pop()
             if a in options:
                 continue
-            found: list[_Option] = []
-            options[a] = found
-            if a[0] == "e":
-                continue  # an element's existence: claimed to need nothing
+            options[a] = []
             if a in self.free:
-                found.append((0, ()))
+                self._add(a, 0, 0, ())
+                continue
+            if a[0] == "e":
+                self._element(a)
                 continue
             fact = self.inputs.get(a)
             if fact is not None:
-                found.append((self._bit(fact), ()))
+                bit = self._bit(fact)
+                self._add(a, bit, bit, ())
             if a in rules.tbox:
-                found.append((self._own(rules.tbox[a]), ()))
-            for premises, tag, _ in derivations(self.m, rules, self.witness_of, a):
+                tag = rules.tbox[a]
+                self._add(a, self._own(tag), self._bits(() if tag is None else (tag,)), ())
+            for premises, tag, structure in derivations(self.m, rules, self.witness_of, a):
                 if tag in disabled or not all(self._present(p) for p in premises):
                     continue
-                found.append((self._own(tag), tuple(premises)))
-                for p in premises:
-                    users.setdefault(p, []).append(a)
-                    if p not in options:
-                        todo.append(p)
+                rests = self._bits(structure) | self._bits(() if tag is None else (tag,))
+                self._add(a, self._own(tag), rests, tuple(premises))
+            todo += self.pending
+            self.pending = []
+
+    def _element(self, a: Atom) -> None:
+        """How an element comes to be: a fact that names it, the TBox, or
+        the rule that made it a witness (its needs count as none)."""
+        x = str(a[1])
+        for f in self.elements.get(x, ()):
+            self._add(a, 0, self._bit(f), ())
+        if a in self.rules.tbox:
+            tag = self.rules.tbox[a]
+            self._add(a, 0, self._bits(() if tag is None else (tag,)), ())
+        if x in self.witness_of:
+            z, r, _ = self.witness_of[x]
+            self._add(a, 0, 0, (edge(r, z, x),))
 
     def _solve(self) -> bool:
         """The greatest solution of the needs (see the module's docstring);
         False when an atom has no grounded derivation."""
         need, options, users = self.need, self.options, self.users
+        fixed = {a for a in options if a[0] == "e" or (a[0] == "q" and _weak(a))}
         for a in options:
-            need[a] = 0 if a[0] == "e" else _TOP
+            need[a] = 0 if a in fixed else _TOP
         # Premises were found after the atoms they derive: the reverse
         # order meets most of them first.
-        order = [a for a in reversed(options) if a[0] != "e"]
+        order = [a for a in reversed(options) if a not in fixed]
         queued = set(order)
         work = deque(order)
         while work:
             a = work.popleft()
             queued.discard(a)
             value = _TOP
-            for own, premises in options[a]:
+            for own, _, premises in options[a]:
                 part = own
                 for p in premises:
                     part |= need[p]
@@ -409,7 +503,93 @@ class _Needs:
             if value != need[a]:
                 need[a] = value
                 for u in users.get(a, ()):
-                    if u not in queued:
+                    if u not in queued and u not in fixed:
                         queued.add(u)
                         work.append(u)
         return all(v != _TOP for v in need.values())
+
+
+class Oracle:
+    """Answers the deletion search's questions about the facts and axioms
+    of one proof's model, each with some left out: True (still entailed:
+    the query's node is still derived), False (a needed item is out), None
+    (ask the engine)."""
+
+    def __init__(self, needs: _Needs, root: Atom, needed: int, without: frozenset[str]) -> None:
+        self.rank = needs.rank
+        self.needed = needed
+        self.without = without
+        # The graph as arrays: a derivation's head, the items it rests on,
+        # its premises by number; the derivations each atom is a premise of.
+        every = {**needs.options, **needs.extra}
+        number = {a: i for i, a in enumerate(every)}
+        self.root = number[root]
+        self.heads: list[int] = []
+        self.rests: list[int] = []
+        self.counts: list[int] = []
+        self.uses: list[list[int]] = [[] for _ in every]
+        self.starts: list[int] = []
+        for a, options in every.items():
+            for _, rests, premises in options:
+                k = len(self.heads)
+                self.heads.append(number[a])
+                self.rests.append(rests)
+                known = {number[p] for p in premises if p in number}
+                self.counts.append(len(known) if len(known) == len(set(premises)) else -1)
+                for p in known:
+                    self.uses[p].append(k)
+                if not premises:
+                    self.starts.append(k)
+        self.size = len(every)
+        # Items no derivation rests on change nothing: answers are kept by
+        # the removed items that matter.
+        self.relevant = 0
+        for rests in self.rests:
+            self.relevant |= rests
+        self._memo: dict[int, bool] = {}
+        # The engine call's deadline holds for the questions it answers later.
+        self.deadline = current_deadline()
+
+    def mask(self, facts: Collection[Fact], axioms: Collection[str]) -> int | None:
+        """The items as bits (None: one the graph cannot leave out)."""
+        removed = 0
+        for item in (*facts, *axioms):
+            if item in self.without:
+                continue  # out already
+            r = self.rank.get(item)
+            if r is None:
+                return None
+            removed |= 1 << r
+        return removed
+
+    def decide(self, removed: int) -> bool | None:
+        """Is the finding entailed by the proof's facts and axioms without
+        the ``removed`` ones (a :meth:`mask`)?"""
+        if self.deadline is not None and time.monotonic() > self.deadline:
+            raise DeadlineExceeded("the deadline passed while an explanation was read off a proof")
+        if removed & self.needed:
+            return False
+        key = removed & self.relevant
+        derived = self._memo.get(key)
+        if derived is None:
+            derived = self._memo[key] = self._derived(key)
+        return True if derived else None
+
+    def _derived(self, removed: int) -> bool:
+        """Is the root derived by derivations resting on no removed item?"""
+        counts = list(self.counts)
+        rests, heads, uses = self.rests, self.heads, self.uses
+        alive = bytearray(self.size)
+        todo = [k for k in self.starts if not rests[k] & removed]
+        while todo:
+            h = heads[todo.pop()]
+            if alive[h]:
+                continue
+            alive[h] = 1
+            if h == self.root:
+                return True
+            for k in uses[h]:
+                counts[k] -= 1
+                if counts[k] == 0 and not rests[k] & removed:
+                    todo.append(k)
+        return False

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from typing import Generic, TypeVar
 
 from virf.ontology.tbox import UnsafeStateConcept, Vocabulary
-from virf.reasoning import Engine, Proof
+from virf.reasoning import Engine, Oracle, Proof
 from virf.schema import BackgroundKnowledge, Fact, FactKind, Phase, Provenance
 from virf.verify.findings import Finding, inconsistency
 from virf.verify.questions import rule_questions
@@ -109,12 +109,35 @@ def minimize(
 
 @dataclass(frozen=True)
 class Hint(Generic[T]):
-    """A proof's items that suffice, and those it names as needed: without
-    one of them, what the proof was asked of does not hold (an engine's
-    claim, see :attr:`virf.reasoning.Proof.needed`)."""
+    """A proof's items that suffice, those it names as needed (without one
+    of them, what the proof was asked of does not hold: an engine's claim,
+    see :attr:`virf.reasoning.Proof.needed_facts`), and an oracle: do the
+    items the proof was asked of hold without some of them (None: it
+    cannot tell)?"""
 
     suffices: Collection[T]
     needed: Collection[T] = ()
+    reader: Reader[T] | None = None
+
+
+@dataclass(frozen=True)
+class Reader(Generic[T]):
+    """A proof's oracle (:class:`virf.reasoning.Oracle`) over a search's
+    items: the mask of some items (None: one it cannot leave out), and
+    whether the items the proof was asked of hold without a mask's (None:
+    it cannot tell)."""
+
+    mask: Callable[[Collection[T]], int | None]
+    decide: Callable[[int], bool | None]
+
+
+@dataclass(frozen=True)
+class _Known(Generic[T]):
+    """A proof that holds: its items, those it needs, its oracle."""
+
+    proof: set[T]
+    needed: set[T]
+    reader: Reader[T] | None
 
 
 def _tested(
@@ -123,7 +146,7 @@ def _tested(
     holds: Callable[[list[T]], bool],
     *,
     holding: bool = False,
-) -> tuple[set[T], set[T]] | None:
+) -> _Known[T] | None:
     """The items of a proof of ``items`` that hold on their own, and those
     of them it needs (None when there is no proof, or it does not hold).
     With ``holding``, ``items`` are known to hold: a proof of them all is
@@ -132,9 +155,42 @@ def _tested(
     if found is None:
         return None
     kept = [x for x in items if x in found.suffices]
-    if (holding and len(kept) == len(items)) or holds(kept):
-        return set(kept), {x for x in kept if x in found.needed}
+    answer = None
+    if found.reader is not None:
+        dropped = found.reader.mask([x for x in items if x not in found.suffices])
+        answer = None if dropped is None else found.reader.decide(dropped)
+    if answer is None:
+        answer = (holding and len(kept) == len(items)) or holds(kept)
+    if answer:
+        return _Known(set(kept), {x for x in kept if x in found.needed}, found.reader)
     return None
+
+
+def _one_at_a_time(
+    current: list[T],
+    i: int,
+    reader: Reader[T] | None,
+    holds: Callable[[list[T]], bool],
+) -> list[T]:
+    """The deletion itself, from item ``i`` on, each question put to the
+    oracle first (does ``current`` hold without some items?) and to
+    ``holds`` when it cannot tell."""
+    gone = 0  # the items deleted, as the oracle's mask
+    while i < len(current):
+        trial = current[:i] + current[i + 1 :]
+        bit = reader.mask([current[i]]) if reader is not None else None
+        answer = reader.decide(gone | bit) if reader is not None and bit is not None else None
+        if answer is None:
+            answer = holds(trial)
+        if answer:
+            if bit is None:
+                reader = None  # an item it cannot leave out is gone: no more answers
+            else:
+                gone |= bit
+            current = trial
+        else:
+            i += 1
+    return current
 
 
 def drop_greedily(
@@ -142,7 +198,7 @@ def drop_greedily(
     holds: Callable[[list[T]], bool],
     prove: Callable[[list[T]], Hint[T] | None] | None = None,
     each: Callable[[list[T], list[T], list[bool]], Iterable[bool]] | None = None,
-    first: tuple[set[T], set[T]] | None = None,
+    first: _Known[T] | None = None,
     asked: bool = False,
 ) -> list[T]:
     """What is left of ``items`` after trying to drop each in turn, keeping
@@ -168,10 +224,15 @@ def drop_greedily(
     tests together: for each tested item of ``rest``, does ``kept`` with the
     tested items before it and every item after it hold?  With ``asked``, the
     caller has already asked for the first proof: ``first`` is what
-    :func:`_tested` made of it."""
+    :func:`_tested` made of it.
+
+    A proof may also name items it needs (kept without asking), and bring
+    an oracle that answers questions about lists of its items.  Once the
+    oracle reads the list as holding, the rest is deleted one at a time,
+    each question put to it, and to ``holds`` only when it cannot tell."""
     current = list(items)
 
-    def proved() -> tuple[set[T], set[T]] | None:
+    def proved() -> _Known[T] | None:
         return _tested(current, prove, holds, holding=True) if prove is not None else None
 
     def one_by_one(kept: list[T], rest: list[T], tested: list[bool]) -> Iterator[bool]:
@@ -186,7 +247,9 @@ def drop_greedily(
     i, run = 0, 1
     while i < len(current):
         if known is not None:
-            proof, needed = known
+            if known.reader is not None and known.reader.decide(0) is True:
+                return _one_at_a_time(current, i, known.reader, holds)
+            proof, needed = known.proof, known.needed
             rest = current[i:]
             # What the proof needs stays without asking; the others' tests
             # are asked with it in place, as one at a time would.
@@ -233,11 +296,13 @@ def needed_background(
     *,
     deadline: float | None = None,
     hint: Hint[str] | None = None,
+    oracle: Reader[str] | None = None,
 ) -> list[str]:
     """Background axiom ids the entailment needs, given the minimal facts.
     Each engine call stops at ``deadline`` (see :mod:`virf.reasoning`).
     ``hint`` may name axioms of a proof from these facts (tested before it
-    is used, as every proof is)."""
+    is used, as every proof is).  ``oracle`` may tell whether the facts
+    entail the finding without some of the axioms (see :class:`Reader`)."""
     names: set[str] = {concept}
     for f in facts:
         names.update((f.subject, f.predicate))
@@ -272,7 +337,9 @@ def needed_background(
         found = engine.proof(
             facts, concept, individual, without=every - set(kept), order=order, deadline=deadline
         )
-        return Hint(found.axioms, found.needed_axioms) if found else None
+        if found is None:
+            return None
+        return Hint(found.axioms, found.needed_axioms, _axioms_reader(found.oracle))
 
     def each(kept: list[str], rest: list[str], tested: list[bool]) -> Iterator[bool]:
         dropped = every - set(kept) - set(rest)
@@ -280,6 +347,8 @@ def needed_background(
             facts, dropped, rest, tested, concept, individual, deadline=deadline
         )
 
+    if oracle is not None and oracle.decide(0) is True:
+        return _one_at_a_time(order, 0, oracle, holds)
     first = _tested(order, lambda _: hint, holds, holding=True) if hint is not None else None
     return drop_greedily(order, holds, prove, each, first, asked=first is not None)
 
@@ -409,6 +478,7 @@ class Explainer:
             return self.engine.entails(fs, usc.name, ind, deadline=self.deadline)
 
         last: list[Proof | None] = [None]
+        asked: list[list[Fact]] = [[]]  # the facts the last proof was asked of
         # The axioms are ranked after the facts, in the background search's
         # order: the fact search's last proof then also serves as that
         # search's first (one proof fewer per finding), while every choice
@@ -421,7 +491,14 @@ class Explainer:
                 kept, usc.name, ind, order=[*order, *axioms], deadline=self.deadline
             )
             last[0] = found
-            return Hint(found.facts, found.needed_facts) if found else None
+            asked[0] = list(kept)
+            if found is None:
+                return None
+            oracle = found.oracle
+            reader: Reader[Fact] | None = None
+            if oracle is not None:
+                reader = Reader(lambda fs: oracle.mask(fs, ()), oracle.decide)
+            return Hint(found.facts, found.needed_facts, reader)
 
         def each(kept: list[Fact], rest: list[Fact], tested: list[bool]) -> Iterator[bool]:
             self.tick()
@@ -444,6 +521,7 @@ class Explainer:
                     if proof is not None and proof.facts == set(facts)
                     else None
                 ),
+                oracle=_without_axioms(proof, asked[0], facts),
             )
             if self.background
             else []
@@ -482,6 +560,26 @@ class Explainer:
             return not self.engine.consistent(fs, deadline=self.deadline)
 
         return inconsistency(minimize(snapshot, contradicts, set(), self.vocab), snapshot, k)
+
+
+def _axioms_reader(oracle: Oracle | None, base: int = 0) -> Reader[str] | None:
+    """An oracle's questions about axioms left out (and the ``base`` mask)."""
+    if oracle is None:
+        return None
+    return Reader(lambda axioms: oracle.mask((), axioms), lambda m: oracle.decide(base | m))
+
+
+def _without_axioms(
+    proof: Proof | None, asked: list[Fact], facts: list[Fact]
+) -> Reader[str] | None:
+    """The oracle of a proof asked of ``asked``, for ``facts`` (fewer) with
+    some axioms left out."""
+    oracle = None if proof is None else proof.oracle
+    if oracle is None:
+        return None
+    kept = set(facts)
+    base = oracle.mask([f for f in asked if f not in kept], ())
+    return None if base is None else _axioms_reader(oracle, base)
 
 
 def note_onset(f: Finding, states: Sequence[WorldState], sim: Simulator) -> None:
