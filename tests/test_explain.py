@@ -8,7 +8,7 @@ from collections.abc import Callable
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from virf.verify.explain import Hint, drop_greedily
+from virf.verify.deletion import Hint, drop_greedily
 
 
 def one_at_a_time(items: list[int], holds: Callable[[list[int]], bool]) -> list[int]:

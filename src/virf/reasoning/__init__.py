@@ -206,7 +206,7 @@ class Engine(ABC):
         engine keeps no derivations (or found none).  Where there are
         alternatives, it prefers facts and axioms late in ``order``.  A hint
         for explanations, which test it (see
-        :func:`virf.verify.explain.drop_greedily`), never a verdict."""
+        :func:`virf.verify.deletion.drop_greedily`), never a verdict."""
         return None
 
     @abstractmethod

@@ -50,7 +50,7 @@ from virf.reasoning.chase import ChaseLimit, Model
 from virf.reasoning.derive import atom_of
 from virf.reasoning.evaluate import Evaluator, Fallback, checks, required
 from virf.reasoning.kept import Core, Kept, individuals
-from virf.reasoning.necessity import needed
+from virf.reasoning.necessity import with_needs
 from virf.reasoning.prior import Atoms, Prior, Readers, Values, Wheres, atoms
 from virf.reasoning.program import Program, compile_program
 from virf.reasoning.proof import NoProof, Prover
@@ -567,22 +567,9 @@ class FastEngine(Engine):
                         return None
                     prover = Prover(m, frag, ev.defs, inputs, rank, ev.certain, ev.impose)
                     found = prover.proof(concept, individual)
-                    used = [
-                        r for i in (*found.facts, *found.axioms) if (r := rank.get(i)) is not None
-                    ]
-                    wanted = sum(1 << r for r in set(used))
                     off = frozenset(without)
-                    bits, oracle = needed(
-                        m, frag, ev.defs, inputs, rank, concept, individual, off, wanted
-                    )
-                    chosen = (order[i] for i in range(bits.bit_length()) if bits >> i & 1)
-                    items = list(chosen)
-                    return Proof(
-                        found.facts,
-                        found.axioms,
-                        frozenset(f for f in items if isinstance(f, Fact)),
-                        frozenset(a for a in items if isinstance(a, str)),
-                        oracle,
+                    return with_needs(
+                        found, m, frag, ev.defs, inputs, order, rank, concept, individual, off
                     )
             except (Fallback, ChaseLimit, NoProof, RecursionError):
                 return None

@@ -54,16 +54,16 @@ remains entailed).
 
 from __future__ import annotations
 
-import time
 from collections import deque
-from collections.abc import Collection, Mapping
+from collections.abc import Collection, Mapping, Sequence
 from contextlib import suppress
 
-from virf.deadlines import DeadlineExceeded, current_deadline
 from virf.ontology.fragment import Expr, Fragment, Role
 from virf.ontology.iri import NOTHING, THING
+from virf.reasoning import Proof
 from virf.reasoning.chase import ChaseLimit, Model
 from virf.reasoning.derive import Atom, derivations, edge, rules_of
+from virf.reasoning.oracle import Oracle
 from virf.schema import Fact, FactKind
 
 # The need of an atom not yet bounded: every item (an infinite bit set).
@@ -102,7 +102,7 @@ def needed(
     for part in _conjuncts(("C", concept), defs):
         with suppress(ChaseLimit):  # too many witnesses: claim nothing more
             found |= needs.refuted(part, x, bool(wanted & ~found))
-    return found, Oracle(needs, root, found, without)
+    return found, Oracle({**needs.options, **needs.extra}, root, rank, found, without)
 
 
 def _weak(a: Atom) -> bool:
@@ -509,87 +509,30 @@ class _Needs:
         return all(v != _TOP for v in need.values())
 
 
-class Oracle:
-    """Answers the deletion search's questions about the facts and axioms
-    of one proof's model, each with some left out: True (still entailed:
-    the query's node is still derived), False (a needed item is out), None
-    (ask the engine)."""
-
-    def __init__(self, needs: _Needs, root: Atom, needed: int, without: frozenset[str]) -> None:
-        self.rank = needs.rank
-        self.needed = needed
-        self.without = without
-        # The graph as arrays: a derivation's head, the items it rests on,
-        # its premises by number; the derivations each atom is a premise of.
-        every = {**needs.options, **needs.extra}
-        number = {a: i for i, a in enumerate(every)}
-        self.root = number[root]
-        self.heads: list[int] = []
-        self.rests: list[int] = []
-        self.counts: list[int] = []
-        self.uses: list[list[int]] = [[] for _ in every]
-        self.starts: list[int] = []
-        for a, options in every.items():
-            for _, rests, premises in options:
-                k = len(self.heads)
-                self.heads.append(number[a])
-                self.rests.append(rests)
-                known = {number[p] for p in premises if p in number}
-                self.counts.append(len(known) if len(known) == len(set(premises)) else -1)
-                for p in known:
-                    self.uses[p].append(k)
-                if not premises:
-                    self.starts.append(k)
-        self.size = len(every)
-        # Items no derivation rests on change nothing: answers are kept by
-        # the removed items that matter.
-        self.relevant = 0
-        for rests in self.rests:
-            self.relevant |= rests
-        self._memo: dict[int, bool] = {}
-        # The engine call's deadline holds for the questions it answers later.
-        self.deadline = current_deadline()
-
-    def mask(self, facts: Collection[Fact], axioms: Collection[str]) -> int | None:
-        """The items as bits (None: one the graph cannot leave out)."""
-        removed = 0
-        for item in (*facts, *axioms):
-            if item in self.without:
-                continue  # out already
-            r = self.rank.get(item)
-            if r is None:
-                return None
-            removed |= 1 << r
-        return removed
-
-    def decide(self, removed: int) -> bool | None:
-        """Is the finding entailed by the proof's facts and axioms without
-        the ``removed`` ones (a :meth:`mask`)?"""
-        if self.deadline is not None and time.monotonic() > self.deadline:
-            raise DeadlineExceeded("the deadline passed while an explanation was read off a proof")
-        if removed & self.needed:
-            return False
-        key = removed & self.relevant
-        derived = self._memo.get(key)
-        if derived is None:
-            derived = self._memo[key] = self._derived(key)
-        return True if derived else None
-
-    def _derived(self, removed: int) -> bool:
-        """Is the root derived by derivations resting on no removed item?"""
-        counts = list(self.counts)
-        rests, heads, uses = self.rests, self.heads, self.uses
-        alive = bytearray(self.size)
-        todo = [k for k in self.starts if not rests[k] & removed]
-        while todo:
-            h = heads[todo.pop()]
-            if alive[h]:
-                continue
-            alive[h] = 1
-            if h == self.root:
-                return True
-            for k in uses[h]:
-                counts[k] -= 1
-                if counts[k] == 0 and not rests[k] & removed:
-                    todo.append(k)
-        return False
+def with_needs(
+    found: Proof,
+    m: Model,
+    frag: Fragment,
+    defs: Mapping[str, Expr],
+    inputs: Mapping[Atom, Fact],
+    order: Sequence[object],
+    rank: Mapping[object, int],
+    concept: str,
+    x: str,
+    without: frozenset[str],
+) -> Proof:
+    """``found`` (a proof read off ``m``) with what every derivation needs,
+    of the items of ``order`` (``rank``: their places), and the oracle of
+    its model."""
+    used = {r for i in (*found.facts, *found.axioms) if (r := rank.get(i)) is not None}
+    bits, oracle = needed(
+        m, frag, defs, inputs, rank, concept, x, without, sum(1 << r for r in used)
+    )
+    items = [order[i] for i in range(bits.bit_length()) if bits >> i & 1]
+    return Proof(
+        found.facts,
+        found.axioms,
+        frozenset(f for f in items if isinstance(f, Fact)),
+        frozenset(a for a in items if isinstance(a, str)),
+        oracle,
+    )

@@ -9,7 +9,7 @@ facts.  No rule is applied again; the search reads the finished model.
 
 A proof is one derivation, not necessarily a minimal one, nor the one a
 deletion search over the same facts would keep.  The explainer uses it as a
-hint (see :func:`virf.verify.explain.drop_greedily`): what a proof leaves out
+hint (see :func:`virf.verify.deletion.drop_greedily`): what a proof leaves out
 is dropped without asking the reasoner, and the rest is tested as before, so
 the explanation is the same with or without it.
 """

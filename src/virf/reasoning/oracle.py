@@ -1,0 +1,108 @@
+"""Questions an explanation's deletion search asks, answered over the
+derivation graph of one proof's model (see :mod:`virf.reasoning.necessity`):
+is the finding still entailed once some facts and axioms are left out?
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Collection, Mapping
+
+from virf.deadlines import DeadlineExceeded, current_deadline
+from virf.reasoning.derive import Atom
+from virf.schema import Fact
+
+
+class Oracle:
+    """Answers the deletion search's questions about the facts and axioms
+    of one proof's model, each with some left out: True (still entailed:
+    the query's node is still derived), False (a needed item is out), None
+    (ask the engine)."""
+
+    def __init__(
+        self,
+        every: Mapping[Atom, list[tuple[int, int, tuple[Atom, ...]]]],
+        root: Atom,
+        rank: Mapping[object, int],
+        needed: int,
+        without: frozenset[str],
+    ) -> None:
+        """``every`` atom's derivations (own item, items it rests on,
+        premises), the query's node, the items' ranks (their bits), those
+        needed, and the axioms the proof's model left out."""
+        self.rank = rank
+        self.needed = needed
+        self.without = without
+        # The graph as arrays: a derivation's head, the items it rests on,
+        # its premises by number; the derivations each atom is a premise of.
+        number = {a: i for i, a in enumerate(every)}
+        self.root = number[root]
+        self.heads: list[int] = []
+        self.rests: list[int] = []
+        self.counts: list[int] = []
+        self.uses: list[list[int]] = [[] for _ in every]
+        self.starts: list[int] = []
+        for a, options in every.items():
+            for _, rests, premises in options:
+                k = len(self.heads)
+                self.heads.append(number[a])
+                self.rests.append(rests)
+                known = {number[p] for p in premises if p in number}
+                self.counts.append(len(known) if len(known) == len(set(premises)) else -1)
+                for p in known:
+                    self.uses[p].append(k)
+                if not premises:
+                    self.starts.append(k)
+        self.size = len(every)
+        # Items no derivation rests on change nothing: answers are kept by
+        # the removed items that matter.
+        self.relevant = 0
+        for rests in self.rests:
+            self.relevant |= rests
+        self._memo: dict[int, bool] = {}
+        # The engine call's deadline holds for the questions it answers later.
+        self.deadline = current_deadline()
+
+    def mask(self, facts: Collection[Fact], axioms: Collection[str]) -> int | None:
+        """The items as bits (None: one the graph cannot leave out)."""
+        removed = 0
+        for item in (*facts, *axioms):
+            if item in self.without:
+                continue  # out already
+            r = self.rank.get(item)
+            if r is None:
+                return None
+            removed |= 1 << r
+        return removed
+
+    def decide(self, removed: int) -> bool | None:
+        """Is the finding entailed by the proof's facts and axioms without
+        the ``removed`` ones (a :meth:`mask`)?"""
+        if self.deadline is not None and time.monotonic() > self.deadline:
+            raise DeadlineExceeded("the deadline passed while an explanation was read off a proof")
+        if removed & self.needed:
+            return False
+        key = removed & self.relevant
+        derived = self._memo.get(key)
+        if derived is None:
+            derived = self._memo[key] = self._derived(key)
+        return True if derived else None
+
+    def _derived(self, removed: int) -> bool:
+        """Is the root derived by derivations resting on no removed item?"""
+        counts = list(self.counts)
+        rests, heads, uses = self.rests, self.heads, self.uses
+        alive = bytearray(self.size)
+        todo = [k for k in self.starts if not rests[k] & removed]
+        while todo:
+            h = heads[todo.pop()]
+            if alive[h]:
+                continue
+            alive[h] = 1
+            if h == self.root:
+                return True
+            for k in uses[h]:
+                counts[k] -= 1
+                if counts[k] == 0 and not rests[k] & removed:
+                    todo.append(k)
+        return False
