@@ -3,12 +3,12 @@ one item at a time finds, whenever the test is monotone (as entailment is)."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from virf.verify.deletion import Hint, drop_greedily
+from virf.verify.deletion import Hint, Reader, drop_greedily
 
 
 def one_at_a_time(items: list[int], holds: Callable[[list[int]], bool]) -> list[int]:
@@ -179,3 +179,45 @@ def test_items_a_proof_needs_are_kept_without_asking(
     assert drop_greedily(items, counting(holds, calls), proves_all) == result
     if all(not holds([y for y in items if y != x]) for x in result):
         assert len(calls) <= 1  # the proof is tested once, if it leaves anything out
+
+
+@settings(max_examples=300, deadline=None, derandomize=True)
+@given(monotone_tests(), st.data())
+def test_a_proofs_oracle_answers_for_the_engine(
+    case: tuple[list[int], list[frozenset[int]]], data: st.DataObject
+) -> None:
+    """An oracle that answers some questions rightly and cannot tell the
+    others (it cannot leave some items out at all): the search finds what
+    one-at-a-time deletion finds, and asks ``holds`` only what the oracle
+    could not tell."""
+    items, needs = case
+
+    holds = needing(needs)
+
+    if not holds(items):
+        return
+    unknown = data.draw(st.sets(st.sampled_from(items))) if items else set()
+    blind = data.draw(st.sets(st.sampled_from(items))) if items else set()
+    told: list[int] = []
+
+    def prove(kept: list[int]) -> Hint[int] | None:
+        base = list(kept)
+
+        def mask(xs: Collection[int]) -> int | None:
+            if any(x in blind for x in xs):
+                return None
+            return sum(1 << base.index(x) for x in set(xs))
+
+        def decide(removed: int) -> bool | None:
+            rest = [x for k, x in enumerate(base) if not removed >> k & 1]
+            if any(x in unknown for k, x in enumerate(base) if removed >> k & 1):
+                return None
+            told.append(removed)
+            return holds(rest)
+
+        return Hint(frozenset(one_at_a_time(kept, holds)), (), Reader(mask, decide))
+
+    calls: list[int] = []
+    assert drop_greedily(items, counting(holds, calls), prove) == one_at_a_time(items, holds)
+    if not unknown and not blind:
+        assert len(calls) == 0  # the oracle told everything

@@ -94,3 +94,43 @@ def test_a_closure_bounds_an_empty_surface(engine: FastEngine) -> None:
     assert found is not None
     assert empty in found.facts
     assert "StoveBurner_1 hasState OnState" in needs(engine, lit, hazard, "StoveBurner_1")
+
+
+def test_the_proofs_model_answers_what_can_go(engine: FastEngine) -> None:
+    """The oracle answers questions about the proof's facts with some left
+    out: still entailed (a second path to the spoon), not (the only path),
+    or unknown; each answer it gives is the engine's."""
+    nested = [
+        t("Microwave_1", "Microwave"),
+        r("Microwave_1", "hasState", "OnState"),
+        r("Microwave_1", "contains", "Bowl_1"),
+        t("Bowl_1", "Bowl"),
+        r("Bowl_1", "contains", "Spoon_1"),
+        t("Spoon_1", "Spoon"),
+    ]
+    direct = r("Microwave_1", "contains", "Spoon_1")
+    hazard = "MetalInRunningMicrowaveDanger"
+    facts = [*nested, direct]
+    order = [*sorted(facts), *sorted(engine.tbox.vocabulary.background)]
+    found = engine.proof(facts, hazard, "Microwave_1", order=order)
+    assert found is not None and found.oracle is not None
+    oracle = found.oracle
+    asked = 0
+    for out in ([], [nested[2]], [direct], [nested[2], direct], [nested[1]], [t("Bowl_1", "Bowl")]):
+        removed = oracle.mask(out, ())
+        assert removed is not None
+        answer = oracle.decide(removed)
+        if answer is not None:
+            asked += 1
+            assert answer == engine.entails(
+                [f for f in facts if f not in out], hazard, "Microwave_1"
+            )
+    assert oracle.decide(0) is True
+    assert oracle.decide(oracle.mask([nested[2]], ()) or 0) is True  # the direct path
+    # Both paths out: neither was needed alone, and a graph that no longer
+    # derives the finding is not taken as a refutation; the engine is asked.
+    assert oracle.decide(oracle.mask([nested[2], direct], ()) or 0) is None
+    assert oracle.decide(oracle.mask([nested[1]], ()) or 0) is False  # the microwave's state
+    # An axiom the spoon's metal rests on, left out: the finding goes.
+    assert oracle.decide(oracle.mask((), ["KIT-Spoon-material-Metal"]) or 0) is False
+    assert asked >= 4

@@ -89,8 +89,9 @@ def needed(
     """The ranks (as bits) of the ranked items without which ``concept(x)``
     is not entailed, given that it is entailed by the facts and rules of
     ``m`` (its least model, grown, with the axioms ``without`` left out),
-    and an oracle for the questions about what is left out.  The search for refutations stops once those of
-    ``wanted`` (a proof's) are all found, unless the oracle needs them."""
+    and an oracle for the questions about what is left out.  Refutations
+    are tried for claims only while some of ``wanted`` (a proof's items)
+    are not found, and for the oracle where they derive a negation."""
     if m.prog.checks or m.clash is not None:
         return 0, None
     needs = _Needs(m, frag, defs, inputs, rank)
@@ -108,7 +109,7 @@ def needed(
 def _weak(a: Atom) -> bool:
     """Is the query node ``a`` Thing in the positive skeleton?"""
     e = a[1]
-    return isinstance(e, tuple) and e[0] in _WEAK
+    return isinstance(e, tuple) and e[0] in _WEAK and e[:2] != ("min", 1)
 
 
 def _conjuncts(e: Expr, defs: Mapping[str, Expr]) -> list[Expr]:
