@@ -48,8 +48,9 @@ def test_a_stated_material_and_the_catalogue_are_two_ways(engine: FastEngine) ->
     assert not {"KIT-Knife-material-Metal", stated.render(), "Knife_1 is a Knife"} & both
 
 
-def test_a_path_of_containment_is_needed_unless_there_is_another(engine: FastEngine) -> None:
-    nested = [
+def spoon_in_a_bowl() -> list[Fact]:
+    """A running microwave, a bowl in it, a spoon in the bowl."""
+    return [
         t("Microwave_1", "Microwave"),
         r("Microwave_1", "hasState", "OnState"),
         r("Microwave_1", "contains", "Bowl_1"),
@@ -57,6 +58,10 @@ def test_a_path_of_containment_is_needed_unless_there_is_another(engine: FastEng
         r("Bowl_1", "contains", "Spoon_1"),
         t("Spoon_1", "Spoon"),
     ]
+
+
+def test_a_path_of_containment_is_needed_unless_there_is_another(engine: FastEngine) -> None:
+    nested = spoon_in_a_bowl()
     hazard = "MetalInRunningMicrowaveDanger"
     one = needs(engine, nested, hazard, "Microwave_1")
     assert {"Microwave_1 contains Bowl_1", "Bowl_1 contains Spoon_1"} <= one
@@ -100,14 +105,7 @@ def test_the_proofs_model_answers_what_can_go(engine: FastEngine) -> None:
     """The oracle answers questions about the proof's facts with some left
     out: still entailed (a second path to the spoon), not (the only path),
     or unknown; each answer it gives is the engine's."""
-    nested = [
-        t("Microwave_1", "Microwave"),
-        r("Microwave_1", "hasState", "OnState"),
-        r("Microwave_1", "contains", "Bowl_1"),
-        t("Bowl_1", "Bowl"),
-        r("Bowl_1", "contains", "Spoon_1"),
-        t("Spoon_1", "Spoon"),
-    ]
+    nested = spoon_in_a_bowl()
     direct = r("Microwave_1", "contains", "Spoon_1")
     hazard = "MetalInRunningMicrowaveDanger"
     facts = [*nested, direct]
