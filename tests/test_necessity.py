@@ -132,3 +132,48 @@ def test_the_proofs_model_answers_what_can_go(engine: FastEngine) -> None:
     # An axiom the spoon's metal rests on, left out: the finding goes.
     assert oracle.decide(oracle.mask((), ["KIT-Spoon-material-Metal"]) or 0) is False
     assert asked >= 4
+
+
+def oracle_agrees(engine: FastEngine, facts: list[Fact], concept: str, x: str) -> int:
+    """Every answer the proof's oracle gives, with one fact or one axiom
+    left out, is the engine's; how many it gave."""
+    axioms = sorted(engine.tbox.vocabulary.background)
+    found = engine.proof(facts, concept, x, order=[*sorted(facts), *axioms])
+    assert found is not None and found.oracle is not None
+    oracle, given = found.oracle, 0
+    for f in facts:
+        answer = oracle.decide(oracle.mask([f], ()) or 0)
+        if answer is not None:
+            given += 1
+            assert answer == engine.entails([g for g in facts if g != f], concept, x), f.render()
+    for a in axioms:
+        removed = oracle.mask((), [a])
+        answer = None if removed is None else oracle.decide(removed)
+        if answer is not None:
+            given += 1
+            assert answer == engine.entails(facts, concept, x, without={a}), a
+    return given
+
+
+def test_a_negation_through_a_definition_rests_on_it(engine: FastEngine) -> None:
+    """'hasTarget some (SurfaceReceptacle and not FoodContactItem)': the
+    floor is refuted as a food-contact item through that class's
+    definition, a disjunction of kinds; without the definition the
+    negation no longer holds, and the oracle must not say it does."""
+    pour = [
+        t("Step5_pour", "PourAction"),
+        r("Step5_pour", "hasPatient", "Mug_1"),
+        t("Mug_1", "Mug"),
+        r("Mug_1", "contains", "Coffee_in_Mug_1"),
+        t("Coffee_in_Mug_1", "Coffee"),
+        r("Step5_pour", "hasTarget", "Floor_1"),
+        t("Floor_1", "Floor"),
+    ]
+    hazard = "StainingLiquidOntoSurfaceDanger"
+    assert oracle_agrees(engine, pour, hazard, "Step5_pour") > 100
+    burner = [
+        t("StoveBurner_1", "StoveBurner"),
+        r("StoveBurner_1", "supports", "Knife_1"),
+        t("Knife_1", "Knife"),
+    ]
+    assert oracle_agrees(engine, burner, "ObjectLeftOnHeatingSurfaceDanger", "StoveBurner_1") > 100
