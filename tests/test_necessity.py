@@ -177,3 +177,20 @@ def test_a_negation_through_a_definition_rests_on_it(engine: FastEngine) -> None
         t("Knife_1", "Knife"),
     ]
     assert oracle_agrees(engine, burner, "ObjectLeftOnHeatingSurfaceDanger", "StoveBurner_1") > 100
+
+
+def test_reach_through_a_shelf_rests_on_its_chain(engine: FastEngine) -> None:
+    """A lit candle on a shelf beside the curtains: the curtains are near
+    the flame only through 'isOn o isNear'; without that chain axiom the
+    finding goes, and the oracle must not say otherwise."""
+    shelf = [
+        t("Candle_1", "Candle"),
+        r("Candle_1", "hasState", "OnState"),
+        t("Shelf_1", "Shelf"),
+        t("Curtains_1", "Curtains"),
+        r("Candle_1", "isOn", "Shelf_1"),
+        r("Shelf_1", "isNear", "Curtains_1"),
+    ]
+    hazard = "EasilyIgnitedNearIgnitionSourceDanger"
+    assert not engine.entails(shelf, hazard, "Curtains_1", without={"MECH-ReachThroughSupport"})
+    assert oracle_agrees(engine, shelf, hazard, "Curtains_1") > 100
