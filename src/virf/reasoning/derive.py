@@ -39,6 +39,22 @@ def atom_of(f: Fact) -> Atom:
     return ("c", f.subject, f.predicate, f.members)
 
 
+def naming(inputs: Mapping[Atom, Fact]) -> dict[str, list[Fact]]:
+    """The input facts that make each element (a class is not one): an
+    element's were a scan of every input, for every element a proof reached."""
+    out: dict[str, list[Fact]] = {}
+    for f in inputs.values():
+        if f.kind is FactKind.OBJECT:
+            names: tuple[str, ...] = (f.subject, f.object)
+        elif f.kind is FactKind.CLOSURE:
+            names = (f.subject, *f.members)
+        else:
+            names = (f.subject,)
+        for n in dict.fromkeys(names):
+            out.setdefault(n, []).append(f)
+    return out
+
+
 def edge(r: Role, a: str, b: str) -> Atom:
     """The stored atom of ``r(a, b)`` (an inverse role is stored the other way)."""
     return ("r", r[0], b, a) if r[1] else ("r", r[0], a, b)

@@ -62,9 +62,9 @@ from virf.ontology.fragment import Expr, Fragment, Role
 from virf.ontology.iri import NOTHING, THING
 from virf.reasoning import Proof
 from virf.reasoning.chase import ChaseLimit, Model
-from virf.reasoning.derive import Atom, derivations, edge, rules_of
+from virf.reasoning.derive import Atom, derivations, edge, naming, rules_of
 from virf.reasoning.oracle import Oracle
-from virf.schema import Fact, FactKind
+from virf.schema import Fact
 
 # The need of an atom not yet bounded: every item (an infinite bit set).
 _TOP = -1
@@ -131,21 +131,6 @@ def _other_clash(m: Model) -> bool:
     return any(len(table.get(d, ())) > 1 for table in m.data.values() for d in functional)
 
 
-def _elements(inputs: Mapping[Atom, Fact]) -> dict[str, list[Fact]]:
-    """The input facts that make each element (a class is not one)."""
-    out: dict[str, list[Fact]] = {}
-    for f in inputs.values():
-        if f.kind is FactKind.OBJECT:
-            names: tuple[str, ...] = (f.subject, f.object)
-        elif f.kind is FactKind.CLOSURE:
-            names = (f.subject, *f.members)
-        else:
-            names = (f.subject,)
-        for n in dict.fromkeys(names):
-            out.setdefault(n, []).append(f)
-    return out
-
-
 class _Needs:
     """The derivations of one state of a model, and their needs (see the
     module's docstring)."""
@@ -162,7 +147,7 @@ class _Needs:
     ) -> None:
         self.m, self.frag, self.defs = m, frag, defs
         self.inputs, self.rank, self.free = inputs, rank, free
-        self.elements = _elements(inputs) if elements is None else elements
+        self.elements = naming(inputs) if elements is None else elements
         self.rules = rules_of(m.prog)
         self.structural = m.prog.structural
         self.witness_of = {y: key for key, y in m.witness.items()}

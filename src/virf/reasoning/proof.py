@@ -23,7 +23,7 @@ from virf.ontology.fragment import Expr, Fragment, Role
 from virf.ontology.iri import NOTHING
 from virf.reasoning import Proof
 from virf.reasoning.chase import Hop, Model
-from virf.reasoning.derive import Atom, Derivation, derivations, edge, rules_of
+from virf.reasoning.derive import Atom, Derivation, derivations, edge, naming, rules_of
 from virf.schema import Fact, FactKind
 
 _LATE = 1 << 30  # the rank of what the caller did not rank
@@ -64,17 +64,6 @@ def _base_order(m: Model) -> dict[Atom, int]:
         found = (m, _order(m.journal, 0, m.base_mark))
         _BASES[id(m)] = found
     return found[1]
-
-
-def _mentions(inputs: Mapping[Atom, Fact]) -> dict[object, list[Fact]]:
-    """The input facts by each name in their atom (an element, a class, a
-    property): an element's mentions were a scan of every input, for every
-    element a proof reached."""
-    out: dict[object, list[Fact]] = {}
-    for a, f in inputs.items():
-        for n in dict.fromkeys(a[1:]):
-            out.setdefault(n, []).append(f)
-    return out
 
 
 class NoProof(Exception):
@@ -122,8 +111,8 @@ class Prover:
             [new, base] if parent is None else [new, *parent.layers]
         )
         # The input facts naming each element, shared with a refutation's prover.
-        self.mentions: dict[object, list[Fact]] = (
-            parent.mentions if parent is not None else _mentions(inputs)
+        self.mentions: dict[str, list[Fact]] = (
+            parent.mentions if parent is not None else naming(inputs)
         )
         self.witness_of = {y: key for key, y in m.witness.items()}
         self.closures: dict[tuple[str, str], list[Fact]] = {}
