@@ -17,9 +17,10 @@ from typing import Any
 from virf.ontology.fragment import Axiom, Expr, Role
 from virf.ontology.iri import NOTHING, THING
 from virf.reasoning.chase import Model
-from virf.reasoning.prior import Prior, Values
+from virf.reasoning.prior import Prior, Reads, Values
 
 _NONE: frozenset[str] = frozenset()
+_UNREAD = object()
 
 
 class Fallback(Exception):
@@ -42,15 +43,19 @@ class Evaluator:
         defs: dict[str, Expr],
         sinks: frozenset[str],
         prior: Prior | None = None,
+        reads: tuple[Reads, AbstractSet[str]] | None = None,
     ) -> None:
         """With ``prior`` (the previous step's answers), the classical truth
         at an individual the change cannot reach is taken from it; either
         way, the answers read while the model is as given are kept in
-        :attr:`values`, for the next step."""
+        :attr:`values`, for the next step.  Likewise ``reads``: the previous
+        step's candidates of the definitions, and the definitions whose
+        candidates the change may touch (see :meth:`reads`)."""
         self.m = model
         self.defs = defs
         self.sinks = sinks
         self.prior = prior
+        self._reads = reads
         self._at = model.version
         self.values: Values = {}
         self._version = model.version
@@ -274,11 +279,24 @@ class Evaluator:
         if tag == "C":
             name = e[1]
             if name in self.defs:
-                # Definitions share defined classes: each is read once per model.
+                # Definitions share defined classes: each is read once per
+                # model, and kept from the previous step where the change
+                # touched none of the tables it reads.
                 self._fresh()
-                if name not in self._candidates:
-                    self._candidates[name] = self.candidates(self.defs[name])
-                return self._candidates[name]
+                hit = self._candidates.get(name, _UNREAD)
+                if hit is _UNREAD:
+                    reads = self._reads
+                    if (
+                        reads is not None
+                        and name in reads[0]
+                        and name not in reads[1]
+                        and m.version == self._at
+                    ):
+                        hit = reads[0][name]
+                    else:
+                        hit = self.candidates(self.defs[name])
+                    self._candidates[name] = hit
+                return hit  # type: ignore[return-value]
             if name in self.sinks or name == THING:
                 return None
             return m.members.get(name, _NONE)
@@ -287,12 +305,15 @@ class Evaluator:
             # action class absent from the state, or a property no object
             # has, settles the question before a filler is read.
             both: set[str] | None = None
-            for c in _by_cost(e):
+            order = _by_cost(e)
+            for c in order:
                 part = self.candidates(c)
                 if part is None:
                     continue
                 both = set(part) if both is None else both & part
                 if not both:
+                    if not part and c is not order[0]:
+                        _read_first(e, c)
                     return both
             return both
         if tag == "or":
@@ -323,6 +344,18 @@ class Evaluator:
         if tag == "dvalue":
             return {x for x, table in m.data.items() if e[2] in table.get(e[1], _NONE)}
         return None
+
+    def reads(self) -> Reads:
+        """The candidates of the definitions read in the model as given,
+        frozen (a class's members are a live table of the model)."""
+        m = self.m
+        if m.version != self._at:
+            return {}
+        self._fresh()
+        return {
+            name: read if read is None or isinstance(read, frozenset) else frozenset(read)
+            for name, read in self._candidates.items()
+        }
 
     # ------------------------------------------------------------------ decision
     def decide(self, concept: str, x: str) -> bool:
@@ -531,6 +564,14 @@ class Evaluator:
 # conjunction's id (the conjunction is kept beside it, so the id stays its own).
 _ORDERED: dict[int, tuple[Expr, tuple[Expr, ...]]] = {}
 _COST = {"C": 0, "value": 1, "dvalue": 1, "oneof": 1}
+
+
+def _read_first(e: Expr, part: Expr) -> None:
+    """Read ``part`` first next time: it had no candidate, and a step
+    changes little, so it likely has none again (the order changes what is
+    read, never what is found)."""
+    parts = _by_cost(e)
+    _ORDERED[id(e)] = (e, (part, *(c for c in parts if c is not part)))
 
 
 def _by_cost(e: Expr) -> tuple[Expr, ...]:

@@ -51,7 +51,7 @@ from virf.reasoning.derive import atom_of
 from virf.reasoning.evaluate import Evaluator, Fallback, checks, required
 from virf.reasoning.kept import Core, Kept, individuals
 from virf.reasoning.necessity import with_needs
-from virf.reasoning.prior import Atoms, Prior, Readers, Values, Wheres, atoms
+from virf.reasoning.prior import Atoms, Prior, Readers, Reads, Values, Wheres, atoms
 from virf.reasoning.program import Program, compile_program
 from virf.reasoning.proof import NoProof, Prover
 from virf.schema import Fact, FactKind
@@ -96,7 +96,7 @@ class FastEngine(Engine):
         self._readers: Readers | None = None  # see _touched
         # The last step classify_shared grew the core by: its atoms, answers
         # and each concept's candidates.
-        self._last: tuple[Core, Atoms, Values, Wheres] | None = None
+        self._last: tuple[Core, Atoms, Values, Wheres, Reads] | None = None
         self._query_ids = frozenset(
             a.id for a in self.fragment.query_axiom.values() if a.id is not None
         )
@@ -302,15 +302,18 @@ class FastEngine(Engine):
                 last = self._last
                 prior = None
                 before = None
+                reads = None
                 if small and last is not None and last[0] is core:
                     prior = Prior(last[2], defs, sinks, last[1] ^ grown)
-                    before = (last[3], prior)
-                ev = Evaluator(m, defs, sinks, prior)
+                    touched = self._touched(prior, m)
+                    before = (last[3], touched)
+                    reads = (last[4], touched)
+                ev = Evaluator(m, defs, sinks, prior, reads)
                 wheres: Wheres = {}
                 found = self._instances(
                     m, ev, core.individuals | individuals(added), concepts, before, wheres
                 )
-                self._last = (core, grown, ev.values, wheres) if small else None
+                self._last = (core, grown, ev.values, wheres, ev.reads()) if small else None
                 return found
             finally:
                 m.rollback(token)
@@ -329,13 +332,13 @@ class FastEngine(Engine):
         ev: Evaluator,
         abox: frozenset[str],
         concepts: Sequence[str],
-        before: tuple[Wheres, Prior] | None = None,
+        before: tuple[Wheres, AbstractSet[str]] | None = None,
         wheres: Wheres | None = None,
     ) -> Classification:
         """The instances among ``abox`` of each concept, in the grown model.
 
         ``before`` is the previous step's candidates of each concept and
-        what changed since: a concept none of whose tables changed keeps
+        the concepts the change touched: a concept none of whose tables changed keeps
         its candidates (a step moves one or two objects; reading every
         concept's candidates again was half of a step's classification).
         This step's candidates go into ``wheres``, for the next."""
@@ -349,8 +352,7 @@ class FastEngine(Engine):
         kept: Wheres = {}
         touched: AbstractSet[str] = frozenset()
         if before is not None:
-            kept, prior = before
-            touched = self._touched(prior, m)
+            kept, touched = before
         for concept in concepts:
             where: frozenset[str] | None
             if concept in kept and concept not in touched:

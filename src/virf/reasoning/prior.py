@@ -45,6 +45,8 @@ Atoms = frozenset[tuple[Any, ...]]
 Values = dict[tuple[Expr, str], bool]
 # Each concept's candidates in a step's model (None: possibly any individual).
 Wheres = dict[str, frozenset[str] | None]
+# The candidates of the definitions a step's model read (None: possibly any).
+Reads = dict[str, frozenset[str] | None]
 Table = tuple[Any, ...]  # see tables()
 Tables = frozenset[Table]
 
