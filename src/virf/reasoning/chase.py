@@ -293,7 +293,7 @@ class Model:
                         if b not in ts and tag not in off:
                             self.cls(x, b)
                     for body, head, tag in conj:
-                        if head not in ts and tag not in off and all(c in ts for c in body):
+                        if head not in ts and tag not in off and ts.issuperset(body):
                             self.cls(x, head)
                     for r, i, tag in value_head:
                         if tag not in off:
