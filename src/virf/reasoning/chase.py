@@ -521,11 +521,17 @@ class Model:
 
     # ------------------------------------------------------------------ checks
     def closure_violation(self) -> str | None:
-        for (x, p), bound in sorted(self.closures.items()):
-            extra = self.rsucc((p, False), x) - bound
-            if extra:
-                return f"{x} {p} {sorted(extra)[0]} is outside its closure"
-        return None
+        """The first closure, in order, with a successor outside it (sorted
+        only when there is one: every step's model is checked)."""
+        found: tuple[tuple[str, str], set[str]] | None = None
+        for key, bound in self.closures.items():
+            extra = self.rsucc((key[1], False), key[0]) - bound
+            if extra and (found is None or key < found[0]):
+                found = (key, extra)
+        if found is None:
+            return None
+        (x, p), extra = found
+        return f"{x} {p} {min(extra)} is outside its closure"
 
 
 _EMPTY: set[str] = set()

@@ -175,8 +175,15 @@ class FastEngine(Engine):
         # checks) run afterwards, over all of them.
         for f in facts:
             members = f.members
-            names = (f.subject, f.predicate, *(members or (f.object,)))
-            if any(n.startswith(_INTERNAL) for n in names):
+            if (
+                f.subject.startswith(_INTERNAL)
+                or f.predicate.startswith(_INTERNAL)
+                or (
+                    any(n.startswith(_INTERNAL) for n in members)
+                    if members
+                    else f.object.startswith(_INTERNAL)
+                )
+            ):
                 raise Fallback(f"the input name in '{f.render()}' looks like an internal name")
             if f.kind is FactKind.TYPE:
                 if f.object in self._defined:
@@ -280,8 +287,7 @@ class FastEngine(Engine):
         core = self._core
         if core is None or core.facts is not shared or self.fragment.problems:
             return super().classify_shared(shared, extra, concepts, deadline=deadline)
-        unknown = [c for c in concepts if c not in self.tbox.vocabulary.classes]
-        if unknown:
+        if not self.tbox.vocabulary.classes.issuperset(concepts):
             return super().classify_shared(shared, extra, concepts, deadline=deadline)
         added = Fact.sorted(f for f in extra if f not in shared)
 
