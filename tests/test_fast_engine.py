@@ -447,6 +447,47 @@ def test_a_shared_core_gives_the_same_answers(engines: tuple[FastEngine, Engine]
     check()
 
 
+def test_a_block_on_the_same_core_starts_from_the_block_before(
+    engines: tuple[FastEngine, Engine],
+) -> None:
+    """A plan verified again, or repaired, shares its facts with the last
+    one: the first step of its block starts from the first step of the block
+    before (its later steps start from the step before them), and gets the
+    answers it gets from scratch.  A block on other facts in between starts
+    the next one over."""
+    fast, _ = engines
+    pools = _pools(fast.tbox.vocabulary)
+    concepts = sorted(fast.tbox.vocabulary.uscs)
+    started: list[tuple[bool, int]] = []  # (a block in between, first steps reused)
+
+    @RANDOM
+    @given(fact_sets(pools), st.data())
+    def check(facts: list[Fact], data: st.DataObject) -> None:
+        core = frozenset(data.draw(st.lists(st.sampled_from(facts), min_size=2, unique=True)))
+        blocks = [
+            data.draw(st.lists(st.lists(st.sampled_from(facts), unique=True), min_size=1))
+            for _ in range(2)
+        ]
+        between = data.draw(st.booleans())
+        expected = [[fast.classify([*core, *step], concepts) for step in b] for b in blocks]
+        with fast.sharing(core):
+            first = [fast.classify_shared(core, step, concepts) for step in blocks[0]]
+        if between:
+            other = core - {min(core)}
+            with fast.sharing(other):
+                fast.classify_shared(other, [], concepts)
+        with fast.counting() as calls, fast.sharing(core):
+            second = [fast.classify_shared(core, step, concepts) for step in blocks[1]]
+        assert [first, second] == expected
+        if fast.consistent(core):
+            started.append((between, calls["first steps from an earlier block"]))
+
+    check()
+    again = [n for between, n in started if not between]
+    assert again and sum(again) > len(again) // 2, again
+    assert not any(n for between, n in started if between)
+
+
 def test_a_closure_that_comes_after_its_edge_is_still_a_clash(
     engines: tuple[FastEngine, Engine],
 ) -> None:

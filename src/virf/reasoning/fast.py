@@ -97,6 +97,10 @@ class FastEngine(Engine):
         # The last step classify_shared grew the core by: its atoms, answers
         # and each concept's candidates.
         self._last: tuple[Core, Atoms, Values, Wheres, Reads] | None = None
+        # A block's first step, by the state of its core: the next block on
+        # the same core (the same plan again, or a repair of it) starts from
+        # it, as its later steps start from the step before.
+        self._first: tuple[tuple[Any, ...], Atoms, Values, Wheres, Reads] | None = None
         self._query_ids = frozenset(
             a.id for a in self.fragment.query_axiom.values() if a.id is not None
         )
@@ -306,6 +310,11 @@ class FastEngine(Engine):
                 # The previous step grew the same core: where the two steps'
                 # atoms differ is all that can change an answer.
                 last = self._last
+                if last is None and core.state is not None:
+                    first = self._first
+                    if first is not None and first[0] == core.state:
+                        last = (core, *first[1:])
+                        self._counts["first steps from an earlier block"] += 1
                 prior = None
                 before = None
                 reads = None
@@ -319,7 +328,10 @@ class FastEngine(Engine):
                 found = self._instances(
                     m, ev, core.individuals | individuals(added), concepts, before, wheres
                 )
-                self._last = (core, grown, ev.values, wheres, ev.reads()) if small else None
+                kept = (grown, ev.values, wheres, ev.reads()) if small else None
+                if self._last is None and core.state is not None:
+                    self._first = None if kept is None else (core.state, *kept)
+                self._last = None if kept is None else (core, *kept)
                 return found
             finally:
                 m.rollback(token)

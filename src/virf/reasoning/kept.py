@@ -22,7 +22,7 @@ way; the answers do not depend on what was kept.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 from virf.reasoning.chase import Model, Token
 from virf.reasoning.program import Program
@@ -36,11 +36,15 @@ Loader = Callable[[Model, list[Fact]], None]
 
 
 class Core(NamedTuple):
-    """The model a sharing block grew: its facts, and the individuals they name."""
+    """The model a sharing block grew: its facts, and the individuals they
+    name.  ``state`` tells two blocks' cores apart: the kept base's token
+    and the journal of the growth on it.  Two cores with equal states are
+    the same model, atom for atom and name for name (None: not compared)."""
 
     model: Model
     facts: frozenset[Fact]
     individuals: frozenset[str]
+    state: tuple[Any, ...] | None = None
 
 
 def individuals(facts: Iterable[Fact]) -> frozenset[str]:
@@ -87,7 +91,11 @@ class Kept:
     def core(self, m: Model, shared: frozenset[Fact]) -> Core:
         """The block's core, its individuals named from what the base already knows."""
         rest = shared - self.base if self.base else shared
-        return Core(m, shared, self._base_names | individuals(rest))
+        base = self._base
+        assert base is not None and m.journal is not None
+        # A rebase makes a new token: the base is the same state while its token is.
+        state = (base, tuple(m.journal[base[0] :]))
+        return Core(m, shared, self._base_names | individuals(rest), state)
 
     def _rebase(self, m: Model, base: frozenset[Fact], load: Loader) -> None:
         assert self._tbox is not None and m.journal is not None
