@@ -571,7 +571,7 @@ class FastEngine(Engine):
             return None
         given = Fact.sorted(set(facts))
         inputs = {atom_of(f): f for f in given}
-        rank = {item: i for i, item in enumerate(order)}
+        rank = dict(zip(order, range(len(order)), strict=True))
         with until(deadline), self._lock:
             prog, disabled = self.program(frozenset(without))
             try:
