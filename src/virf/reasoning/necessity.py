@@ -409,16 +409,6 @@ class _Needs:
             m.rollback(token)
 
     # ------------------------------------------------------------------ atoms
-    def _present(self, a: Atom) -> bool:
-        m, kind = self.m, a[0]
-        if kind == "t":
-            return str(a[2]) in m.types.get(str(a[1]), ())
-        if kind == "r":
-            return str(a[3]) in m._stored((str(a[1]), False), str(a[2]))
-        if kind == "d":
-            return bool(a[3]) in m.data.get(str(a[1]), {}).get(str(a[2]), ())
-        return str(a[1]) in m.types
-
     def _explore(self, roots: list[Atom]) -> None:
         """The derivations of the roots, and of their premises, down to the inputs."""
         options, rules = self.options, self.rules
@@ -443,9 +433,9 @@ class _Needs:
                 tag = rules.tbox[a]
                 self._add(a, self._own(tag), self._bits(() if tag is None else (tag,)), ())
             for premises, tag, structure in derivations(self.m, rules, self.witness_of, a):
-                if tag in disabled or not all(self._present(p) for p in premises):
+                if tag in disabled:
                     continue
-                rests = self._bits(structure) | self._bits(() if tag is None else (tag,))
+                rests = self._bits(structure) | (0 if tag is None else self._bit(tag))
                 self._add(a, self._own(tag), rests, tuple(premises))
             todo += self.pending
             self.pending = []
