@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 import re
+from functools import lru_cache
 
 _SEPARATORS = re.compile(r"[\s_\-]+")
 
 
+# Kept: every new state indexes its objects' names again, and a verification
+# compares the same few dozen names many times.
+@lru_cache(maxsize=8192)
 def term_key(term: str) -> str:
     """How a name is compared with types and instances: case, spaces,
     underscores and hyphens do not matter ('stove knob 2', 'StoveKnob_2')."""
