@@ -155,6 +155,10 @@ def test_a_small_run_prints_every_figure(tmp_path: Path) -> None:
     text = md.read_text(encoding="utf-8")
     assert "## Scaling with plan length" in text and "| x1 |" in text
     assert "| (c) fast engine | 3 |" in text
+    # With one run a plan, its first run is its time.
+    assert fig["fast"]["first_run_p50_ms"] == round(fig["fast"]["p50_ms"], 2)
+    assert fig["fast"]["first_run_ratio"] == fig["reference_ratio"]
+    assert "first run of each plan alone (after another plan's): p50" in text
     saved = LatencyFigures.model_validate(fig)  # a run read back, as the page is rendered again
     assert render_markdown(saved, "virf bench latency X").startswith("# Performance")
     cold = {row["engine"]: row for row in fig["cold_start"]["rows"]}

@@ -102,9 +102,14 @@ def deadline_row(tbox: TBox, engine: Engine, boxes: int, timeout_s: float) -> De
 
 
 def time_plans(
-    verifier: Verifier, cases: Sequence[Case], repeats: int, tick: Callable[[], None] | None = None
+    verifier: Verifier,
+    cases: Sequence[Case],
+    repeats: int,
+    tick: Callable[[], None] | None = None,
+    firsts: list[float] | None = None,
 ) -> tuple[list[float], list[Report]]:
-    """Per-case median wall time (ms) of a full verification, and the reports."""
+    """Per-case median wall time (ms) of a full verification, and the
+    reports; each case's first run also goes into ``firsts``."""
     # What earlier phases left on the heap (reports, TBoxes) is moved out of
     # the collector's reach, so it does not tax the cases timed now.
     gc.collect()
@@ -119,6 +124,8 @@ def time_plans(
             runs.append((time.perf_counter() - start) * 1000)
         assert report is not None
         times.append(statistics.median(runs))
+        if firsts is not None:
+            firsts.append(runs[0])
         reports.append(report)
         if tick:
             tick()
@@ -295,9 +302,10 @@ def run_latency(
     stats_before = [group.fast.engine.stats() for group in rooms]
     tick = bar("fast engine", len(cases))
     fast_ms, fast_reports = [], []
+    fast_first: list[float] = []
     by_room = []
     for group in rooms:
-        group_ms, group_reports = time_plans(group.fast, group.cases, repeats, tick)
+        group_ms, group_reports = time_plans(group.fast, group.cases, repeats, tick, fast_first)
         fast_ms += group_ms
         fast_reports += group_reports
         by_room.append(RoomTimings(room=group.room, plans=len(group.cases), **timings(group_ms)))
@@ -339,6 +347,10 @@ def run_latency(
     # b/c on the plans timed both ways, as a/c is.
     fast_of = {c.name: ms for c, ms in zip(cases, fast_ms, strict=True)}
     both = [r / fast_of[c.name] for c, r in zip(ref_cases, ref_ms, strict=True) if fast_of[c.name]]
+    first_of = {c.name: ms for c, ms in zip(cases, fast_first, strict=True)}
+    both_first = [
+        r / first_of[c.name] for c, r in zip(ref_cases, ref_ms, strict=True) if first_of[c.name]
+    ]
 
     # Scaling with scene size (the 10-step plan) and plan length (50 objects).
     # The reference engine is also timed with two workers (parallel steps).
@@ -470,6 +482,8 @@ def run_latency(
                 reasoner_calls=calls,
                 fallbacks=falls,
                 python_heap_peak_mb=round(fast_heap, 1),
+                first_run_p50_ms=round(percentile(fast_first, 50), 2) if fast_first else None,
+                first_run_ratio=round(statistics.median(both_first), 1) if both_first else None,
             ),
             "reference": ReferenceTimings(**timings(ref_ms), plans=len(ref_cases)),
             "identical_reports": Identical(compared=len(ref_cases), identical=identical),

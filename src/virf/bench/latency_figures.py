@@ -49,6 +49,10 @@ class FastTimings(Timings):
     reasoner_calls: int
     fallbacks: int  # questions handed to the reference engine
     python_heap_peak_mb: float
+    # Each plan's first timed run alone: it follows another plan's runs, so
+    # nothing the engine keeps between runs of the same plan helps it.
+    first_run_p50_ms: float | None = None
+    first_run_ratio: float | None = None  # median of per-plan ratios b/c
 
 
 class ReferenceTimings(Timings):
