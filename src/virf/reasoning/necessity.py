@@ -44,6 +44,17 @@ negation holds where asserting it derives a clash) is sound.  For this every
 derivation carries every item it rests on (the role hierarchy, chains, the
 TBox's facts), and an element exists through the facts that name it.
 
+**No longer entailed.**  The needs answer for one item at a time; the
+deletion search leaves out several (those it dropped already, and the one it
+tries).  The same argument answers those: every atom of the least model of
+what is left has a derivation in the graph that rests on nothing left out
+(the rules are monotone), and that model is a model of the knowledge base.
+So when the query's positive skeleton is not derived without the items left
+out, with every negation, universal and number restriction counting as
+Thing, the finding is false in that model, hence not entailed
+(:meth:`Oracle.decide`).  Where the skeleton is derived but the query is
+not, a negation decides, and the question goes to the engine.
+
 Under-claiming is always safe: a question the graph cannot answer goes to
 the engine.  So whatever this reading cannot vouch for counts as needing
 nothing, and as not derived: an element's existence (for the needs), the
@@ -103,7 +114,9 @@ def needed(
     for part in _conjuncts(("C", concept), defs):
         with suppress(ChaseLimit):  # too many witnesses: claim nothing more
             found |= needs.refuted(part, x, bool(wanted & ~found))
-    return found, Oracle({**needs.options, **needs.extra}, root, rank, found, without)
+    weak = [a for a in needs.options if a[0] == "q" and _weak(a)]
+    every = {**needs.options, **needs.extra}
+    return found, Oracle(every, root, rank, found, without, weak)
 
 
 def _weak(a: Atom) -> bool:

@@ -26,10 +26,15 @@ class Oracle:
         rank: Mapping[object, int],
         needed: int,
         without: frozenset[str],
+        weak: Collection[Atom] | None = None,
     ) -> None:
         """``every`` atom's derivations (own item, items it rests on,
         premises), the query's node, the items' ranks (their bits), those
-        needed, and the axioms the proof's model left out."""
+        needed, the axioms the proof's model left out, and the query's
+        nodes its positive skeleton reads as Thing (see
+        :mod:`virf.reasoning.necessity`).  Without ``weak`` (None), the
+        skeleton is not read: no question is answered False but by
+        ``needed``."""
         self.rank = rank
         self.needed = needed
         self.without = without
@@ -59,7 +64,9 @@ class Oracle:
         self.relevant = 0
         for rests in self.rests:
             self.relevant |= rests
-        self._memo: dict[int, bool] = {}
+        self._memo: dict[int, bool | None] = {}
+        self.skeleton = weak is not None
+        self.weak = [number[a] for a in weak or () if a in number]
         # The engine call's deadline holds for the questions it answers later.
         self.deadline = current_deadline()
 
@@ -83,17 +90,34 @@ class Oracle:
         if removed & self.needed:
             return False
         key = removed & self.relevant
-        derived = self._memo.get(key)
-        if derived is None:
-            derived = self._memo[key] = self._derived(key)
-        return True if derived else None
+        if key in self._memo:
+            return self._memo[key]
+        answer: bool | None = True
+        if not self._derived(key):
+            # Not even the positive skeleton is derived: the least model of
+            # what is left (a model of the knowledge base, the proof's model
+            # having no clash and no axiom left to check) lacks it, so the
+            # finding is not entailed.  Otherwise a negation or a universal
+            # decides, which the graph does not: ask the engine.
+            answer = False if self.skeleton and not self._derived(key, self.weak) else None
+        self._memo[key] = answer
+        return answer
 
-    def _derived(self, removed: int) -> bool:
-        """Is the root derived by derivations resting on no removed item?"""
+    def _derived(self, removed: int, free: Collection[int] = ()) -> bool:
+        """Is the root derived by derivations resting on no removed item
+        (the atoms ``free`` given)?"""
         counts = list(self.counts)
         rests, heads, uses = self.rests, self.heads, self.uses
         alive = bytearray(self.size)
         todo = [k for k in self.starts if not rests[k] & removed]
+        for h in free:
+            alive[h] = 1
+            for k in uses[h]:
+                counts[k] -= 1
+                if counts[k] == 0 and not rests[k] & removed:
+                    todo.append(k)
+        if alive[self.root]:
+            return True
         while todo:
             h = heads[todo.pop()]
             if alive[h]:
