@@ -204,9 +204,11 @@ class Engine(ABC):
         """One derivation of ``concept(individual)`` from ``facts`` without the
         axioms ``without``: the facts and axiom ids it uses, or None when the
         engine keeps no derivations (or found none).  Where there are
-        alternatives, it prefers facts and axioms late in ``order``.  A hint
-        for explanations, which test it (see
-        :func:`virf.verify.deletion.drop_greedily`), never a verdict."""
+        alternatives, it prefers facts and axioms late in ``order``, unless
+        it brings an oracle that answers for them all (then any derivation
+        serves: the search asks the oracle first).  A hint for explanations,
+        which test it (see :func:`virf.verify.deletion.drop_greedily`),
+        never a verdict."""
         return None
 
     @abstractmethod

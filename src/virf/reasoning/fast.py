@@ -50,7 +50,7 @@ from virf.reasoning.chase import ChaseLimit, Model
 from virf.reasoning.derive import atom_of
 from virf.reasoning.evaluate import Evaluator, Fallback, checks, required
 from virf.reasoning.kept import Core, Kept, individuals
-from virf.reasoning.necessity import with_needs
+from virf.reasoning.necessity import read_off, with_needs
 from virf.reasoning.prior import Atoms, Prior, Readers, Reads, Values, Wheres, atoms
 from virf.reasoning.program import Program, compile_program
 from virf.reasoning.proof import NoProof, Prover
@@ -585,9 +585,16 @@ class FastEngine(Engine):
                     ev = Evaluator(m, self._definitions(frozenset(without)), frag.sinks)
                     if not ev.certain(("C", concept), individual):
                         return None
+                    off = frozenset(without)
+                    # A proof read off the graph names only the axioms ranked.
+                    if rank.keys() >= self.tbox.vocabulary.background.keys():
+                        read = read_off(
+                            m, frag, ev.defs, inputs, order, rank, concept, individual, off
+                        )
+                        if read is not None:
+                            return read
                     prover = Prover(m, frag, ev.defs, inputs, rank, ev.certain, ev.impose)
                     found = prover.proof(concept, individual)
-                    off = frozenset(without)
                     return with_needs(
                         found, m, frag, ev.defs, inputs, order, rank, concept, individual, off
                     )

@@ -498,6 +498,40 @@ class _Needs:
         return all(v != _TOP for v in need.values())
 
 
+def read_off(
+    m: Model,
+    frag: Fragment,
+    defs: Mapping[str, Expr],
+    inputs: Mapping[Atom, Fact],
+    order: Sequence[object],
+    rank: Mapping[object, int],
+    concept: str,
+    x: str,
+    without: frozenset[str],
+) -> Proof | None:
+    """A proof read off the derivation graph alone, when the graph derives
+    the finding (None otherwise): one derivation's items, what every
+    derivation needs, and the oracle.  The deletion search then asks the
+    oracle first, so the backward search for a preferred derivation
+    (:class:`virf.reasoning.proof.Prover`) is spared."""
+    bits, oracle = needed(m, frag, defs, inputs, rank, concept, x, without)
+    support = None if oracle is None else oracle.support()
+    if oracle is None or support is None:
+        return None
+    used, claimed = _items(order, support), _items(order, bits)
+    return Proof(
+        frozenset(f for f in used if isinstance(f, Fact)),
+        frozenset(a for a in used if isinstance(a, str)),
+        frozenset(f for f in claimed if isinstance(f, Fact)),
+        frozenset(a for a in claimed if isinstance(a, str)),
+        oracle,
+    )
+
+
+def _items(order: Sequence[object], bits: int) -> list[object]:
+    return [order[i] for i in range(bits.bit_length()) if bits >> i & 1]
+
+
 def with_needs(
     found: Proof,
     m: Model,
@@ -517,7 +551,7 @@ def with_needs(
     bits, oracle = needed(
         m, frag, defs, inputs, rank, concept, x, without, sum(1 << r for r in used)
     )
-    items = [order[i] for i in range(bits.bit_length()) if bits >> i & 1]
+    items = _items(order, bits)
     return Proof(
         found.facts,
         found.axioms,

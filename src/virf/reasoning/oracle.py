@@ -47,12 +47,14 @@ class Oracle:
         self.counts: list[int] = []
         self.uses: list[list[int]] = [[] for _ in every]
         self.starts: list[int] = []
+        self.premises: list[frozenset[int]] = []
         for a, options in every.items():
             for _, rests, premises in options:
                 k = len(self.heads)
                 self.heads.append(number[a])
                 self.rests.append(rests)
-                known = {number[p] for p in premises if p in number}
+                known = frozenset(number[p] for p in premises if p in number)
+                self.premises.append(known)
                 self.counts.append(len(known) if len(known) == len(set(premises)) else -1)
                 for p in known:
                     self.uses[p].append(k)
@@ -102,6 +104,38 @@ class Oracle:
             answer = False if self.skeleton and not self._derived(key, self.weak) else None
         self._memo[key] = answer
         return answer
+
+    def support(self) -> int | None:
+        """The items (as bits) of one derivation of the root, its premises'
+        derivations included: items that suffice for the finding (None:
+        the graph does not derive the root)."""
+        counts = list(self.counts)
+        rests, heads, uses = self.rests, self.heads, self.uses
+        via: dict[int, int] = {}
+        todo = list(self.starts)
+        while todo:
+            k = todo.pop()
+            h = heads[k]
+            if h in via:
+                continue
+            via[h] = k
+            if h == self.root:
+                break
+            for k in uses[h]:
+                counts[k] -= 1
+                if counts[k] == 0:
+                    todo.append(k)
+        else:
+            return None
+        bits, seen, walk = 0, {self.root}, [self.root]
+        while walk:
+            k = via[walk.pop()]
+            bits |= rests[k]
+            for p in self.premises[k]:
+                if p not in seen:
+                    seen.add(p)
+                    walk.append(p)
+        return bits
 
     def _derived(self, removed: int, free: Collection[int] = ()) -> bool:
         """Is the root derived by derivations resting on no removed item
