@@ -371,6 +371,7 @@ class FastEngine(Engine):
         touched: AbstractSet[str] = frozenset()
         if before is not None:
             kept, touched = before
+        required = self._required if ev.defs is self.fragment.query_defs else {}
         for concept in concepts:
             where: frozenset[str] | None
             if concept in kept and concept not in touched:
@@ -379,7 +380,7 @@ class FastEngine(Engine):
                 # Every set of classes the concept needs lacks a member: it has
                 # no candidate (most concepts, in most steps, are settled here).
                 # (A loop and map: generators here cost a tenth of a step.)
-                for alt in self._needs(concept, ev.defs):
+                for alt in required.get(concept) or self._needs(concept, ev.defs):
                     if all(map(members.get, alt)):
                         break
                 else:
