@@ -50,7 +50,7 @@ from virf.reasoning.chase import ChaseLimit, Model
 from virf.reasoning.derive import atom_of
 from virf.reasoning.evaluate import Evaluator, Fallback, checks, required
 from virf.reasoning.kept import Core, Kept, individuals
-from virf.reasoning.necessity import read_off, with_needs
+from virf.reasoning.necessity import with_needs
 from virf.reasoning.prior import Atoms, Prior, Readers, Reads, Values, Wheres, atoms
 from virf.reasoning.program import Program, compile_program
 from virf.reasoning.proof import NoProof, Prover
@@ -589,8 +589,8 @@ class FastEngine(Engine):
                     off = frozenset(without)
                     # A proof read off the graph names only the axioms ranked.
                     if rank.keys() >= self.tbox.vocabulary.background.keys():
-                        read = read_off(
-                            m, frag, ev.defs, inputs, order, rank, concept, individual, off
+                        read = with_needs(
+                            None, m, frag, ev.defs, inputs, order, rank, concept, individual, off
                         )
                         if read is not None:
                             return read

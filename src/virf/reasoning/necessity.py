@@ -498,7 +498,12 @@ class _Needs:
         return all(v != _TOP for v in need.values())
 
 
-def read_off(
+def _items(order: Sequence[object], bits: int) -> list[object]:
+    return [order[i] for i in range(bits.bit_length()) if bits >> i & 1]
+
+
+def with_needs(
+    found: Proof | None,
     m: Model,
     frag: Fragment,
     defs: Mapping[str, Expr],
@@ -509,53 +514,32 @@ def read_off(
     x: str,
     without: frozenset[str],
 ) -> Proof | None:
-    """A proof read off the derivation graph alone, when the graph derives
-    the finding (None otherwise): one derivation's items, what every
-    derivation needs, and the oracle.  The deletion search then asks the
-    oracle first, so the backward search for a preferred derivation
-    (:class:`virf.reasoning.proof.Prover`) is spared."""
-    bits, oracle = needed(m, frag, defs, inputs, rank, concept, x, without)
-    support = None if oracle is None else oracle.support()
-    if oracle is None or support is None:
-        return None
-    used, claimed = _items(order, support), _items(order, bits)
-    return Proof(
-        frozenset(f for f in used if isinstance(f, Fact)),
-        frozenset(a for a in used if isinstance(a, str)),
-        frozenset(f for f in claimed if isinstance(f, Fact)),
-        frozenset(a for a in claimed if isinstance(a, str)),
-        oracle,
-    )
-
-
-def _items(order: Sequence[object], bits: int) -> list[object]:
-    return [order[i] for i in range(bits.bit_length()) if bits >> i & 1]
-
-
-def with_needs(
-    found: Proof,
-    m: Model,
-    frag: Fragment,
-    defs: Mapping[str, Expr],
-    inputs: Mapping[Atom, Fact],
-    order: Sequence[object],
-    rank: Mapping[object, int],
-    concept: str,
-    x: str,
-    without: frozenset[str],
-) -> Proof:
-    """``found`` (a proof read off ``m``) with what every derivation needs,
+    """``found`` (a proof read off ``m`` by the backward search,
+    :class:`virf.reasoning.proof.Prover`) with what every derivation needs,
     of the items of ``order`` (``rank``: their places), and the oracle of
-    its model."""
-    used = {r for i in (*found.facts, *found.axioms) if (r := rank.get(i)) is not None}
-    bits, oracle = needed(
-        m, frag, defs, inputs, rank, concept, x, without, sum(1 << r for r in used)
-    )
-    items = _items(order, bits)
+    its model.  Without ``found``, the proof is the first derivation the
+    graph finds, when it derives the finding (None otherwise): the deletion
+    search asks the oracle first, so the backward search for the derivation
+    it would rather keep can be spared."""
+    wanted = _TOP
+    if found is not None:
+        used = {r for i in (*found.facts, *found.axioms) if (r := rank.get(i)) is not None}
+        wanted = sum(1 << r for r in used)
+    bits, oracle = needed(m, frag, defs, inputs, rank, concept, x, without, wanted)
+    if found is None:
+        support = None if oracle is None else oracle.support()
+        if support is None:
+            return None
+        items = _items(order, support)
+        found = Proof(
+            frozenset(f for f in items if isinstance(f, Fact)),
+            frozenset(a for a in items if isinstance(a, str)),
+        )
+    claimed = _items(order, bits)
     return Proof(
         found.facts,
         found.axioms,
-        frozenset(f for f in items if isinstance(f, Fact)),
-        frozenset(a for a in items if isinstance(a, str)),
+        frozenset(f for f in claimed if isinstance(f, Fact)),
+        frozenset(a for a in claimed if isinstance(a, str)),
         oracle,
     )
