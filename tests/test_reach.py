@@ -31,8 +31,8 @@ from virf.bench.latency_cases import dev_cases
 from virf.ontology.fragment import Expr
 from virf.reasoning import make_engine
 from virf.reasoning.chase import Model
-from virf.reasoning.evaluate import required
 from virf.reasoning.fast import FastEngine
+from virf.reasoning.instances import required
 from virf.reasoning.prior import Tables, bounding_marks, holders, tables
 from virf.schema import Fact, Report
 from virf.world.plan import PlanStep, parse_plan, parse_plan_text

@@ -10,7 +10,7 @@ engine asks the reference reasoner (see :mod:`virf.reasoning.fast`).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Collection
+from collections.abc import Callable
 from collections.abc import Set as AbstractSet
 from typing import Any
 
@@ -583,39 +583,6 @@ def _by_cost(e: Expr) -> tuple[Expr, ...]:
         _ORDERED.clear()
     _ORDERED[id(e)] = (e, parts)
     return parts
-
-
-def required(
-    e: Expr, defs: dict[str, Expr], sinks: AbstractSet[str], lazy: Collection[str]
-) -> list[frozenset[str]]:
-    """What :meth:`Evaluator.candidates` needs to find any candidate for
-    ``e``, read from the definitions alone: sets of knowledge-base classes,
-    one of which must have a member each (a disjunction's, one set per
-    disjunct).  Where none has, ``e`` has no candidate.  A set ``{}`` asks
-    nothing; a requirement left out only makes the test weaker."""
-    tag = e[0]
-    if tag == "C":
-        if e[1] in defs:
-            return required(defs[e[1]], defs, sinks, lazy)
-        return [frozenset()] if e[1] == THING or e[1] in sinks else [frozenset({e[1]})]
-    if tag == "and":
-        # One set of each conjunct's, in every combination (within a bound).
-        out: list[frozenset[str]] = [frozenset()]
-        for c in e[1]:
-            part = required(c, defs, sinks, lazy)
-            if len(out) * len(part) <= _REQUIRED_AT_MOST:
-                out = [a | b for a in out for b in part]
-        return out
-    if tag == "or":
-        return [x for c in e[1] for x in required(c, defs, sinks, lazy)]
-    if tag == "some" or (tag == "min" and int(e[1]) >= 1):
-        role, filler = (e[1], e[2]) if tag == "some" else (e[2], e[3])
-        return [frozenset()] if role[0] in lazy else required(filler, defs, sinks, lazy)
-    return [frozenset()]
-
-
-# Alternatives a requirement may list before a conjunct's are left out.
-_REQUIRED_AT_MOST = 16
 
 
 def _assertable(e: Expr, defs: dict[str, Expr]) -> bool:

@@ -28,7 +28,6 @@ from __future__ import annotations
 import threading
 from collections import Counter
 from collections.abc import Callable, Collection, Iterable, Iterator, Sequence
-from collections.abc import Set as AbstractSet
 from contextlib import contextmanager
 from typing import Any
 
@@ -48,10 +47,11 @@ from virf.reasoning import (
 from virf.reasoning.batch import halving
 from virf.reasoning.chase import ChaseLimit, Model
 from virf.reasoning.derive import atom_of
-from virf.reasoning.evaluate import Evaluator, Fallback, checks, required
+from virf.reasoning.evaluate import Evaluator, Fallback, checks
+from virf.reasoning.instances import Instances
 from virf.reasoning.kept import Core, Kept, individuals
 from virf.reasoning.necessity import with_needs
-from virf.reasoning.prior import Atoms, Prior, Readers, Reads, Values, Wheres, atoms
+from virf.reasoning.prior import Atoms, Prior, Reads, Values, Wheres, atoms
 from virf.reasoning.program import Program, compile_program
 from virf.reasoning.proof import NoProof, Prover
 from virf.schema import Fact, FactKind
@@ -92,8 +92,7 @@ class FastEngine(Engine):
         self._lock = threading.Lock()
         self._core: Core | None = None  # see sharing()
         self._kept = Kept()  # the model sharing() grows, kept between blocks
-        self._required: dict[str, list[frozenset[str]]] = {}  # see _needs
-        self._readers: Readers | None = None  # see _touched
+        self._instances: Instances | None = None  # see instances
         # The last step classify_shared grew the core by: its atoms, answers
         # and each concept's candidates.
         self._last: tuple[Core, Atoms, Values, Wheres, Reads] | None = None
@@ -271,7 +270,7 @@ class FastEngine(Engine):
     def _classify(self, facts: list[Fact], concepts: list[str]) -> Classification:
         def exact() -> Classification:
             with self._model(facts, frozenset()) as (m, ev):
-                return self._instances(m, ev, individuals(facts), concepts)
+                return self.instances(m, ev, individuals(facts), concepts)
 
         result: Classification = self._answer(
             exact, lambda: self.reference._classify(facts, concepts)
@@ -320,12 +319,12 @@ class FastEngine(Engine):
                 reads = None
                 if small and last is not None and last[0] is core:
                     prior = Prior(last[2], defs, sinks, last[1] ^ grown)
-                    touched = self._touched(prior, m)
+                    touched = self.instances.touched(prior, m)
                     before = (last[3], touched)
                     reads = (last[4], touched)
                 ev = Evaluator(m, defs, sinks, prior, reads)
                 wheres: Wheres = {}
-                found = self._instances(
+                found = self.instances(
                     m, ev, core.individuals | individuals(added), concepts, before, wheres
                 )
                 kept = (grown, ev.values, wheres, ev.reads()) if small else None
@@ -344,83 +343,14 @@ class FastEngine(Engine):
             result: Classification = self._answer(exact, fallback)
         return result
 
-    def _instances(
-        self,
-        m: Model,
-        ev: Evaluator,
-        abox: frozenset[str],
-        concepts: Sequence[str],
-        before: tuple[Wheres, AbstractSet[str]] | None = None,
-        wheres: Wheres | None = None,
-    ) -> Classification:
-        """The instances among ``abox`` of each concept, in the grown model.
-
-        ``before`` is the previous step's candidates of each concept and
-        the concepts the change touched: a concept none of whose tables changed keeps
-        its candidates (a step moves one or two objects; reading every
-        concept's candidates again was half of a step's classification).
-        This step's candidates go into ``wheres``, for the next."""
-        if m.clash is not None:
-            return Classification(False, {})
-        bad = ev.violations(checks(m))
-        if bad is not None:
-            raise Fallback(f"candidate model violates: {bad}")
-        found: dict[str, tuple[str, ...]] = {}
-        members = m.members
-        kept: Wheres = {}
-        touched: AbstractSet[str] = frozenset()
-        if before is not None:
-            kept, touched = before
-        required = self._required if ev.defs is self.fragment.query_defs else {}
-        for concept in concepts:
-            where: frozenset[str] | None
-            if concept in kept and concept not in touched:
-                where = kept[concept]
-            else:
-                # Every set of classes the concept needs lacks a member: it has
-                # no candidate (most concepts, in most steps, are settled here).
-                # (A loop and map: generators here cost a tenth of a step.)
-                for alt in required.get(concept) or self._needs(concept, ev.defs):
-                    if all(map(members.get, alt)):
-                        break
-                else:
-                    if wheres is not None:
-                        wheres[concept] = _NONE
-                    continue
-                # (Checked only here: a concept settled above costs a microsecond.)
-                check_deadline("while the fast engine classified the facts")
-                # Only where the concept holds in the model can it be entailed.
-                read = ev.candidates(("C", concept))
-                # Frozen: a class's members are a live table of the model.
-                where = None if read is None else frozenset(read) if read else _NONE
-            if wheres is not None:
-                wheres[concept] = where
-            if where is not None and not where:
-                continue
-            check_deadline("while the fast engine classified the facts")
-            pool = abox if where is None else abox & where
-            names = tuple(x for x in sorted(pool) if ev.decide(concept, x))
-            if names:
-                found[concept] = names
-        return Classification(True, found)
-
-    def _touched(self, prior: Prior, m: Model) -> AbstractSet[str]:
-        if self._readers is None:
-            frag = self.fragment
+    @property
+    def instances(self) -> Instances:
+        """Reads the instances of concepts off a grown model (built when
+        first asked for: it needs the compiled program)."""
+        if self._instances is None:
             lazy = self.program(frozenset())[0].lazy
-            self._readers = Readers(frag.query_defs, frag.sinks, lazy)
-        return self._readers.touched(prior, m)
-
-    def _needs(self, concept: str, defs: dict[str, Expr]) -> list[frozenset[str]]:
-        """The knowledge-base classes the concept's candidates require."""
-        if defs is not self.fragment.query_defs:
-            return [frozenset()]
-        needs = self._required.get(concept)
-        if needs is None:
-            lazy = self.program(frozenset())[0].lazy
-            needs = required(("C", concept), defs, self.fragment.sinks, lazy)
-            self._required[concept] = needs
-        return needs
+            self._instances = Instances(self.fragment, lazy)
+        return self._instances
 
     def _entails(
         self, facts: list[Fact], concept: str, individual: str, without: frozenset[str]
