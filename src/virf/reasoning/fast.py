@@ -29,7 +29,7 @@ import threading
 from collections import Counter
 from collections.abc import Callable, Collection, Iterable, Iterator, Sequence
 from contextlib import contextmanager
-from typing import Any
+from typing import Any, NamedTuple
 
 from virf.errors import VirfError
 from virf.ontology.fragment import Expr, Fragment
@@ -72,6 +72,17 @@ _NONE: frozenset[str] = frozenset()
 _PRIOR_AT_MOST = 1000
 
 
+class Step(NamedTuple):
+    """What a step's classification keeps for the next: the atoms it grew
+    the core by, its answers, each concept's candidates, and the candidates
+    of the definitions it read."""
+
+    grown: Atoms
+    values: Values
+    wheres: Wheres
+    reads: Reads
+
+
 def fragment_of(tbox: TBox) -> Fragment:
     """The TBox as fast-engine terms (compiled with the knowledge artifact)."""
     return tbox.fragment
@@ -93,13 +104,12 @@ class FastEngine(Engine):
         self._core: Core | None = None  # see sharing()
         self._kept = Kept()  # the model sharing() grows, kept between blocks
         self._instances: Instances | None = None  # see instances
-        # The last step classify_shared grew the core by: its atoms, answers
-        # and each concept's candidates.
-        self._last: tuple[Core, Atoms, Values, Wheres, Reads] | None = None
+        # The last step classify_shared grew the core by, with that core.
+        self._last: tuple[Core, Step] | None = None
         # A block's first step, by the state of its core: the next block on
         # the same core (the same plan again, or a repair of it) starts from
         # it, as its later steps start from the step before.
-        self._first: tuple[tuple[Any, ...], Atoms, Values, Wheres, Reads] | None = None
+        self._first: tuple[tuple[Any, ...], Step] | None = None
         self._query_ids = frozenset(
             a.id for a in self.fragment.query_axiom.values() if a.id is not None
         )
@@ -312,25 +322,26 @@ class FastEngine(Engine):
                 if last is None and core.state is not None:
                     first = self._first
                     if first is not None and first[0] == core.state:
-                        last = (core, *first[1:])
+                        last = (core, first[1])
                         self._counts["first steps from an earlier block"] += 1
                 prior = None
                 before = None
                 reads = None
                 if small and last is not None and last[0] is core:
-                    prior = Prior(last[2], defs, sinks, last[1] ^ grown)
+                    step = last[1]
+                    prior = Prior(step.values, defs, sinks, step.grown ^ grown)
                     touched = self.instances.touched(prior, m)
-                    before = (last[3], touched)
-                    reads = (last[4], touched)
+                    before = (step.wheres, touched)
+                    reads = (step.reads, touched)
                 ev = Evaluator(m, defs, sinks, prior, reads)
                 wheres: Wheres = {}
                 found = self.instances(
                     m, ev, core.individuals | individuals(added), concepts, before, wheres
                 )
-                kept = (grown, ev.values, wheres, ev.reads()) if small else None
+                kept = Step(grown, ev.values, wheres, ev.reads()) if small else None
                 if self._last is None and core.state is not None:
-                    self._first = None if kept is None else (core.state, *kept)
-                self._last = None if kept is None else (core, *kept)
+                    self._first = None if kept is None else (core.state, kept)
+                self._last = None if kept is None else (core, kept)
                 return found
             finally:
                 m.rollback(token)

@@ -109,10 +109,41 @@ class Oracle:
         """The items (as bits) of one derivation of the root, its premises'
         derivations included: items that suffice for the finding (None:
         the graph does not derive the root)."""
+        via = self._derive(0)
+        if via is None:
+            return None
+        bits, seen, walk = 0, {self.root}, [self.root]
+        while walk:
+            k = via[walk.pop()]
+            if k >= 0:
+                bits |= self.rests[k]
+                for p in self.premises[k]:
+                    if p not in seen:
+                        seen.add(p)
+                        walk.append(p)
+        return bits
+
+    def _derived(self, removed: int, free: Collection[int] = ()) -> bool:
+        """Is the root derived by derivations resting on no removed item
+        (the atoms ``free`` given)?"""
+        return self._derive(removed, free) is not None
+
+    def _derive(self, removed: int, free: Collection[int] = ()) -> dict[int, int] | None:
+        """The derivation that first derived each atom on the way to the
+        root, resting on no removed item (-1: an atom ``free``), or None
+        when the root is not derived."""
         counts = list(self.counts)
         rests, heads, uses = self.rests, self.heads, self.uses
         via: dict[int, int] = {}
-        todo = list(self.starts)
+        todo = [k for k in self.starts if not rests[k] & removed]
+        for h in free:
+            via[h] = -1
+            for k in uses[h]:
+                counts[k] -= 1
+                if counts[k] == 0 and not rests[k] & removed:
+                    todo.append(k)
+        if self.root in via:
+            return via
         while todo:
             k = todo.pop()
             h = heads[k]
@@ -120,47 +151,9 @@ class Oracle:
                 continue
             via[h] = k
             if h == self.root:
-                break
-            for k in uses[h]:
-                counts[k] -= 1
-                if counts[k] == 0:
-                    todo.append(k)
-        else:
-            return None
-        bits, seen, walk = 0, {self.root}, [self.root]
-        while walk:
-            k = via[walk.pop()]
-            bits |= rests[k]
-            for p in self.premises[k]:
-                if p not in seen:
-                    seen.add(p)
-                    walk.append(p)
-        return bits
-
-    def _derived(self, removed: int, free: Collection[int] = ()) -> bool:
-        """Is the root derived by derivations resting on no removed item
-        (the atoms ``free`` given)?"""
-        counts = list(self.counts)
-        rests, heads, uses = self.rests, self.heads, self.uses
-        alive = bytearray(self.size)
-        todo = [k for k in self.starts if not rests[k] & removed]
-        for h in free:
-            alive[h] = 1
+                return via
             for k in uses[h]:
                 counts[k] -= 1
                 if counts[k] == 0 and not rests[k] & removed:
                     todo.append(k)
-        if alive[self.root]:
-            return True
-        while todo:
-            h = heads[todo.pop()]
-            if alive[h]:
-                continue
-            alive[h] = 1
-            if h == self.root:
-                return True
-            for k in uses[h]:
-                counts[k] -= 1
-                if counts[k] == 0 and not rests[k] & removed:
-                    todo.append(k)
-        return False
+        return None

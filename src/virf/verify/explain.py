@@ -194,24 +194,28 @@ def _grown(names: set[str], vocab: Vocabulary) -> list[str]:
     return sorted(found)
 
 
-_INDEX: dict[int, tuple[Vocabulary, dict[str, list[str]], dict[str, str | None]]] = {}
-_ORDER: dict[int, tuple[Vocabulary, list[str]]] = {}
+_Index = tuple[dict[str, list[str]], dict[str, str | None], list[str]]
+_INDEX: dict[int, tuple[Vocabulary, _Index]] = {}
 
 
 def _axiom_order(vocab: Vocabulary) -> list[str]:
     """The background axiom ids in order, sorted once per vocabulary (a
     finding's proof ranks them all: sorting them each time cost a twentieth
     of an explanation).  Read only."""
-    found = _ORDER.get(id(vocab))
-    if found is None or found[0] is not vocab:
-        found = _ORDER[id(vocab)] = (vocab, sorted(vocab.background))
-    return found[1]
+    return _background_index(vocab)[2]
 
 
 def _signature_index(vocab: Vocabulary) -> tuple[dict[str, list[str]], dict[str, str | None]]:
     """Background axiom ids by each name in their signature and by their
     subject, and each axiom's subject (None for a disjointness, which joins
     when any of its classes is named but names none of the others)."""
+    by_name, subject_of, _ = _background_index(vocab)
+    return by_name, subject_of
+
+
+def _background_index(vocab: Vocabulary) -> _Index:
+    """The background axioms indexed once per vocabulary (see
+    :func:`_signature_index` and :func:`_axiom_order`)."""
     found = _INDEX.get(id(vocab))
     if found is None or found[0] is not vocab:
         by_name: dict[str, list[str]] = {}
@@ -232,9 +236,9 @@ def _signature_index(vocab: Vocabulary) -> tuple[dict[str, list[str]], dict[str,
             )
             for n in keys:
                 by_name.setdefault(n, []).append(ident)
-        found = (vocab, by_name, subject_of)
+        found = (vocab, (by_name, subject_of, sorted(vocab.background)))
         _INDEX[id(vocab)] = found
-    return found[1], found[2]
+    return found[1]
 
 
 def background_knowledge(
