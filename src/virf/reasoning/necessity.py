@@ -499,7 +499,14 @@ class _Needs:
 
 
 def _items(order: Sequence[object], bits: int) -> list[object]:
-    return [order[i] for i in range(bits.bit_length()) if bits >> i & 1]
+    """The items of ``order`` whose ranks are the bits set, in order (one
+    step per bit set: the ranks run through every background axiom)."""
+    out = []
+    while bits:
+        low = bits & -bits
+        out.append(order[low.bit_length() - 1])
+        bits ^= low
+    return out
 
 
 def with_needs(

@@ -42,24 +42,38 @@ class Oracle:
         # its premises by number; the derivations each atom is a premise of.
         number = {a: i for i, a in enumerate(every)}
         self.root = number[root]
-        self.heads: list[int] = []
+        heads: list[int] = []
+        self.heads = heads
         self.rests: list[int] = []
         self.counts: list[int] = []
-        self.uses: list[list[int]] = [[] for _ in every]
+        uses: list[list[int]] = [[] for _ in every]
+        self.uses = uses
         self.starts: list[int] = []
-        self.premises: list[frozenset[int]] = []
+        self.premises: list[set[int]] = []
         for a, options in every.items():
+            h = number[a]
             for _, rests, premises in options:
-                k = len(self.heads)
-                self.heads.append(number[a])
+                k = len(heads)
+                heads.append(h)
                 self.rests.append(rests)
-                known = frozenset(number[p] for p in premises if p in number)
-                self.premises.append(known)
-                self.counts.append(len(known) if len(known) == len(set(premises)) else -1)
-                for p in known:
-                    self.uses[p].append(k)
                 if not premises:
+                    self.premises.append(set())
+                    self.counts.append(0)
                     self.starts.append(k)
+                    continue
+                # (Sets built directly: this loop runs for every derivation
+                # of every explanation.)  A premise outside the graph leaves
+                # the derivation unusable (-1).
+                try:
+                    known = {number[p] for p in premises}
+                    count = len(known)
+                except KeyError:
+                    known = {number[p] for p in premises if p in number}
+                    count = -1
+                self.premises.append(known)
+                self.counts.append(count)
+                for p in known:
+                    uses[p].append(k)
         self.size = len(every)
         # Items no derivation rests on change nothing: answers are kept by
         # the removed items that matter.
