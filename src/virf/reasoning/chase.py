@@ -56,7 +56,9 @@ class Model:
         self.prog = prog
         self.disabled = disabled
         self.types: dict[str, set[str]] = {}
-        self.members: dict[str, set[str]] = defaultdict(set)
+        # A class has an entry only while it has members (rollback deletes
+        # the emptied ones): the classes with a member are the keys.
+        self.members: dict[str, set[str]] = {}
         self.succ: dict[str, dict[str, set[str]]] = defaultdict(lambda: defaultdict(set))
         self.pred: dict[str, dict[str, set[str]]] = defaultdict(lambda: defaultdict(set))
         self.data: dict[str, dict[str, set[bool]]] = defaultdict(lambda: defaultdict(set))
@@ -123,7 +125,11 @@ class Model:
         if a in ts:
             return
         ts.add(a)
-        self.members[a].add(x)
+        xs = self.members.get(a)
+        if xs is None:
+            self.members[a] = {x}
+        else:
+            xs.add(x)
         self.version = next(_STATES)
         entry = ("t", x, a)  # one tuple for the journal and the queue
         if self.journal is not None:
