@@ -24,7 +24,6 @@ from virf.verify.deletion import Hint, Reader, checked_proof, drop_greedily, one
 from virf.verify.findings import Finding, inconsistency
 from virf.verify.questions import rule_questions
 from virf.world.actions import portion_source
-from virf.world.simulator import Simulator
 from virf.world.state import WorldState
 
 _DROP_FIRST = {
@@ -415,14 +414,17 @@ def _without_axioms(
     return None if base is None else _axioms_reader(oracle, base)
 
 
-def note_onset(f: Finding, states: Sequence[WorldState], sim: Simulator) -> None:
+def note_onset(
+    f: Finding, states: Sequence[WorldState], closed: Sequence[Mapping[Fact, Provenance]]
+) -> None:
     """Say in a final-state finding's message since when it has held: the
-    earliest step from which its facts hold in every state to the end."""
+    earliest step from which its facts hold in every state to the end
+    (``closed``: each state's closure facts)."""
     n = len(states) - 1
     onset = n
     for k in range(n, -1, -1):
-        present = set(states[k].facts) | set(sim.closure_facts(states[k]))
-        if all(x in present for x in f.facts):
+        facts, closures = states[k].facts, closed[k]
+        if all(x in facts or x in closures for x in f.facts):
             onset = k
         else:
             break

@@ -203,7 +203,8 @@ class Verifier:
         and stop at the first definite finding when ``until_definite``."""
         explainer = Explainer(self.engine, self.vocab, deadline, self._tick, background=explain)
         trace = simulate(self.sim, self.sim.initial(scene), plan)
-        snapshots = self._snapshots(trace)
+        closed: list[dict[Fact, Provenance]] = []
+        snapshots = self._snapshots(trace, closed)
         # What no step changes is reasoned about once, not at every step:
         # closures and all.  Sets built from the snapshots' dicts reuse their
         # hashes, so this costs no Python call per fact; a dict given to the
@@ -214,6 +215,7 @@ class Verifier:
             return self._classify_steps(
                 trace,
                 snapshots,
+                closed,
                 unchanged,
                 len(plan),
                 requirements,
@@ -227,6 +229,7 @@ class Verifier:
         self,
         trace: Trace,
         snapshots: list[dict[Fact, Provenance]],
+        closed: list[dict[Fact, Provenance]],
         unchanged: frozenset[Fact],
         plan_length: int,
         requirements: Sequence[Requirement | Unreadable],
@@ -292,7 +295,7 @@ class Verifier:
                     f = explainer.finding(usc, ind, at, phase, snapshot, full=full)
                     if phase == "final":
                         # A hazard left behind belongs to the end of the plan.
-                        note_onset(f, states, self.sim)
+                        note_onset(f, states, closed)
                     findings.setdefault(f.step, []).append(f)
             if stop is not None and k == n:
                 findings.setdefault(stop.step.index, []).append(
@@ -307,16 +310,21 @@ class Verifier:
                 break
         return Walk(trace, findings, first_definite, checked)
 
-    def _snapshots(self, trace: Trace) -> list[dict[Fact, Provenance]]:
+    def _snapshots(
+        self, trace: Trace, closed: list[dict[Fact, Provenance]] | None = None
+    ) -> list[dict[Fact, Provenance]]:
         """Each state, its closure facts, and the next action (the one-step
         lookahead).  A state's closures are those of the state before it,
-        read again only where the step changed something."""
+        read again only where the step changed something; they are also
+        appended to ``closed``, state by state."""
         out: list[dict[Fact, Provenance]] = []
         since: tuple[WorldState, dict[Fact, Provenance]] | None = None
         for k, state in enumerate(trace.states):
             snapshot = facts_copy(state.facts)
             closures = self.sim.closure_facts(state, since)
             since = (state, closures)
+            if closed is not None:
+                closed.append(closures)
             snapshot.update(closures)
             if k < len(trace.resolved):
                 snapshot.update(self.sim.action_facts(state, trace.resolved[k]))
