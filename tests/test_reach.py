@@ -7,8 +7,9 @@
   step's facts from nothing; and two models that agree on a class's tables
   give it the same candidates.
 * A query's filler asked about every object is read with set operations
-  (:meth:`Evaluator.where`): the same individuals as one by one; and a
-  concept whose required classes have no member has no candidate.
+  (:meth:`Evaluator.where`): the same individuals as one by one; its
+  candidates include them all; and a concept whose required classes have no
+  member has no candidate.
 * The model of what a plan's steps share is kept after the verification,
   rolled back to what later ones share (:mod:`virf.reasoning.kept`): plans
   verified one after another in the same scene, and in other scenes between
@@ -209,13 +210,17 @@ def _where_as_holds(tutor: LogicTutor, facts: Sequence[Fact]) -> None:
     with engine._model(Fact.sorted(set(facts)), frozenset()) as (m, ev):
         for name, e in [*sorted(ev.defs.items()), *_FORMS]:
             found = ev.where(e)
+            holding = {y for y in m.types if ev.holds(e, y)}
             if found is not None:
-                assert found == {y for y in m.types if ev.holds(e, y)}, name
+                assert found == holding, name
+            # Candidates (a search back along a role no table holds, too)
+            # leave out no individual where the query holds.
+            read = ev.candidates(e)
+            assert read is None or holding <= read, name
         # A concept whose every set of required classes lacks a member has no
         # candidate (the classification skips it).
-        lazy = engine.program(frozenset())[0].lazy
         for name in sorted(ev.defs):
-            needs = required(("C", name), ev.defs, engine.fragment.sinks, lazy)
+            needs = required(("C", name), ev.defs, engine.fragment.sinks)
             if not any(all(m.members.get(c) for c in alt) for alt in needs):
                 assert ev.candidates(("C", name)) == set(), name
 

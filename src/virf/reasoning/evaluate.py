@@ -323,9 +323,12 @@ class Evaluator:
             return set().union(*parts)  # type: ignore[arg-type]
         if tag == "some" or (tag == "min" and int(e[1]) >= 1):
             role, filler = (e[1], e[2]) if tag == "some" else (e[2], e[3])
-            if role[0] in m.lazy:
-                return None
             ends = self.candidates(filler)
+            if role[0] in m.lazy:
+                # Those a search over the role's paths leads back to from the
+                # filler's candidates (what a running heater may enclose):
+                # without it, every heater was decided at every step.
+                return None if ends is None else m.reach_any(role[0], ends, not role[1])
             back = (m.succ if role[1] else m.pred).get(role[0], {})
             if ends is None:
                 forth = (m.pred if role[1] else m.succ).get(role[0], {})

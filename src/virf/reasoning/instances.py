@@ -7,7 +7,7 @@ step's candidates of every concept its change did not touch
 
 from __future__ import annotations
 
-from collections.abc import Collection, Sequence
+from collections.abc import Mapping, Sequence
 from collections.abc import Set as AbstractSet
 
 from virf.deadlines import check_deadline
@@ -17,6 +17,7 @@ from virf.reasoning import Classification
 from virf.reasoning.chase import Model
 from virf.reasoning.evaluate import Evaluator, Fallback, checks
 from virf.reasoning.prior import Prior, Readers, Wheres
+from virf.reasoning.program import LazyRole
 
 _NONE: frozenset[str] = frozenset()
 
@@ -24,7 +25,7 @@ _NONE: frozenset[str] = frozenset()
 class Instances:
     """Reads the instances of concepts off a model, for one fragment."""
 
-    def __init__(self, fragment: Fragment, lazy: Collection[str]) -> None:
+    def __init__(self, fragment: Fragment, lazy: Mapping[str, LazyRole]) -> None:
         self.fragment = fragment
         self.lazy = lazy
         self._required: dict[str, list[frozenset[str]]] = {}  # see needs
@@ -104,14 +105,12 @@ class Instances:
             return [frozenset()]
         needs = self._required.get(concept)
         if needs is None:
-            needs = required(("C", concept), defs, self.fragment.sinks, self.lazy)
+            needs = required(("C", concept), defs, self.fragment.sinks)
             self._required[concept] = needs
         return needs
 
 
-def required(
-    e: Expr, defs: dict[str, Expr], sinks: AbstractSet[str], lazy: Collection[str]
-) -> list[frozenset[str]]:
+def required(e: Expr, defs: dict[str, Expr], sinks: AbstractSet[str]) -> list[frozenset[str]]:
     """What :meth:`Evaluator.candidates` needs to find any candidate for
     ``e``, read from the definitions alone: sets of knowledge-base classes,
     one of which must have a member each (a disjunction's, one set per
@@ -120,21 +119,21 @@ def required(
     tag = e[0]
     if tag == "C":
         if e[1] in defs:
-            return required(defs[e[1]], defs, sinks, lazy)
+            return required(defs[e[1]], defs, sinks)
         return [frozenset()] if e[1] == THING or e[1] in sinks else [frozenset({e[1]})]
     if tag == "and":
         # One set of each conjunct's, in every combination (within a bound).
         out: list[frozenset[str]] = [frozenset()]
         for c in e[1]:
-            part = required(c, defs, sinks, lazy)
+            part = required(c, defs, sinks)
             if len(out) * len(part) <= _REQUIRED_AT_MOST:
                 out = [a | b for a in out for b in part]
         return out
     if tag == "or":
-        return [x for c in e[1] for x in required(c, defs, sinks, lazy)]
+        return [x for c in e[1] for x in required(c, defs, sinks)]
     if tag == "some" or (tag == "min" and int(e[1]) >= 1):
-        role, filler = (e[1], e[2]) if tag == "some" else (e[2], e[3])
-        return [frozenset()] if role[0] in lazy else required(filler, defs, sinks, lazy)
+        # Over any role, a searched one too: no candidate of the filler, none here.
+        return required(e[2] if tag == "some" else e[3], defs, sinks)
     return [frozenset()]
 
 

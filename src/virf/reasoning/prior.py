@@ -30,13 +30,16 @@ previous step's candidates are this step's (:attr:`Prior.tables` and
 
 from __future__ import annotations
 
-from collections.abc import Collection, Iterable, Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from collections.abc import Set as AbstractSet
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from virf.ontology.fragment import Expr
 from virf.ontology.iri import THING
 from virf.reasoning.chase import Model
+
+if TYPE_CHECKING:
+    from virf.reasoning.program import LazyRole
 
 # Journal entries that are atoms of the model: an element, a type, an edge, a datum.
 _ATOMS = frozenset({"e", "t", "r", "d"})
@@ -58,7 +61,7 @@ def atoms(m: Model, since: int) -> Atoms:
 
 
 def tables(
-    e: Expr, defs: dict[str, Expr], sinks: AbstractSet[str], lazy: Collection[str]
+    e: Expr, defs: dict[str, Expr], sinks: AbstractSet[str], lazy: Mapping[str, LazyRole]
 ) -> Tables:
     """The model's tables :meth:`Evaluator.candidates` reads for ``e``:
 
@@ -81,8 +84,12 @@ def tables(
         return frozenset().union(*(tables(c, defs, sinks, lazy) for c in e[1]))
     if tag == "some" or (tag == "min" and int(e[1]) >= 1):
         role, filler = (e[1], e[2]) if tag == "some" else (e[2], e[3])
-        if role[0] in lazy:
-            return frozenset()
+        spec = lazy.get(role[0])
+        if spec is not None:
+            # The search from the filler's candidates reads the role's stored
+            # edges and those of its left and right roles (Model.reach_any).
+            walked = {("r", s[0]) for s in (*spec.left, *spec.right)}
+            return tables(filler, defs, sinks, lazy) | {("r", role[0]), *walked}
         # The edges read are those from (or to) the filler's candidates, all
         # of which bear one of the marks that bound them (a class, or an edge
         # to a value; the filler's own tables include theirs): a robot
@@ -268,7 +275,7 @@ class Readers:
     knowledge base has hundreds of concepts."""
 
     def __init__(
-        self, defs: dict[str, Expr], sinks: AbstractSet[str], lazy: Collection[str]
+        self, defs: dict[str, Expr], sinks: AbstractSet[str], lazy: Mapping[str, LazyRole]
     ) -> None:
         readers: dict[Table, set[str]] = {}
         for name in defs:
