@@ -50,7 +50,7 @@ from virf.reasoning.derive import atom_of
 from virf.reasoning.evaluate import Evaluator, Fallback, checks
 from virf.reasoning.instances import Instances
 from virf.reasoning.kept import Core, Kept, individuals
-from virf.reasoning.necessity import with_needs
+from virf.reasoning.necessity import needed, with_needs
 from virf.reasoning.prior import Atoms, Prior, Reads, Values, Wheres, atoms
 from virf.reasoning.program import Program, compile_program
 from virf.reasoning.proof import NoProof, Prover
@@ -528,18 +528,16 @@ class FastEngine(Engine):
                     if not ev.certain(("C", concept), individual):
                         return None
                     off = frozenset(without)
+                    args = (m, frag, ev.defs, inputs, order, rank, concept, individual, off)
+                    known = None
                     # A proof read off the graph names only the axioms ranked.
                     if rank.keys() >= self.tbox.vocabulary.background.keys():
-                        read = with_needs(
-                            None, m, frag, ev.defs, inputs, order, rank, concept, individual, off
-                        )
+                        known = needed(m, frag, ev.defs, inputs, rank, concept, individual, off)
+                        read = with_needs(None, *args, known=known)
                         if read is not None:
                             return read
                     prover = Prover(m, frag, ev.defs, inputs, rank, ev.certain, ev.impose)
-                    found = prover.proof(concept, individual)
-                    return with_needs(
-                        found, m, frag, ev.defs, inputs, order, rank, concept, individual, off
-                    )
+                    return with_needs(prover.proof(concept, individual), *args, known=known)
             except (Fallback, ChaseLimit, NoProof, RecursionError):
                 return None
 

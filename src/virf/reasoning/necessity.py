@@ -520,6 +520,7 @@ def with_needs(
     concept: str,
     x: str,
     without: frozenset[str],
+    known: tuple[int, Oracle | None] | None = None,
 ) -> Proof | None:
     """``found`` (a proof read off ``m`` by the backward search,
     :class:`virf.reasoning.proof.Prover`) with what every derivation needs,
@@ -527,12 +528,16 @@ def with_needs(
     its model.  Without ``found``, the proof is the first derivation the
     graph finds, when it derives the finding (None otherwise): the deletion
     search asks the oracle first, so the backward search for the derivation
-    it would rather keep can be spared."""
-    wanted = _TOP
-    if found is not None:
-        used = {r for i in (*found.facts, *found.axioms) if (r := rank.get(i)) is not None}
-        wanted = sum(1 << r for r in used)
-    bits, oracle = needed(m, frag, defs, inputs, rank, concept, x, without, wanted)
+    it would rather keep can be spared.  ``known``: what :func:`needed`
+    gave for the same question already (with every item wanted, so its
+    claims are those of any proof's, or more: each is sound)."""
+    if known is None:
+        wanted = _TOP
+        if found is not None:
+            used = {r for i in (*found.facts, *found.axioms) if (r := rank.get(i)) is not None}
+            wanted = sum(1 << r for r in used)
+        known = needed(m, frag, defs, inputs, rank, concept, x, without, wanted)
+    bits, oracle = known
     if found is None:
         support = None if oracle is None else oracle.support()
         if support is None:
