@@ -196,3 +196,31 @@ def test_reach_through_a_shelf_rests_on_its_chain(engine: FastEngine) -> None:
     hazard = "EasilyIgnitedNearIgnitionSourceDanger"
     assert not engine.entails(shelf, hazard, "Curtains_1", without={"MECH-ReachThroughSupport"})
     assert oracle_agrees(engine, shelf, hazard, "Curtains_1") > 100
+
+
+def test_a_negation_inside_a_filler_at_each_of_two_objects(engine: FastEngine) -> None:
+    """'encloses some (ConductiveObject or NonFoodItem)', NonFoodItem read
+    through 'not FoodItem': with two non-food objects in a running
+    microwave, leaving out either one's facts keeps the finding, through
+    the other's refutation.  The oracle says so itself (it asked the engine
+    for each before), and every answer it gives is the engine's."""
+    oven = [
+        t("Microwave_1", "Microwave"),
+        r("Microwave_1", "hasState", "OnState"),
+        r("Microwave_1", "contains", "Book_1"),
+        t("Book_1", "Book"),
+        r("Microwave_1", "contains", "Candle_1"),
+        t("Candle_1", "Candle"),
+    ]
+    hazard = "ItemLeftInHeatingApplianceDanger"
+    assert engine.entails(oven, hazard, "Microwave_1")
+    order = [*sorted(oven), *sorted(engine.tbox.vocabulary.background)]
+    found = engine.proof(oven, hazard, "Microwave_1", order=order)
+    assert found is not None and found.oracle is not None
+    for gone in (oven[2:4], oven[4:6]):
+        removed = found.oracle.mask(gone, ())
+        assert removed is not None and found.oracle.decide(removed) is True
+        assert engine.entails([f for f in oven if f not in gone], hazard, "Microwave_1")
+    both = found.oracle.mask(oven[2:], ())
+    assert both is not None and found.oracle.decide(both) is not True
+    assert oracle_agrees(engine, oven, hazard, "Microwave_1") > 100

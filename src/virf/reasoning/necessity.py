@@ -42,7 +42,10 @@ finding entailed when the query's node is still derived: each derivation is
 a rule application of the model, and the engine's certain reading (a
 negation holds where asserting it derives a clash) is sound.  For this every
 derivation carries every item it rests on (the role hierarchy, chains, the
-TBox's facts), and an element exists through the facts that name it.
+TBox's facts), and an element exists through the facts that name it.  A
+negation ``not N`` the query reads at an element is derived there by the
+clashes that N (each of its disjuncts) asserted at that element alone
+derives, each clash with its own derivations (:meth:`_Needs.negations`).
 
 **No longer entailed.**  The needs answer for one item at a time; the
 deletion search leaves out several (those it dropped already, and the one it
@@ -59,8 +62,8 @@ Under-claiming is always safe: a question the graph cannot answer goes to
 the engine.  So whatever this reading cannot vouch for counts as needing
 nothing, and as not derived: an element's existence (for the needs), the
 role hierarchy and chains (for the needs), a universal or number
-restriction, a negation refuted at more than one successor (for what
-remains entailed).
+restriction, a negation at a witness or of a class whose assertion the
+reading cannot enumerate (for what remains entailed).
 """
 
 from __future__ import annotations
@@ -114,6 +117,8 @@ def needed(
     for part in _conjuncts(("C", concept), defs):
         with suppress(ChaseLimit):  # too many witnesses: claim nothing more
             found |= needs.refuted(part, x, bool(wanted & ~found))
+    with suppress(ChaseLimit):
+        needs.negations(x)
     weak = [a for a in needs.options if a[0] == "q" and _weak(a)]
     every = {**needs.options, **needs.extra}
     return found, Oracle(every, root, rank, found, without, weak)
@@ -352,6 +357,34 @@ class _Needs:
             if derives and len(clashes) == len(names):
                 self._add(("q", ("not", e), targets[0]), 0, rests, tuple(clashes))
         return found
+
+    def negations(self, x: str) -> None:
+        """Derivations, for the oracle, of the negations ``not N`` the query
+        reads at one element each and no refutation derived (inside a
+        filler, or a class it names): N, or each of its disjuncts, asserted
+        at that element alone derives a clash.  Without them the oracle
+        could not tell whether the finding holds once a fact the graph's
+        first derivation used is left out (an appliance enclosing two
+        non-food objects), and the engine was asked, one model a fact."""
+        open_: list[tuple[Atom, Expr, str]] = []
+        for a, options in self.options.items():
+            e = a[1]
+            if a[0] == "q" and isinstance(e, tuple) and e[0] == "not" and not options:
+                open_.append((a, e[1], str(a[2])))
+        for a, e, z in open_:
+            if z in self.witness_of:
+                continue  # as in refuted: a witness is no target
+            names, complete, rests = self._falsifiers(e)
+            if not complete or not names:
+                continue
+            clashes: list[Atom] = []
+            for name in names:
+                clash = self._trial(name, [z], None, None, x)[1]
+                if clash is None:
+                    break
+                clashes.append(clash)
+            else:
+                self._add(a, 0, rests, tuple(clashes))
 
     def _holds(self, e: Expr, y: str) -> bool:
         """Is the positive skeleton of ``e`` true at ``y``?"""
