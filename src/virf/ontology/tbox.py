@@ -148,7 +148,13 @@ class Vocabulary:
         return cls == ancestor or ancestor in self.ancestors.get(cls, frozenset())
 
     def any_is_a(self, classes: frozenset[str] | set[str], ancestor: str) -> bool:
-        return any(self.is_a(c, ancestor) for c in classes)
+        # (A loop, not a generator over is_a: the simulator asks this of
+        # every object it touches, several times a step.)
+        ancestors = self.ancestors
+        for c in classes:  # noqa: SIM110 - any() over a generator costs a call per class
+            if c == ancestor or ancestor in ancestors.get(c, ()):
+                return True
+        return False
 
     def annotation(self, term: str, prop: str) -> tuple[str, ...]:
         return self.annotations.get(term, {}).get(prop, ())
