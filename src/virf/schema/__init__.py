@@ -87,6 +87,12 @@ class Fact:
         """``subject predicate only {members}``: the list is complete."""
         return cls(subject, predicate, "", FactKind.CLOSURE, tuple(sorted(set(members))))
 
+    @property
+    def sort_key(self) -> tuple[str, str, str, str]:
+        """What facts sort by (``a < b`` compares these): a key for sorts
+        that order facts among other things."""
+        return self._order
+
     def __lt__(self, other: builtins.object) -> bool:  # `object` is a field here
         if not isinstance(other, Fact):
             return NotImplemented

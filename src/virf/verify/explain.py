@@ -85,7 +85,8 @@ def minimize(
     :func:`drop_greedily`)."""
 
     def by_order(pool: Iterable[Fact]) -> list[Fact]:
-        return sorted(pool, key=lambda f: (_DROP_FIRST[facts[f]], f))
+        # (By the facts' kept sort keys: comparing facts calls a Python method.)
+        return sorted(pool, key=lambda f: (_DROP_FIRST[facts[f]], f.sort_key))
 
     ordered = by_order(_component(facts, start, vocab.individuals))
 
@@ -101,7 +102,7 @@ def minimize(
         ordered = by_order(facts)
     elif prove is not None:
         asked = True  # the pool's proof was asked for: none that helps
-    return sorted(drop_greedily(ordered, holds, hint if prove else None, each, first, asked))
+    return Fact.sorted(drop_greedily(ordered, holds, hint if prove else None, each, first, asked))
 
 
 def needed_background(
@@ -175,6 +176,7 @@ def _grown(names: set[str], vocab: Vocabulary) -> list[str]:
     whose subject is named (see :func:`needed_background`): the least set
     closed under both, found from an index of the axioms by name."""
     by_name, subject_of = _signature_index(vocab)
+    background = vocab.background
     names = set(names)
     found: set[str] = set()
     todo = list(names)
@@ -183,7 +185,7 @@ def _grown(names: set[str], vocab: Vocabulary) -> list[str]:
         for ident in by_name.get(name, ()):
             if ident in found:
                 continue
-            subject, signature = subject_of[ident], vocab.background[ident].signature
+            subject, signature = subject_of[ident], background[ident].signature
             if (subject is None or subject in names) and not signature.isdisjoint(names):
                 found.add(ident)
                 if subject is not None:
