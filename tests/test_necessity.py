@@ -48,16 +48,19 @@ def test_a_stated_material_and_the_catalogue_are_two_ways(engine: FastEngine) ->
     assert not {"KIT-Knife-material-Metal", stated.render(), "Knife_1 is a Knife"} & both
 
 
+def running_microwave(*inside: Fact) -> list[Fact]:
+    """A running microwave, and the facts ``inside`` it."""
+    return [t("Microwave_1", "Microwave"), r("Microwave_1", "hasState", "OnState"), *inside]
+
+
 def spoon_in_a_bowl() -> list[Fact]:
     """A running microwave, a bowl in it, a spoon in the bowl."""
-    return [
-        t("Microwave_1", "Microwave"),
-        r("Microwave_1", "hasState", "OnState"),
+    return running_microwave(
         r("Microwave_1", "contains", "Bowl_1"),
         t("Bowl_1", "Bowl"),
         r("Bowl_1", "contains", "Spoon_1"),
         t("Spoon_1", "Spoon"),
-    ]
+    )
 
 
 def test_a_path_of_containment_is_needed_unless_there_is_another(engine: FastEngine) -> None:
@@ -204,14 +207,12 @@ def test_a_negation_inside_a_filler_at_each_of_two_objects(engine: FastEngine) -
     microwave, leaving out either one's facts keeps the finding, through
     the other's refutation.  The oracle says so itself (it asked the engine
     for each before), and every answer it gives is the engine's."""
-    oven = [
-        t("Microwave_1", "Microwave"),
-        r("Microwave_1", "hasState", "OnState"),
+    oven = running_microwave(
         r("Microwave_1", "contains", "Book_1"),
         t("Book_1", "Book"),
         r("Microwave_1", "contains", "Candle_1"),
         t("Candle_1", "Candle"),
-    ]
+    )
     hazard = "ItemLeftInHeatingApplianceDanger"
     assert engine.entails(oven, hazard, "Microwave_1")
     order = [*sorted(oven), *sorted(engine.tbox.vocabulary.background)]

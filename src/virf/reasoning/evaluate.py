@@ -325,9 +325,8 @@ class Evaluator:
             role, filler = (e[1], e[2]) if tag == "some" else (e[2], e[3])
             ends = self.candidates(filler)
             if role[0] in m.lazy:
-                # Those a search over the role's paths leads back to from the
-                # filler's candidates (what a running heater may enclose):
-                # without it, every heater was decided at every step.
+                # Where a search back along the role's paths from the filler's
+                # candidates leads (without it, every heater was decided).
                 return None if ends is None else m.reach_any(role[0], ends, not role[1])
             back = (m.succ if role[1] else m.pred).get(role[0], {})
             if ends is None:
