@@ -50,7 +50,7 @@ from virf.reasoning.derive import atom_of
 from virf.reasoning.evaluate import Evaluator, Fallback, checks
 from virf.reasoning.instances import Instances
 from virf.reasoning.kept import Core, Kept, individuals
-from virf.reasoning.necessity import needed, with_needs
+from virf.reasoning.necessity import needed, proof_bits, with_needs
 from virf.reasoning.prior import Atoms, Prior, Reads, Values, Wheres, atoms
 from virf.reasoning.program import Program, compile_program
 from virf.reasoning.proof import NoProof, Prover
@@ -527,17 +527,21 @@ class FastEngine(Engine):
                     ev = Evaluator(m, self._definitions(frozenset(without)), frag.sinks)
                     if not ev.certain(("C", concept), individual):
                         return None
-                    off = frozenset(without)
-                    args = (m, frag, ev.defs, inputs, order, rank, concept, individual, off)
+                    args = (m, frag, ev.defs, inputs, rank, concept, individual, frozenset(without))
                     known = None
                     # A proof read off the graph names only the axioms ranked.
                     if rank.keys() >= self.tbox.vocabulary.background.keys():
-                        known = needed(m, frag, ev.defs, inputs, rank, concept, individual, off)
-                        read = with_needs(None, *args, known=known)
+                        # Every item wanted: the claims serve the backward
+                        # search's proof too, if the graph's is not one.
+                        known = needed(*args)
+                        read = with_needs(None, known, order)
                         if read is not None:
                             return read
                     prover = Prover(m, frag, ev.defs, inputs, rank, ev.certain, ev.impose)
-                    return with_needs(prover.proof(concept, individual), *args, known=known)
+                    found = prover.proof(concept, individual)
+                    if known is None:
+                        known = needed(*args, wanted=proof_bits(found, rank))
+                    return with_needs(found, known, order)
             except (Fallback, ChaseLimit, NoProof, RecursionError):
                 return None
 

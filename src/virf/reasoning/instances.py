@@ -9,9 +9,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from collections.abc import Set as AbstractSet
-from time import monotonic
 
-from virf.deadlines import DeadlineExceeded, current_deadline
+from virf.deadlines import check_deadline
 from virf.ontology.fragment import Expr, Fragment
 from virf.ontology.iri import THING
 from virf.reasoning import Classification
@@ -21,7 +20,6 @@ from virf.reasoning.prior import Prior, Readers, Wheres
 from virf.reasoning.program import LazyRole
 
 _NONE: frozenset[str] = frozenset()
-_LATE = "the deadline passed while the fast engine classified the facts"
 
 
 class Instances:
@@ -29,7 +27,6 @@ class Instances:
 
     def __init__(self, fragment: Fragment, lazy: Mapping[str, LazyRole]) -> None:
         self.fragment = fragment
-        self.lazy = lazy
         self._required: dict[str, list[frozenset[str]]] = {}  # see needs
         self._readers = Readers(fragment.query_defs, fragment.sinks, lazy)
 
@@ -63,7 +60,6 @@ class Instances:
         if before is not None:
             kept, touched = before
         required = self._required if ev.defs is self.fragment.query_defs else {}
-        deadline = current_deadline()  # read once: checked for each concept read
         for concept in concepts:
             where: frozenset[str] | None
             if concept in kept and concept not in touched:
@@ -81,8 +77,7 @@ class Instances:
                         wheres[concept] = _NONE
                     continue
                 # (Checked only here: a concept settled above costs a microsecond.)
-                if deadline is not None and monotonic() > deadline:
-                    raise DeadlineExceeded(_LATE)
+                check_deadline("while the fast engine classified the facts")
                 # Only where the concept holds in the model can it be entailed.
                 read = ev.candidates(("C", concept))
                 # Frozen: a class's members are a live table of the model.
@@ -91,8 +86,7 @@ class Instances:
                 wheres[concept] = where
             if where is not None and not where:
                 continue
-            if deadline is not None and monotonic() > deadline:
-                raise DeadlineExceeded(_LATE)
+            check_deadline("while the fast engine classified the facts")
             pool = abox if where is None else abox & where
             names = tuple(x for x in sorted(pool) if ev.decide(concept, x))
             if names:

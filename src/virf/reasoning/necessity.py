@@ -542,34 +542,23 @@ def _items(order: Sequence[object], bits: int) -> list[object]:
     return out
 
 
+def proof_bits(found: Proof, rank: Mapping[object, int]) -> int:
+    """The ranks (as bits) of a proof's items: :func:`needed` tries
+    refutations for claims only while some of them are not claimed."""
+    used = {r for i in (*found.facts, *found.axioms) if (r := rank.get(i)) is not None}
+    return sum(1 << r for r in used)
+
+
 def with_needs(
-    found: Proof | None,
-    m: Model,
-    frag: Fragment,
-    defs: Mapping[str, Expr],
-    inputs: Mapping[Atom, Fact],
-    order: Sequence[object],
-    rank: Mapping[object, int],
-    concept: str,
-    x: str,
-    without: frozenset[str],
-    known: tuple[int, Oracle | None] | None = None,
+    found: Proof | None, known: tuple[int, Oracle | None], order: Sequence[object]
 ) -> Proof | None:
-    """``found`` (a proof read off ``m`` by the backward search,
-    :class:`virf.reasoning.proof.Prover`) with what every derivation needs,
-    of the items of ``order`` (``rank``: their places), and the oracle of
-    its model.  Without ``found``, the proof is the first derivation the
-    graph finds, when it derives the finding (None otherwise): the deletion
-    search asks the oracle first, so the backward search for the derivation
-    it would rather keep can be spared.  ``known``: what :func:`needed`
-    gave for the same question already (with every item wanted, so its
-    claims are those of any proof's, or more: each is sound)."""
-    if known is None:
-        wanted = _TOP
-        if found is not None:
-            used = {r for i in (*found.facts, *found.axioms) if (r := rank.get(i)) is not None}
-            wanted = sum(1 << r for r in used)
-        known = needed(m, frag, defs, inputs, rank, concept, x, without, wanted)
+    """``found`` (a proof read off a model by the backward search,
+    :class:`virf.reasoning.proof.Prover`) with what :func:`needed` gave for
+    that model (``known``: the items every derivation needs, as ranks in
+    ``order``, and the oracle).  Without ``found``, the proof is the first
+    derivation the graph finds, when it derives the finding (None
+    otherwise): the deletion search asks the oracle first, so the backward
+    search for the derivation it would rather keep can be spared."""
     bits, oracle = known
     if found is None:
         support = None if oracle is None else oracle.support()

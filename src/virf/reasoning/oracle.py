@@ -26,15 +26,13 @@ class Oracle:
         rank: Mapping[object, int],
         needed: int,
         without: frozenset[str],
-        weak: Collection[Atom] | None = None,
+        weak: Collection[Atom],
     ) -> None:
         """``every`` atom's derivations (own item, items it rests on,
         premises), the query's node, the items' ranks (their bits), those
         needed, the axioms the proof's model left out, and the query's
         nodes its positive skeleton reads as Thing (see
-        :mod:`virf.reasoning.necessity`).  Without ``weak`` (None), the
-        skeleton is not read: no question is answered False but by
-        ``needed``."""
+        :mod:`virf.reasoning.necessity`)."""
         self.rank = rank
         self.needed = needed
         self.without = without
@@ -81,8 +79,7 @@ class Oracle:
         for rests in self.rests:
             self.relevant |= rests
         self._memo: dict[int, bool | None] = {}
-        self.skeleton = weak is not None
-        self.weak = [number[a] for a in weak or () if a in number]
+        self.weak = [number[a] for a in weak if a in number]
         # The engine call's deadline holds for the questions it answers later.
         self.deadline = current_deadline()
 
@@ -115,7 +112,7 @@ class Oracle:
             # having no clash and no axiom left to check) lacks it, so the
             # finding is not entailed.  Otherwise a negation or a universal
             # decides, which the graph does not: ask the engine.
-            answer = False if self.skeleton and not self._derived(key, self.weak) else None
+            answer = False if not self._derived(key, self.weak) else None
         self._memo[key] = answer
         return answer
 

@@ -146,7 +146,7 @@ class Verifier:
     def snapshots(self, scene: Scene, plan: Sequence[PlanStep]) -> list[dict[Fact, Provenance]]:
         """The ABox the reasoner sees for each step (for baselines and tools)."""
         trace = simulate(self.sim, self.sim.initial(scene), plan)
-        return self._snapshots(trace)
+        return self._snapshots(trace)[0]
 
     def findings(self, scene: Scene, plan: Sequence[PlanStep]) -> Walk:
         """Every finding of the plan, at every step, not only up to the first
@@ -203,8 +203,7 @@ class Verifier:
         and stop at the first definite finding when ``until_definite``."""
         explainer = Explainer(self.engine, self.vocab, deadline, self._tick, background=explain)
         trace = simulate(self.sim, self.sim.initial(scene), plan)
-        closed: list[dict[Fact, Provenance]] = []
-        snapshots = self._snapshots(trace, closed)
+        snapshots, closed = self._snapshots(trace)
         # What no step changes is reasoned about once, not at every step:
         # closures and all.  Sets built from the snapshots' dicts reuse their
         # hashes, so this costs no Python call per fact; a dict given to the
@@ -311,25 +310,25 @@ class Verifier:
         return Walk(trace, findings, first_definite, checked)
 
     def _snapshots(
-        self, trace: Trace, closed: list[dict[Fact, Provenance]] | None = None
-    ) -> list[dict[Fact, Provenance]]:
+        self, trace: Trace
+    ) -> tuple[list[dict[Fact, Provenance]], list[dict[Fact, Provenance]]]:
         """Each state, its closure facts, and the next action (the one-step
-        lookahead).  A state's closures are those of the state before it,
-        read again only where the step changed something; they are also
-        appended to ``closed``, state by state."""
+        lookahead); and each state's closure facts alone.  A state's
+        closures are those of the state before it, read again only where
+        the step changed something."""
         out: list[dict[Fact, Provenance]] = []
+        closed: list[dict[Fact, Provenance]] = []
         since: tuple[WorldState, dict[Fact, Provenance]] | None = None
         for k, state in enumerate(trace.states):
             snapshot = facts_copy(state.facts)
             closures = self.sim.closure_facts(state, since)
             since = (state, closures)
-            if closed is not None:
-                closed.append(closures)
+            closed.append(closures)
             snapshot.update(closures)
             if k < len(trace.resolved):
                 snapshot.update(self.sim.action_facts(state, trace.resolved[k]))
             out.append(snapshot)
-        return out
+        return out, closed
 
     def _classify_ahead(
         self, snapshots: list[dict[Fact, Provenance]], concepts: list[list[str]], deadline: float
